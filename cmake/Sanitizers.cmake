@@ -1,0 +1,12 @@
+# ERRSEP_SANITIZE=address,undefined  (or thread) instruments every target.
+set(ERRSEP_SANITIZE "" CACHE STRING "Comma-separated sanitizers: address,undefined or thread")
+if(ERRSEP_SANITIZE)
+  string(REPLACE "," ";" _sans "${ERRSEP_SANITIZE}")
+  foreach(_s IN LISTS _sans)
+    if(NOT _s MATCHES "^(address|undefined|thread|leak)$")
+      message(FATAL_ERROR "ERRSEP_SANITIZE: unknown sanitizer '${_s}'")
+    endif()
+  endforeach()
+  add_compile_options(-fsanitize=${ERRSEP_SANITIZE} -fno-omit-frame-pointer -fno-sanitize-recover=all)
+  add_link_options(-fsanitize=${ERRSEP_SANITIZE})
+endif()

@@ -1,0 +1,62 @@
+#pragma once
+// errsep's CSV convention, shared by every app:
+//
+//   # errsep <kind> v<version>          <- optional comment/metadata lines, "# key: value"
+//   # units: x in mm, profiles in um
+//   x_mm,m1_um,m2_um,m3_um,m4_um         <- one header line; the unit is the name's suffix
+//   0,0.12,...                           <- numeric rows, all the same width
+//
+// Reading reports the first problem as "file:line: what is wrong" and never returns a partial
+// table.  Writing goes through write_file_atomic, so a result file is whole or absent.
+#include <filesystem>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace errsep::io {
+
+/// Error in a CSV file: what() is "file:line: problem" (line 0 when it concerns the whole file).
+class CsvError : public std::runtime_error {
+ public:
+  CsvError(const std::filesystem::path& file, std::size_t line, const std::string& problem);
+  std::size_t line() const noexcept { return line_; }
+
+ private:
+  std::size_t line_;
+};
+
+struct CsvTable {
+  std::vector<std::pair<std::string, std::string>> metadata;  ///< "# key: value" lines, in order
+  std::vector<std::string> columns;                           ///< header names, units as suffix
+  std::vector<std::vector<double>> rows;                      ///< rows.size() x columns.size()
+  std::vector<std::size_t> row_line;  ///< 1-based source line of each row (empty when built)
+
+  /// Index of a column, or nullopt.
+  std::optional<std::size_t> find_column(const std::string& name) const;
+  /// All values of a named column; throws CsvError(file, 0, "missing column 'x'") when absent.
+  std::vector<double> column(const std::string& name,
+                             const std::filesystem::path& file = {}) const;
+  /// Value of a metadata key, or nullopt.
+  std::optional<std::string> meta(const std::string& key) const;
+  void set_meta(const std::string& key, const std::string& value);
+  void add_column(const std::string& name, const std::vector<double>& values);
+};
+
+struct CsvReadOptions {
+  bool allow_non_finite = false;  ///< NaN/Inf in a cell is an error unless this is set
+  std::size_t min_rows = 1;       ///< fewer data rows is an error
+};
+
+/// Reads a CSV file; throws CsvError naming file and line on any malformed content.
+CsvTable read_csv(const std::filesystem::path& file, const CsvReadOptions& opts = {});
+
+/// Formats a table as CSV text (metadata as "# key: value" lines, then header, then rows).
+std::string format_csv(const CsvTable& table, int significant_digits = 10);
+
+/// Writes atomically (see write_file_atomic).  Throws std::runtime_error on I/O failure.
+void write_csv(const std::filesystem::path& file, const CsvTable& table,
+               int significant_digits = 10);
+
+}  // namespace errsep::io

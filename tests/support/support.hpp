@@ -1,0 +1,35 @@
+#pragma once
+// Shared helpers for the Catch2 tests: paths of the source, build and ../shared trees, and a
+// scratch directory that removes itself.
+#include <filesystem>
+#include <string>
+
+namespace errsep::test {
+
+inline std::filesystem::path source_dir() { return ERRSEP_SOURCE_DIR; }
+inline std::filesystem::path binary_dir() { return ERRSEP_BINARY_DIR; }
+inline std::filesystem::path shared_dir() { return ERRSEP_SHARED_DIR; }
+/// Path of an errsep app in the build tree, e.g. app_path("separate").
+inline std::filesystem::path app_path(const std::string& name) {
+  return binary_dir() / "apps" / ("errsep-" + name);
+}
+
+/// A fresh directory under the system temp dir, removed (recursively) on destruction.
+class TempDir {
+ public:
+  TempDir();
+  ~TempDir();
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  const std::filesystem::path& path() const { return path_; }
+  std::filesystem::path operator/(const std::string& name) const { return path_ / name; }
+
+ private:
+  std::filesystem::path path_;
+};
+
+/// Runs a shell command, returns its exit status (-1 if it did not exit normally) and its
+/// combined stdout+stderr in `output`.
+int run_command(const std::string& cmd, std::string* output = nullptr);
+
+}  // namespace errsep::test
