@@ -1,0 +1,212 @@
+#pragma once
+// The machine config: buses, sensors, stages, optional GPIO, the sampler, the scan and the device
+// simulator, read from a TOML file (config/simulator.toml is the embedded default,
+// config/machine-example.toml a commented example for a real machine).
+//
+// Every error is a ConfigError whose message is "file:line: key: what is wrong" (line omitted
+// when the key is missing), so a user can fix the file without reading code.  Cross references
+// (a sensor's bus, the scan's sensors and stages) are checked when loading.
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "errsep/core/four_sensor_config.hpp"
+#include "errsep/io/register_spec.hpp"
+
+namespace errsep::io {
+
+/// A problem in a config file.  what() = "file:line: key: problem".
+class ConfigError : public std::runtime_error {
+ public:
+  ConfigError(const std::string& file, int line, const std::string& key,
+              const std::string& problem);
+  const std::string& key() const noexcept { return key_; }
+  int line() const noexcept { return line_; }
+
+ private:
+  std::string key_;
+  int line_;
+};
+
+enum class BusKind { tcp, rtu };
+enum class Parity { none, even, odd };
+
+/// One physical bus = one libmodbus context ([[bus]]).
+struct BusConfig {
+  std::string name;
+  BusKind kind = BusKind::tcp;
+  // tcp
+  std::string host = "127.0.0.1";
+  int port = 502;  ///< 0 only for the embedded simulator: replaced by its actual port at start
+  // rtu
+  std::string device;  ///< serial device, e.g. /dev/ttyUSB0
+  int baud = 115200;
+  Parity parity = Parity::none;
+  int data_bits = 8;
+  int stop_bits = 1;
+  // both
+  int response_timeout_ms = 50;  ///< per request; keep below the sample period
+  int retries = 1;               ///< extra attempts after a timeout (0 = none)
+  double sample_rate_hz = 0.0;   ///< sampling rate of this bus's thread; 0 = sampler.rate_hz
+};
+
+/// A displacement sensor ([[sensor]]): one register, decoded to µm.
+struct SensorConfig {
+  std::string name;
+  std::string bus;                ///< name of a [[bus]]
+  RegisterSpec reg;               ///< value register; scale/offset give µm
+  double range_min_um = -1000.0;  ///< measuring range: readings outside are out_of_range
+  double range_max_um = 1000.0;
+};
+
+enum class StageRole { slide, sensor_stage, reference_piece };
+
+/// A positioning stage ([[stage]]).  Positions in mm (register scale/offset give mm).
+struct StageConfig {
+  std::string name;
+  StageRole role = StageRole::slide;
+  std::string bus;
+  RegisterSpec target_position;            ///< holding register(s), written by move_to
+  RegisterSpec actual_position;            ///< input or holding register(s)
+  RegisterSpec status;                     ///< a 16-bit register holding the bits below
+  int in_position_bit = 0;                 ///< bit of `status` set when in position and settled
+  int fault_bit = 1;                       ///< bit of `status` set on a drive fault
+  RegisterSpec stop_coil;                  ///< coil; writing 1 stops motion
+  std::optional<RegisterSpec> fault_code;  ///< optional fault word register
+  std::optional<RegisterSpec> speed;       ///< optional holding register, mm/s
+  double speed_mm_s = 0.0;                 ///< written to `speed` at configure when > 0
+  double position_tolerance_mm = 0.001;    ///< |actual − target| accepted as "there"
+  int move_timeout_ms = 30000;             ///< wait_in_position timeout used by the scan
+};
+
+/// Digital I/O on a gpiochip ([gpio], optional).  Lines are offsets on the chip; −1 = unused.
+struct GpioConfig {
+  std::string chip = "gpiochip0";
+  int start_line = -1;    ///< input: start button (rising edge starts a scan)
+  int trigger_line = -1;  ///< input: external trigger / encoder index
+  int output_line = -1;   ///< output: e.g. "scan running" lamp
+};
+
+/// The sampling threads ([sampler]).
+struct SamplerConfig {
+  double rate_hz = 1000.0;
+  bool realtime = false;   ///< try SCHED_FIFO + mlockall (warning, not failure, when refused)
+  int cpu_affinity = -1;   ///< CPU to pin the sampling threads to; −1 = none
+  int fifo_priority = 80;  ///< SCHED_FIFO priority when realtime
+  std::size_t ring_capacity = 65536;  ///< samples per bus ring
+};
+
+enum class ScanMethod { four_sensor, displacement, both };
+
+/// The scan ([scan]).
+struct ScanConfig {
+  ScanMethod method = ScanMethod::four_sensor;
+  core::FourSensorConfig geometry;  ///< dx_mm, s2, s3, s4, N (Zhao 2019)
+  /// true: one sensor on the sensor stage moved to the four configurations (Zhao 2019's set-up);
+  /// false: four sensors, fixed at the four configuration offsets.
+  bool single_sensor = true;
+  /// Sensors in configuration order: one name when single_sensor, four otherwise.
+  std::vector<std::string> sensors;
+  std::string slide_stage;              ///< role slide
+  std::string sensor_stage;             ///< role sensor_stage (single_sensor only)
+  double slide_start_mm = 0.0;          ///< slide position of x_0
+  double sensor_stage_origin_mm = 0.0;  ///< sensor-stage position of configuration 1
+  int averages = 100;  ///< K readings averaged per point (Zhao 2019's experiment used 100)
+  int settle_ms = 50;  ///< wait after in-position before averaging
+  // displacement method (Haramiishi 2024, section 2.1)
+  double d_mm = 5.0;             ///< displacement of the reference piece between the scans
+  int displacement_points = 0;   ///< points per scan, spaced d_mm (0 = geometry.N)
+  std::string workpiece_sensor;  ///< reads w(x) + m(x)
+  std::string reference_sensor;  ///< reads r(x) + m(x), then r(x + d) + m(x)
+  std::string reference_stage;   ///< role reference_piece: displaces the reference piece
+  std::filesystem::path output_dir = "scans";  ///< relative to the current directory
+};
+
+/// One harmonic a·sin(2π·x/period + phase) of a simulated profile.
+struct Harmonic {
+  double amplitude = 0.0;  ///< µm (for gamma: µrad)
+  double period_mm = 100.0;
+  double phase_rad = 0.0;
+};
+
+/// A simulated profile: offset + slope·x + Σ harmonics (x in mm).  Units: µm (gamma: µrad).
+struct ProfileSpec {
+  double offset = 0.0;
+  double slope_per_mm = 0.0;
+  std::vector<Harmonic> harmonics;
+  double eval(double x_mm) const noexcept;
+};
+
+/// Fault injection of the device simulator ([simulator.faults] or command line).  Request counts
+/// are over all clients, counted from the simulator's start; 0 = never.
+struct SimulatorFaults {
+  long hang_after_requests = 0;       ///< stop answering after this many requests ...
+  int hang_ms = 0;                    ///< ... for this long (0 = forever)
+  long drop_after_requests = 0;       ///< close every client connection once, after this many
+  long exception_after_requests = 0;  ///< answer with a Modbus exception after this many ...
+  int exception_count = 1;            ///< ... for this many requests
+  int exception_code = 4;             ///< MODBUS_EXCEPTION_SLAVE_OR_SERVER_FAILURE
+  std::string out_of_range_sensor;    ///< this sensor reads range_max_um + 1000 µm
+};
+
+/// The device simulator ([simulator]): what it plays, and whether the scan app starts it.
+struct SimulatorConfig {
+  bool embedded = false;           ///< the scan app starts errsep-devsim itself and uses its port
+  std::string host = "127.0.0.1";  ///< loopback only (127.0.0.1 or ::1)
+  int port = 0;                    ///< 0 = ephemeral (the actual port is printed)
+  /// "zhao2019_example1" (S, gamma, f of Zhao 2019 Eqs. 21-23 for scan.geometry) or "" (use the
+  /// profiles below).
+  std::string preset = "zhao2019_example1";
+  ProfileSpec S_um;                        ///< straightness error S(x)
+  ProfileSpec gamma_urad;                  ///< tilt error γ(x), µrad
+  ProfileSpec f_um;                        ///< reference surface f(x)
+  std::array<double, 4> e_um{0, 0, 0, 0};  ///< zero-adjustment values e_1..e_4 (e_1 = 0)
+  // displacement method (Haramiishi 2024, section 2.1)
+  ProfileSpec w_um;                ///< workpiece profile w(x)
+  ProfileSpec r_um;                ///< reference piece profile r(x)
+  ProfileSpec m_um;                ///< motion error m(x) of the table
+  double noise_sigma_um = 0.0;     ///< Gaussian noise on every reading
+  double drift_um_per_s = 0.0;     ///< linear sensor drift since the simulator started
+  double stage_speed_mm_s = 50.0;  ///< default speed of every simulated stage
+  int settle_ms = 20;              ///< time after arrival before in-position is set
+  std::uint64_t seed = 1;
+  SimulatorFaults faults;
+};
+
+struct MachineConfig {
+  std::filesystem::path source;  ///< the file it was read from (for messages)
+  std::vector<BusConfig> buses;
+  std::vector<SensorConfig> sensors;
+  std::vector<StageConfig> stages;
+  std::optional<GpioConfig> gpio;
+  SamplerConfig sampler;
+  ScanConfig scan;
+  SimulatorConfig simulator;
+
+  const BusConfig* find_bus(const std::string& name) const;
+  const SensorConfig* find_sensor(const std::string& name) const;
+  const StageConfig* find_stage(const std::string& name) const;
+  /// Effective sampling rate of a bus (its own, or sampler.rate_hz).
+  double sample_rate_hz(const BusConfig& bus) const;
+};
+
+/// Reads and validates a machine config.  Throws ConfigError ("file:line: key: problem") on any
+/// syntax error, unknown key, wrong type, out-of-range value or dangling reference.
+MachineConfig load_machine_config(const std::filesystem::path& file);
+/// The same from a string; `name` is used as the file name in messages.
+MachineConfig parse_machine_config(const std::string& toml_text, const std::string& name);
+
+/// For the embedded simulator: every TCP bus whose port is 0 gets `port` (the port the simulator
+/// printed as "listening 127.0.0.1:<port>").  Returns how many buses were changed.
+int apply_simulator_port(MachineConfig& cfg, int port);
+
+const char* to_string(BusKind k) noexcept;
+const char* to_string(StageRole r) noexcept;
+const char* to_string(ScanMethod m) noexcept;
+
+}  // namespace errsep::io
