@@ -1,0 +1,650 @@
+#include "errsep/io/machine_config.hpp"
+
+#include <toml++/toml.h>
+
+#include <cmath>
+#include <fstream>
+#include <initializer_list>
+#include <limits>
+#include <set>
+#include <sstream>
+
+namespace errsep::io {
+
+ConfigError::ConfigError(const std::string& file, int line, const std::string& key,
+                         const std::string& problem)
+    : std::runtime_error(file + (line > 0 ? ":" + std::to_string(line) : std::string()) + ": " +
+                         (key.empty() ? std::string() : key + ": ") + problem),
+      key_(key),
+      line_(line) {}
+
+double ProfileSpec::eval(double x_mm) const noexcept {
+  constexpr double kTwoPi = 6.283185307179586;
+  double v = offset + slope_per_mm * x_mm;
+  for (const Harmonic& h : harmonics)
+    v += h.amplitude * std::sin(kTwoPi * x_mm / h.period_mm + h.phase_rad);
+  return v;
+}
+
+const BusConfig* MachineConfig::find_bus(const std::string& name) const {
+  for (const auto& b : buses)
+    if (b.name == name) return &b;
+  return nullptr;
+}
+const SensorConfig* MachineConfig::find_sensor(const std::string& name) const {
+  for (const auto& s : sensors)
+    if (s.name == name) return &s;
+  return nullptr;
+}
+const StageConfig* MachineConfig::find_stage(const std::string& name) const {
+  for (const auto& s : stages)
+    if (s.name == name) return &s;
+  return nullptr;
+}
+double MachineConfig::sample_rate_hz(const BusConfig& bus) const {
+  return bus.sample_rate_hz > 0.0 ? bus.sample_rate_hz : sampler.rate_hz;
+}
+
+int apply_simulator_port(MachineConfig& cfg, int port) {
+  int n = 0;
+  for (auto& b : cfg.buses) {
+    if (b.kind == BusKind::tcp && b.port == 0) {
+      b.port = port;
+      ++n;
+    }
+  }
+  return n;
+}
+
+const char* to_string(BusKind k) noexcept {
+  return k == BusKind::tcp ? "tcp" : "rtu";
+}
+const char* to_string(StageRole r) noexcept {
+  switch (r) {
+    case StageRole::slide:
+      return "slide";
+    case StageRole::sensor_stage:
+      return "sensor_stage";
+    case StageRole::reference_piece:
+      return "reference_piece";
+  }
+  return "unknown";
+}
+const char* to_string(ScanMethod m) noexcept {
+  switch (m) {
+    case ScanMethod::four_sensor:
+      return "four_sensor";
+    case ScanMethod::displacement:
+      return "displacement";
+    case ScanMethod::both:
+      return "both";
+  }
+  return "unknown";
+}
+
+namespace {
+
+int line_of(const toml::node& n) {
+  return static_cast<int>(n.source().begin.line);
+}
+
+/// Reads typed values from one table, reporting "file:line: key: problem".  `prefix` is the
+/// table's path as the user would write it ("sensor[2]", "scan").
+class Reader {
+ public:
+  Reader(const std::string& file, const toml::table& t, std::string prefix)
+      : file_(file), t_(t), prefix_(std::move(prefix)) {}
+
+  [[noreturn]] void fail(const std::string& key, const std::string& problem) const {
+    const toml::node* n = key.empty() ? nullptr : t_.get(key);
+    throw ConfigError(file_, n ? line_of(*n) : line_of(t_), full(key), problem);
+  }
+  std::string full(const std::string& key) const {
+    if (key.empty()) return prefix_;
+    return prefix_.empty() ? key : prefix_ + "." + key;
+  }
+  const toml::table& table() const { return t_; }
+  const std::string& file() const { return file_; }
+
+  /// Unknown keys are errors: a misspelt key must not silently fall back to a default.
+  void only(std::initializer_list<const char*> allowed) const {
+    std::set<std::string> ok(allowed.begin(), allowed.end());
+    for (const auto& [k, v] : t_) {
+      if (!ok.count(std::string(k.str()))) {
+        std::string list;
+        for (const char* a : allowed)
+          list += (list.empty() ? "" : ", ") + std::string(a);
+        throw ConfigError(file_, line_of(v), full(std::string(k.str())),
+                          "unknown key (allowed here: " + list + ")");
+      }
+    }
+  }
+  bool has(const std::string& key) const { return t_.get(key) != nullptr; }
+  void require(const std::string& key) const {
+    if (!has(key)) fail("", "missing required key '" + key + "'");
+  }
+
+  void get(const std::string& key, std::string& out, bool required = false) const {
+    const toml::node* n = t_.get(key);
+    if (!n) {
+      if (required) require(key);
+      return;
+    }
+    if (!n->is_string()) fail(key, "expected a string");
+    out = n->as_string()->get();
+  }
+  void get(const std::string& key, bool& out) const {
+    const toml::node* n = t_.get(key);
+    if (!n) return;
+    if (!n->is_boolean()) fail(key, "expected true or false");
+    out = n->as_boolean()->get();
+  }
+  void get(const std::string& key, double& out, bool required = false) const {
+    const toml::node* n = t_.get(key);
+    if (!n) {
+      if (required) require(key);
+      return;
+    }
+    if (n->is_floating_point())
+      out = n->as_floating_point()->get();
+    else if (n->is_integer())
+      out = static_cast<double>(n->as_integer()->get());
+    else
+      fail(key, "expected a number");
+    if (!std::isfinite(out)) fail(key, "must be finite");
+  }
+  template <typename Int>
+  void get_int(const std::string& key, Int& out, long long lo, long long hi,
+               bool required = false) const {
+    const toml::node* n = t_.get(key);
+    if (!n) {
+      if (required) require(key);
+      return;
+    }
+    if (!n->is_integer()) fail(key, "expected an integer");
+    const long long v = n->as_integer()->get();
+    if (v < lo || v > hi)
+      fail(key, std::to_string(v) + " is out of range " + std::to_string(lo) + ".." +
+                    std::to_string(hi));
+    out = static_cast<Int>(v);
+  }
+  void check(const std::string& key, bool cond, const std::string& problem) const {
+    if (!cond) fail(key, problem);
+  }
+  const toml::table* sub(const std::string& key) const {
+    const toml::node* n = t_.get(key);
+    if (!n) return nullptr;
+    if (!n->is_table()) fail(key, "expected a table, e.g. " + key + " = { ... }");
+    return n->as_table();
+  }
+
+ private:
+  const std::string& file_;
+  const toml::table& t_;
+  std::string prefix_;
+};
+
+/// A register spec table.  `unit_id` defaults to the device's; `dflt` carries kind and type
+/// defaults for this use.
+RegisterSpec read_register(const Reader& parent, const std::string& key, int unit_id,
+                           RegisterSpec dflt, bool required) {
+  const toml::table* t = parent.sub(key);
+  if (!t) {
+    if (required) parent.require(key);
+    dflt.unit_id = unit_id;
+    return dflt;
+  }
+  Reader r(parent.file(), *t, parent.full(key));
+  r.only({"unit_id", "address", "kind", "type", "word_order", "scale", "offset"});
+  RegisterSpec s = dflt;
+  s.unit_id = unit_id;
+  r.get_int("unit_id", s.unit_id, 0, 247);
+  r.get_int("address", s.address, 0, 65535, true);
+  std::string str;
+  if (r.has("kind")) {
+    r.get("kind", str);
+    auto k = parse_register_kind(str);
+    r.check("kind", k.has_value(), "'" + str + "' is not one of input, holding, coil");
+    s.kind = *k;
+  }
+  if (r.has("type")) {
+    r.get("type", str);
+    auto ty = parse_register_type(str);
+    r.check("type", ty.has_value(), "'" + str + "' is not one of int16, uint16, int32, float32");
+    s.type = *ty;
+  }
+  if (r.has("word_order")) {
+    r.get("word_order", str);
+    auto w = parse_word_order(str);
+    r.check("word_order", w.has_value(), "'" + str + "' is not one of big, little");
+    s.word_order = *w;
+  }
+  r.get("scale", s.scale);
+  r.get("offset", s.offset);
+  std::string why;
+  if (!s.is_valid(&why)) r.fail("", why);
+  return s;
+}
+
+ProfileSpec read_profile(const Reader& parent, const std::string& key) {
+  ProfileSpec p;
+  const toml::table* t = parent.sub(key);
+  if (!t) return p;
+  Reader r(parent.file(), *t, parent.full(key));
+  r.only({"offset", "slope_per_mm", "harmonics"});
+  r.get("offset", p.offset);
+  r.get("slope_per_mm", p.slope_per_mm);
+  if (const toml::node* hn = t->get("harmonics")) {
+    const toml::array* arr = hn->as_array();
+    if (!arr) r.fail("harmonics", "expected an array of { amplitude, period_mm, phase_rad }");
+    for (std::size_t i = 0; i < arr->size(); ++i) {
+      const toml::node& e = *arr->get(i);
+      const std::string hkey = "harmonics[" + std::to_string(i) + "]";
+      if (!e.is_table())
+        throw ConfigError(r.file(), line_of(e), r.full(hkey),
+                          "expected { amplitude = ..., period_mm = ..., phase_rad = ... }");
+      Reader h(r.file(), *e.as_table(), r.full(hkey));
+      h.only({"amplitude", "period_mm", "phase_rad"});
+      Harmonic hm;
+      h.get("amplitude", hm.amplitude, true);
+      h.get("period_mm", hm.period_mm, true);
+      h.check("period_mm", hm.period_mm != 0.0, "must be non-zero");
+      h.get("phase_rad", hm.phase_rad);
+      p.harmonics.push_back(hm);
+    }
+  }
+  return p;
+}
+
+std::vector<std::string> read_string_list(const Reader& r, const std::string& key) {
+  std::vector<std::string> out;
+  const toml::node* n = r.table().get(key);
+  if (!n) return out;
+  const toml::array* arr = n->as_array();
+  if (!arr) r.fail(key, "expected an array of names, e.g. [\"sensor1\"]");
+  for (const auto& e : *arr) {
+    if (!e.is_string()) r.fail(key, "every element must be a string");
+    out.push_back(e.as_string()->get());
+  }
+  return out;
+}
+
+/// Iterates an array of tables ([[bus]]), giving each a Reader "bus[i]".
+template <typename F>
+void for_each_table(const std::string& file, const toml::table& root, const std::string& key,
+                    F&& f) {
+  const toml::node* n = root.get(key);
+  if (!n) return;
+  const toml::array* arr = n->as_array();
+  if (!arr || !arr->is_array_of_tables())
+    throw ConfigError(file, line_of(*n), key, "expected [[" + key + "]] tables");
+  for (std::size_t i = 0; i < arr->size(); ++i)
+    f(Reader(file, *arr->get(i)->as_table(), key + "[" + std::to_string(i) + "]"));
+}
+
+void read_buses(const std::string& file, const toml::table& root, MachineConfig& c) {
+  for_each_table(file, root, "bus", [&](const Reader& r) {
+    r.only({"name", "kind", "host", "port", "device", "baud", "parity", "data_bits", "stop_bits",
+            "response_timeout_ms", "retries", "sample_rate_hz"});
+    BusConfig b;
+    r.get("name", b.name, true);
+    r.check("name", !b.name.empty(), "must not be empty");
+    r.check("name", !c.find_bus(b.name), "duplicate bus name '" + b.name + "'");
+    std::string kind = "tcp";
+    r.get("kind", kind);
+    if (kind == "tcp")
+      b.kind = BusKind::tcp;
+    else if (kind == "rtu")
+      b.kind = BusKind::rtu;
+    else
+      r.fail("kind", "'" + kind + "' is not one of tcp, rtu");
+    if (b.kind == BusKind::tcp) {
+      r.get("host", b.host);
+      r.check("host", !b.host.empty(), "must not be empty");
+      r.get_int("port", b.port, 0, 65535, true);
+    } else {
+      r.get("device", b.device, true);
+      r.check("device", !b.device.empty(), "must name a serial device, e.g. /dev/ttyUSB0");
+      r.get_int("baud", b.baud, 300, 4000000);
+      std::string parity = "none";
+      r.get("parity", parity);
+      if (parity == "none")
+        b.parity = Parity::none;
+      else if (parity == "even")
+        b.parity = Parity::even;
+      else if (parity == "odd")
+        b.parity = Parity::odd;
+      else
+        r.fail("parity", "'" + parity + "' is not one of none, even, odd");
+      r.get_int("data_bits", b.data_bits, 5, 8);
+      r.get_int("stop_bits", b.stop_bits, 1, 2);
+    }
+    r.get_int("response_timeout_ms", b.response_timeout_ms, 1, 60000);
+    r.get_int("retries", b.retries, 0, 10);
+    r.get("sample_rate_hz", b.sample_rate_hz);
+    r.check("sample_rate_hz", b.sample_rate_hz >= 0.0 && b.sample_rate_hz <= 100000.0,
+            "must be in 0..100000 (0 = sampler.rate_hz)");
+    c.buses.push_back(std::move(b));
+  });
+}
+
+void read_sensors(const std::string& file, const toml::table& root, MachineConfig& c) {
+  for_each_table(file, root, "sensor", [&](const Reader& r) {
+    r.only({"name", "bus", "unit_id", "register", "range_min_um", "range_max_um"});
+    SensorConfig s;
+    r.get("name", s.name, true);
+    r.check("name", !s.name.empty(), "must not be empty");
+    r.check("name", !c.find_sensor(s.name), "duplicate sensor name '" + s.name + "'");
+    r.get("bus", s.bus, true);
+    r.check("bus", c.find_bus(s.bus) != nullptr, "no [[bus]] named '" + s.bus + "'");
+    int unit = 1;
+    r.get_int("unit_id", unit, 0, 247);
+    RegisterSpec d;
+    d.kind = RegisterKind::input;
+    d.type = RegisterType::float32;
+    s.reg = read_register(r, "register", unit, d, true);
+    if (s.reg.kind == RegisterKind::coil) r.fail("register", "a sensor value cannot be a coil");
+    r.get("range_min_um", s.range_min_um);
+    r.get("range_max_um", s.range_max_um);
+    r.check("range_max_um", s.range_max_um > s.range_min_um, "must be greater than range_min_um");
+    c.sensors.push_back(std::move(s));
+  });
+}
+
+void read_stages(const std::string& file, const toml::table& root, MachineConfig& c) {
+  for_each_table(file, root, "stage", [&](const Reader& r) {
+    r.only({"name", "role", "bus", "unit_id", "target_position", "actual_position", "status",
+            "in_position_bit", "fault_bit", "stop_coil", "fault_code", "speed", "speed_mm_s",
+            "position_tolerance_mm", "move_timeout_ms"});
+    StageConfig s;
+    r.get("name", s.name, true);
+    r.check("name", !s.name.empty(), "must not be empty");
+    r.check("name", !c.find_stage(s.name), "duplicate stage name '" + s.name + "'");
+    std::string role;
+    r.get("role", role, true);
+    if (role == "slide")
+      s.role = StageRole::slide;
+    else if (role == "sensor_stage")
+      s.role = StageRole::sensor_stage;
+    else if (role == "reference_piece")
+      s.role = StageRole::reference_piece;
+    else
+      r.fail("role", "'" + role + "' is not one of slide, sensor_stage, reference_piece");
+    r.get("bus", s.bus, true);
+    r.check("bus", c.find_bus(s.bus) != nullptr, "no [[bus]] named '" + s.bus + "'");
+    int unit = 1;
+    r.get_int("unit_id", unit, 0, 247);
+    RegisterSpec pos;
+    pos.kind = RegisterKind::holding;
+    pos.type = RegisterType::float32;
+    s.target_position = read_register(r, "target_position", unit, pos, true);
+    r.check("target_position", s.target_position.kind == RegisterKind::holding,
+            "must be a holding register (it is written)");
+    pos.kind = RegisterKind::input;
+    s.actual_position = read_register(r, "actual_position", unit, pos, true);
+    r.check("actual_position", s.actual_position.kind != RegisterKind::coil, "cannot be a coil");
+    RegisterSpec st;
+    st.kind = RegisterKind::input;
+    st.type = RegisterType::uint16;
+    s.status = read_register(r, "status", unit, st, true);
+    r.check("status",
+            s.status.kind != RegisterKind::coil &&
+                (s.status.type == RegisterType::uint16 || s.status.type == RegisterType::int16),
+            "must be a 16-bit (uint16/int16) input or holding register");
+    r.get_int("in_position_bit", s.in_position_bit, 0, 15);
+    r.get_int("fault_bit", s.fault_bit, 0, 15);
+    r.check("fault_bit", s.fault_bit != s.in_position_bit, "must differ from in_position_bit");
+    RegisterSpec coil;
+    coil.kind = RegisterKind::coil;
+    s.stop_coil = read_register(r, "stop_coil", unit, coil, true);
+    r.check("stop_coil", s.stop_coil.kind == RegisterKind::coil, "must have kind = \"coil\"");
+    if (r.has("fault_code")) {
+      s.fault_code = read_register(r, "fault_code", unit, st, true);
+      r.check("fault_code", s.fault_code->kind != RegisterKind::coil, "cannot be a coil");
+    }
+    if (r.has("speed")) {
+      s.speed = read_register(r, "speed", unit, pos, true);
+      r.check("speed", s.speed->kind == RegisterKind::holding, "must be a holding register");
+    }
+    r.get("speed_mm_s", s.speed_mm_s);
+    r.check("speed_mm_s", s.speed_mm_s >= 0.0, "must be >= 0 (0 = leave the drive's speed)");
+    r.get("position_tolerance_mm", s.position_tolerance_mm);
+    r.check("position_tolerance_mm", s.position_tolerance_mm > 0.0, "must be > 0");
+    r.get_int("move_timeout_ms", s.move_timeout_ms, 1, 3600000);
+    c.stages.push_back(std::move(s));
+  });
+}
+
+void read_gpio(const Reader& root, MachineConfig& c) {
+  const toml::table* t = root.sub("gpio");
+  if (!t) return;
+  Reader r(root.file(), *t, "gpio");
+  r.only({"chip", "start_line", "trigger_line", "output_line"});
+  GpioConfig g;
+  r.get("chip", g.chip, true);
+  r.check("chip", !g.chip.empty(), "must name a gpiochip, e.g. gpiochip0");
+  r.get_int("start_line", g.start_line, -1, 1023);
+  r.get_int("trigger_line", g.trigger_line, -1, 1023);
+  r.get_int("output_line", g.output_line, -1, 1023);
+  c.gpio = g;
+}
+
+void read_sampler(const Reader& root, MachineConfig& c) {
+  const toml::table* t = root.sub("sampler");
+  if (!t) return;
+  Reader r(root.file(), *t, "sampler");
+  r.only({"rate_hz", "realtime", "cpu_affinity", "fifo_priority", "ring_capacity"});
+  SamplerConfig& s = c.sampler;
+  r.get("rate_hz", s.rate_hz);
+  r.check("rate_hz", s.rate_hz > 0.0 && s.rate_hz <= 100000.0, "must be in (0, 100000]");
+  r.get("realtime", s.realtime);
+  r.get_int("cpu_affinity", s.cpu_affinity, -1, 1023);
+  r.get_int("fifo_priority", s.fifo_priority, 1, 99);
+  r.get_int("ring_capacity", s.ring_capacity, 2, 1LL << 26);
+}
+
+void read_scan(const Reader& root, MachineConfig& c) {
+  const toml::table* t = root.sub("scan");
+  if (!t) return;
+  Reader r(root.file(), *t, "scan");
+  r.only({"method",
+          "dx_mm",
+          "s2",
+          "s3",
+          "s4",
+          "N",
+          "single_sensor",
+          "sensors",
+          "slide_stage",
+          "sensor_stage",
+          "slide_start_mm",
+          "sensor_stage_origin_mm",
+          "averages",
+          "settle_ms",
+          "d_mm",
+          "displacement_points",
+          "workpiece_sensor",
+          "reference_sensor",
+          "reference_stage",
+          "output_dir"});
+  ScanConfig& s = c.scan;
+  std::string method = "four_sensor";
+  r.get("method", method);
+  if (method == "four_sensor")
+    s.method = ScanMethod::four_sensor;
+  else if (method == "displacement")
+    s.method = ScanMethod::displacement;
+  else if (method == "both")
+    s.method = ScanMethod::both;
+  else
+    r.fail("method", "'" + method + "' is not one of four_sensor, displacement, both");
+  auto& g = s.geometry;
+  r.get("dx_mm", g.dx_mm);
+  r.check("dx_mm", g.dx_mm > 0.0, "must be > 0");
+  r.get_int("s2", g.s2, 1, 100000);
+  r.get_int("s3", g.s3, 1, 100000);
+  r.get_int("s4", g.s4, 1, 100000);
+  r.get_int("N", g.N, 2, 10000000);
+  r.check("N", g.positions() >= 2,
+          "N = " + std::to_string(g.N) + " must exceed s2 + s3 + s4 + 1 = " +
+              std::to_string(g.s2 + g.s3 + g.s4 + 1) + " (at least two slide positions)");
+  r.get("single_sensor", s.single_sensor);
+  s.sensors = read_string_list(r, "sensors");
+  r.get("slide_stage", s.slide_stage);
+  r.get("sensor_stage", s.sensor_stage);
+  r.get("slide_start_mm", s.slide_start_mm);
+  r.get("sensor_stage_origin_mm", s.sensor_stage_origin_mm);
+  r.get_int("averages", s.averages, 1, 1000000);
+  r.get_int("settle_ms", s.settle_ms, 0, 600000);
+  r.get("d_mm", s.d_mm);
+  r.get_int("displacement_points", s.displacement_points, 0, 10000000);
+  r.get("workpiece_sensor", s.workpiece_sensor);
+  r.get("reference_sensor", s.reference_sensor);
+  r.get("reference_stage", s.reference_stage);
+  std::string out = s.output_dir.string();
+  r.get("output_dir", out);
+  r.check("output_dir", !out.empty(), "must not be empty");
+  s.output_dir = out;
+
+  auto stage_with_role = [&](const std::string& key, const std::string& name, StageRole role) {
+    if (name.empty()) r.fail("", "missing required key '" + key + "'");
+    const StageConfig* st = c.find_stage(name);
+    r.check(key, st != nullptr, "no [[stage]] named '" + name + "'");
+    r.check(
+        key, st->role == role,
+        "stage '" + name + "' has role " + to_string(st->role) + ", expected " + to_string(role));
+  };
+  auto sensor_exists = [&](const std::string& key, const std::string& name) {
+    if (name.empty()) r.fail("", "missing required key '" + key + "'");
+    r.check(key, c.find_sensor(name) != nullptr, "no [[sensor]] named '" + name + "'");
+  };
+  if (s.method != ScanMethod::displacement) {
+    const std::size_t want = s.single_sensor ? 1 : 4;
+    r.check("sensors", s.sensors.size() == want,
+            "has " + std::to_string(s.sensors.size()) + " names; " +
+                (s.single_sensor ? "single_sensor = true needs exactly 1"
+                                 : "single_sensor = false needs exactly 4 (configuration order)"));
+    for (const auto& n : s.sensors)
+      sensor_exists("sensors", n);
+    stage_with_role("slide_stage", s.slide_stage, StageRole::slide);
+    if (s.single_sensor) stage_with_role("sensor_stage", s.sensor_stage, StageRole::sensor_stage);
+  }
+  if (s.method != ScanMethod::four_sensor) {
+    r.check("d_mm", s.d_mm > 0.0, "must be > 0");
+    sensor_exists("workpiece_sensor", s.workpiece_sensor);
+    sensor_exists("reference_sensor", s.reference_sensor);
+    r.check("reference_sensor", s.reference_sensor != s.workpiece_sensor,
+            "must differ from workpiece_sensor");
+    stage_with_role("slide_stage", s.slide_stage, StageRole::slide);
+    stage_with_role("reference_stage", s.reference_stage, StageRole::reference_piece);
+  }
+}
+
+void read_simulator(const Reader& root, MachineConfig& c) {
+  const toml::table* t = root.sub("simulator");
+  if (!t) return;
+  Reader r(root.file(), *t, "simulator");
+  r.only({"embedded", "host", "port", "preset", "S_um", "gamma_urad", "f_um", "e_um", "w_um",
+          "r_um", "m_um", "noise_sigma_um", "drift_um_per_s", "stage_speed_mm_s", "settle_ms",
+          "seed", "faults"});
+  SimulatorConfig& s = c.simulator;
+  r.get("embedded", s.embedded);
+  r.get("host", s.host);
+  r.check("host", s.host == "127.0.0.1" || s.host == "::1",
+          "'" + s.host + "': the simulator binds to loopback only (127.0.0.1 or ::1)");
+  r.get_int("port", s.port, 0, 65535);
+  r.get("preset", s.preset);
+  r.check(
+      "preset", s.preset.empty() || s.preset == "zhao2019_example1",
+      "'" + s.preset + "' is not one of \"zhao2019_example1\", \"\" (use S_um, gamma_urad, f_um)");
+  s.S_um = read_profile(r, "S_um");
+  s.gamma_urad = read_profile(r, "gamma_urad");
+  s.f_um = read_profile(r, "f_um");
+  s.w_um = read_profile(r, "w_um");
+  s.r_um = read_profile(r, "r_um");
+  s.m_um = read_profile(r, "m_um");
+  if (const toml::node* n = t->get("e_um")) {
+    const toml::array* arr = n->as_array();
+    if (!arr || arr->size() != 4)
+      r.fail("e_um", "expected 4 numbers e_1..e_4 (µm), e.g. [0.0, 1.5, -2.0, 0.7]");
+    for (std::size_t i = 0; i < 4; ++i) {
+      auto v = arr->get(i)->value<double>();
+      if (!v || !std::isfinite(*v)) r.fail("e_um", "every element must be a finite number");
+      s.e_um[i] = *v;
+    }
+  }
+  r.get("noise_sigma_um", s.noise_sigma_um);
+  r.check("noise_sigma_um", s.noise_sigma_um >= 0.0, "must be >= 0");
+  r.get("drift_um_per_s", s.drift_um_per_s);
+  r.get("stage_speed_mm_s", s.stage_speed_mm_s);
+  r.check("stage_speed_mm_s", s.stage_speed_mm_s > 0.0, "must be > 0");
+  r.get_int("settle_ms", s.settle_ms, 0, 600000);
+  r.get_int("seed", s.seed, 0, std::numeric_limits<long long>::max());
+  if (const toml::table* ft = r.sub("faults")) {
+    Reader f(r.file(), *ft, "simulator.faults");
+    f.only({"hang_after_requests", "hang_ms", "drop_after_requests", "exception_after_requests",
+            "exception_count", "exception_code", "out_of_range_sensor"});
+    SimulatorFaults& x = s.faults;
+    f.get_int("hang_after_requests", x.hang_after_requests, 0, std::numeric_limits<long>::max());
+    f.get_int("hang_ms", x.hang_ms, 0, 3600000);
+    f.get_int("drop_after_requests", x.drop_after_requests, 0, std::numeric_limits<long>::max());
+    f.get_int("exception_after_requests", x.exception_after_requests, 0,
+              std::numeric_limits<long>::max());
+    f.get_int("exception_count", x.exception_count, 1, 1000000);
+    f.get_int("exception_code", x.exception_code, 1, 11);
+    f.get("out_of_range_sensor", x.out_of_range_sensor);
+    if (!x.out_of_range_sensor.empty())
+      f.check("out_of_range_sensor", c.find_sensor(x.out_of_range_sensor) != nullptr,
+              "no [[sensor]] named '" + x.out_of_range_sensor + "'");
+  }
+}
+
+MachineConfig build(const toml::table& root, const std::string& name) {
+  MachineConfig c;
+  c.source = name;
+  Reader r(name, root, "");
+  r.only({"bus", "sensor", "stage", "gpio", "sampler", "scan", "simulator"});
+  read_buses(name, root, c);
+  if (c.buses.empty()) throw ConfigError(name, 0, "bus", "at least one [[bus]] is required");
+  read_sensors(name, root, c);
+  read_stages(name, root, c);
+  read_gpio(r, c);
+  read_sampler(r, c);
+  read_scan(r, c);
+  read_simulator(r, c);
+  // Port 0 means "the embedded simulator's ephemeral port"; without it nothing fills it in.
+  for (std::size_t i = 0; i < c.buses.size(); ++i) {
+    const auto& b = c.buses[i];
+    if (b.kind == BusKind::tcp && b.port == 0 && !c.simulator.embedded) {
+      const toml::node* n = root.get("bus")->as_array()->get(i)->as_table()->get("port");
+      throw ConfigError(name, n ? line_of(*n) : 0, "bus[" + std::to_string(i) + "].port",
+                        "port 0 is only allowed with [simulator] embedded = true");
+    }
+  }
+  return c;
+}
+
+}  // namespace
+
+MachineConfig parse_machine_config(const std::string& toml_text, const std::string& name) {
+  toml::table root;
+  try {
+    root = toml::parse(toml_text, name);
+  } catch (const toml::parse_error& e) {
+    throw ConfigError(name, static_cast<int>(e.source().begin.line), "",
+                      "TOML syntax error: " + std::string(e.description()));
+  }
+  return build(root, name);
+}
+
+MachineConfig load_machine_config(const std::filesystem::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) throw ConfigError(file.string(), 0, "", "cannot open the config file");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  MachineConfig c = parse_machine_config(ss.str(), file.string());
+  c.source = file;
+  return c;
+}
+
+}  // namespace errsep::io
