@@ -135,7 +135,6 @@ ThermalResult evaluate_thermal_loop(const ThermalModel& model, const ThermalLoop
     const ExpansionCoefficient& k = *coef.at(c.coefficient);
     if (!group_length_mm.count(c.coefficient)) group_order.push_back(c.coefficient);
     group_length_mm[c.coefficient] += t.sign * c.length_mm;
-    res.net_length_mm += t.sign * c.length_mm;
     res.beta_um_per_K += t.sign * k.alpha_per_K * c.length_mm * 1000.0;
     // ∂δ/∂l_k = s_k α ΔT (µm per mm -> ·1000).
     length_terms.push_back({"l_" + c.name, "length of " + c.name + " (mm)",
@@ -145,6 +144,7 @@ ThermalResult evaluate_thermal_loop(const ThermalModel& model, const ThermalLoop
   std::vector<BudgetTerm> terms;
   // ∂δ/∂α_g = ΔT Σ_{k∈g} s_k l_k (mm·K -> µm: ·1000).
   for (const auto& g : group_order) {
+    res.group_length_mm.emplace_back(g, group_length_mm[g]);
     const ExpansionCoefficient& k = *coef.at(g);
     terms.push_back({"alpha_" + g, "expansion coefficient " + g + " (1/K)",
                      standard_uncertainty(k.quoted_per_K, k.distribution),

@@ -40,9 +40,11 @@ std::string format_budget_text(const core::BudgetEvaluation& ev, const std::stri
   for (const auto& t : ev.thermal) {
     s << "Thermal loop '" << t.name << "' (" << t.symbol << ")";
     if (!t.description.empty()) s << ": " << t.description;
-    s << "\n  net length " << fmt("%.6g", t.net_length_mm) << " mm, beta "
-      << fmt("%.6g", t.beta_um_per_K) << " um/K, sigma_beta " << fmt("%.6g", t.sigma_beta_um_per_K)
-      << " um/K\n";
+    s << "\n ";
+    for (const auto& [g, l] : t.group_length_mm)
+      s << " sum s*l(" << g << ") " << fmt("%.6g", l) << " mm,";
+    s << " beta " << fmt("%.6g", t.beta_um_per_K) << " um/K, sigma_beta "
+      << fmt("%.6g", t.sigma_beta_um_per_K) << " um/K\n";
     rows_table(s, t.budget, "input");
     s << "  " << t.symbol << " = " << fmt("%.4f", t.sigma_um) << " um\n\n";
   }

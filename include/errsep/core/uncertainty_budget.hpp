@@ -32,6 +32,7 @@
 //    independent coefficients would give σ_tx = 0.21 µm).
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace errsep::core {
@@ -121,7 +122,8 @@ struct ThermalModel {
 
 struct ThermalResult {
   std::string name, symbol, description;
-  double net_length_mm = 0;  ///< Σ s_k l_k (e.g. l_dJx = 7 mm)
+  /// Σ_{k∈g} s_k l_k per coefficient group, in order of appearance (e.g. aluminium: l_dJx = 7 mm)
+  std::vector<std::pair<std::string, double>> group_length_mm;
   double beta_um_per_K = 0;  ///< β
   double sigma_beta_um_per_K = 0;
   double sigma_um = 0;  ///< σ_δ of Eqs. (33)/(36)/(39)
