@@ -1,0 +1,213 @@
+#include "errsep/io/displacement_csv.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <sstream>
+
+namespace errsep::io {
+namespace {
+
+std::string num(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
+Eigen::VectorXd to_vec(const std::vector<double>& v) {
+  return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()));
+}
+
+std::size_t line_of(const CsvTable& t, std::size_t row) {
+  return row < t.row_line.size() ? t.row_line[row] : 0;
+}
+
+/// Checks that x is strictly increasing at a constant interval; returns the interval.
+double uniform_interval(const CsvTable& t, const std::vector<double>& x,
+                        const std::filesystem::path& file, const char* col) {
+  if (x.size() < 2) throw CsvError(file, 0, std::string("need at least 2 rows of ") + col);
+  const double dx = x[1] - x[0];
+  if (!(dx > 0))
+    throw CsvError(
+        file, line_of(t, 1),
+        std::string(col) + " must increase (found " + num(x[0]) + " then " + num(x[1]) + ")");
+  const double tol = 1e-6 * std::max(1.0, std::abs(dx));
+  for (std::size_t k = 1; k < x.size(); ++k)
+    if (std::abs(x[k] - x[k - 1] - dx) > tol)
+      throw CsvError(file, line_of(t, k),
+                     std::string(col) + " = " + num(x[k]) + " after " + num(x[k - 1]) +
+                         " breaks the sampling interval " + num(dx) +
+                         " set by the first two rows (samples must be uniform and in order)");
+  return dx;
+}
+
+/// Distinct values of a grid coordinate (tolerance 1e-6 of the spacing scale), sorted, checked
+/// for a uniform spacing.  Returns the values and sets *spacing.
+std::vector<double> grid_axis(const std::vector<double>& v, const std::filesystem::path& file,
+                              const char* col, double* spacing) {
+  std::vector<double> s = v;
+  std::sort(s.begin(), s.end());
+  std::vector<double> u;
+  for (double a : s)
+    if (u.empty() || std::abs(a - u.back()) > 1e-6 * std::max(1.0, std::abs(a))) u.push_back(a);
+  if (u.size() < 2)
+    throw CsvError(file, 0, std::string("the grid has a single ") + col + " value; need >= 2");
+  const double d = u[1] - u[0];
+  for (std::size_t k = 1; k < u.size(); ++k)
+    if (std::abs(u[k] - u[k - 1] - d) > 1e-6 * std::max(1.0, d))
+      throw CsvError(file, 0,
+                     std::string(col) + " values are not evenly spaced: " + num(u[k - 1]) + " to " +
+                         num(u[k]) + " but the first step is " + num(d));
+  *spacing = d;
+  return u;
+}
+
+std::size_t index_of(const std::vector<double>& axis, double v) {
+  const auto it = std::lower_bound(axis.begin(), axis.end(), v - 1e-6 * std::max(1.0, std::abs(v)));
+  return static_cast<std::size_t>(it - axis.begin());
+}
+
+}  // namespace
+
+OneAxisInput read_one_axis_csv(const std::filesystem::path& file) {
+  const CsvTable t = read_csv(file, CsvReadOptions{false, 2});
+  OneAxisInput in;
+  const auto x = t.column("x_mm", file);
+  in.s1_1_um = to_vec(t.column("s1_1_um", file));
+  in.s2_1_um = to_vec(t.column("s2_1_um", file));
+  in.s2_2_um = to_vec(t.column("s2_2_um", file));
+  in.dx_mm = uniform_interval(t, x, file, "x_mm");
+  in.x_mm = to_vec(x);
+  return in;
+}
+
+ThreePointInput read_three_point_csv(const std::filesystem::path& file) {
+  const CsvTable t = read_csv(file, CsvReadOptions{false, 2});
+  ThreePointInput in;
+  const auto x = t.column("x_mm", file);
+  const char* cols[3] = {"m1_um", "m2_um", "m3_um"};
+  in.m_um.resize(static_cast<Eigen::Index>(t.rows.size()), 3);
+  for (int j = 0; j < 3; ++j)
+    in.m_um.col(j) = to_vec(t.column(cols[j], file));
+  in.dx_mm = uniform_interval(t, x, file, "x_mm");
+  in.x_mm = to_vec(x);
+  return in;
+}
+
+TwoAxisInput read_two_axis_csv(const std::filesystem::path& file) {
+  const CsvTable t = read_csv(file, CsvReadOptions{false, 4});
+  const auto x = t.column("x_mm", file), y = t.column("y_mm", file);
+  const char* names[9] = {"s0_1_um", "s1_1_um", "s1_2_um", "s2_1_um", "s2_2_um",
+                          "s3_1_um", "s3_2_um", "s4_1_um", "s4_2_um"};
+  std::vector<std::vector<double>> cols;
+  for (const char* n : names)
+    cols.push_back(t.column(n, file));
+  TwoAxisInput in;
+  const auto xs = grid_axis(x, file, "x_mm", &in.dx_mm);
+  const auto ys = grid_axis(y, file, "y_mm", &in.dy_mm);
+  const auto nx = static_cast<Eigen::Index>(xs.size()), ny = static_cast<Eigen::Index>(ys.size());
+  core::TwoAxisScan& s = in.scan;
+  s.x_mm = to_vec(xs);
+  s.y_mm = to_vec(ys);
+  Eigen::MatrixXd* mats[9] = {&s.s0_1_um, &s.s1_1_um, &s.s1_2_um, &s.s2_1_um, &s.s2_2_um,
+                              &s.s3_1_um, &s.s3_2_um, &s.s4_1_um, &s.s4_2_um};
+  for (auto* m : mats)
+    m->setZero(nx, ny);
+  std::vector<std::size_t> seen_line(static_cast<std::size_t>(nx * ny), 0);
+  for (std::size_t r = 0; r < t.rows.size(); ++r) {
+    const std::size_t i = index_of(xs, x[r]), j = index_of(ys, y[r]);
+    std::size_t& seen = seen_line[i * static_cast<std::size_t>(ny) + j];
+    if (seen)
+      throw CsvError(file, line_of(t, r),
+                     "grid point (x_mm = " + num(x[r]) + ", y_mm = " + num(y[r]) +
+                         ") appears again (first at line " + std::to_string(seen) + ")");
+    seen = line_of(t, r) ? line_of(t, r) : r + 1;
+    for (int c = 0; c < 9; ++c)
+      (*mats[c])(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) = cols[c][r];
+  }
+  for (Eigen::Index j = 0; j < ny; ++j)
+    for (Eigen::Index i = 0; i < nx; ++i)
+      if (!seen_line[static_cast<std::size_t>(i * ny + j)])
+        throw CsvError(file, 0,
+                       "ragged grid: " + std::to_string(nx) + " x values times " +
+                           std::to_string(ny) + " y values need " + std::to_string(nx * ny) +
+                           " points, the file has " + std::to_string(t.rows.size()) +
+                           "; missing (x_mm = " + num(xs[static_cast<std::size_t>(i)]) +
+                           ", y_mm = " + num(ys[static_cast<std::size_t>(j)]) + ")");
+  return in;
+}
+
+CsvTable one_axis_result_csv(const Eigen::VectorXd& x_mm, const core::DisplacementResult& r) {
+  CsvTable t;
+  t.set_meta("errsep", "displacement method, one axis (Haramiishi 2024 Eqs. 1-9)");
+  t.set_meta("step_ratio", std::to_string(r.step_ratio));
+  auto col = [&](const char* n, const Eigen::VectorXd& v) {
+    t.add_column(n, std::vector<double>(v.data(), v.data() + v.size()));
+  };
+  col("x_mm", x_mm);
+  col("r_um", r.r_um);
+  col("m_um", r.m_um);
+  col("w_um", r.w_um);
+  return t;
+}
+
+CsvTable two_axis_result_csv(const core::TwoAxisScan& scan, const core::TwoAxisResult& r) {
+  CsvTable t;
+  t.set_meta("errsep", "displacement method, two axes (Haramiishi 2024 Eqs. 10-27)");
+  t.set_meta("rotation_correction", r.rotation_corrected ? "on" : "off");
+  const Eigen::Index nx = scan.x_mm.size(), ny = scan.y_mm.size();
+  auto flat = [&](const Eigen::MatrixXd& m) {
+    std::vector<double> v;
+    v.reserve(static_cast<std::size_t>(nx * ny));
+    for (Eigen::Index j = 0; j < ny; ++j)
+      for (Eigen::Index i = 0; i < nx; ++i)
+        v.push_back(m(i, j));
+    return v;
+  };
+  Eigen::MatrixXd xg(nx, ny), yg(nx, ny);
+  for (Eigen::Index j = 0; j < ny; ++j)
+    for (Eigen::Index i = 0; i < nx; ++i)
+      xg(i, j) = scan.x_mm(i), yg(i, j) = scan.y_mm(j);
+  t.add_column("x_mm", flat(xg));
+  t.add_column("y_mm", flat(yg));
+  t.add_column("w_um", flat(r.w_um));
+  t.add_column("m_w_um", flat(r.m_w_um));
+  t.add_column("m1x_um", flat(r.m1x_um));
+  t.add_column("m2x_um", flat(r.m2x_um));
+  t.add_column("m3y_um", flat(r.m3y_um));
+  t.add_column("m4y_um", flat(r.m4y_um));
+  t.add_column("m_wxe_um", flat(r.m_wxe_um));
+  t.add_column("m_wye_um", flat(r.m_wye_um));
+  t.add_column("r1x_um", flat(r.r1x_um));
+  t.add_column("r2x_um", flat(r.r2x_um));
+  t.add_column("r3y_um", flat(r.r3y_um));
+  t.add_column("r4y_um", flat(r.r4y_um));
+  return t;
+}
+
+CsvTable three_point_profile_csv(double x0_mm, double dx_mm, const core::ThreePointResult& r) {
+  CsvTable t;
+  t.set_meta("errsep", "generalised three-point method, profile (datum f_0 = f_{N-1} = 0)");
+  std::vector<double> x, f;
+  for (Eigen::Index k = 0; k < r.f_um.size(); ++k) {
+    x.push_back(x0_mm + k * dx_mm);
+    f.push_back(r.f_um(k));
+  }
+  t.add_column("x_mm", x);
+  t.add_column("f_um", f);
+  return t;
+}
+
+CsvTable three_point_motion_csv(const Eigen::VectorXd& x_mm, const core::ThreePointResult& r) {
+  CsvTable t;
+  t.set_meta("errsep", "generalised three-point method, slide motion");
+  t.add_column("x_mm", std::vector<double>(x_mm.data(), x_mm.data() + x_mm.size()));
+  t.add_column("S_um", std::vector<double>(r.S_um.data(), r.S_um.data() + r.S_um.size()));
+  std::vector<double> g;
+  for (Eigen::Index k = 0; k < r.gamma_rad.size(); ++k)
+    g.push_back(1e6 * r.gamma_rad(k));
+  t.add_column("gamma_urad", g);
+  return t;
+}
+
+}  // namespace errsep::io
