@@ -1,0 +1,204 @@
+// The machine config reader: the shipped configs parse to what they say, and every kind of
+// mistake gives "file:line: key: problem" naming the right key and line.
+#include <catch2/catch.hpp>
+#include <fstream>
+#include <string>
+
+#include "errsep/io/machine_config.hpp"
+#include "support/support.hpp"
+
+using namespace errsep::io;
+
+namespace {
+
+const char* kMinimal = R"(
+[[bus]]
+name = "b"
+kind = "tcp"
+host = "127.0.0.1"
+port = 1502
+
+[[sensor]]
+name = "s"
+bus = "b"
+register = { address = 4, type = "int32", word_order = "little", scale = 0.001 }
+
+[[stage]]
+name = "x"
+role = "slide"
+bus = "b"
+target_position = { address = 100 }
+actual_position = { address = 100 }
+status = { address = 104 }
+stop_coil = { address = 0 }
+)";
+
+// Parses `text` expecting a ConfigError; returns its message.
+std::string error_of(const std::string& text) {
+  try {
+    parse_machine_config(text, "t.toml");
+  } catch (const ConfigError& e) {
+    return e.what();
+  }
+  FAIL("no ConfigError for:\n" << text);
+  return {};
+}
+
+}  // namespace
+
+TEST_CASE("a minimal config parses with the documented defaults") {
+  const MachineConfig c = parse_machine_config(kMinimal, "t.toml");
+  REQUIRE(c.buses.size() == 1);
+  CHECK(c.buses[0].kind == BusKind::tcp);
+  CHECK(c.buses[0].port == 1502);
+  REQUIRE(c.sensors.size() == 1);
+  const RegisterSpec& r = c.sensors[0].reg;
+  CHECK(r.address == 4);
+  CHECK(r.kind == RegisterKind::input);  // default for a sensor
+  CHECK(r.type == RegisterType::int32);
+  CHECK(r.word_order == WordOrder::little);
+  CHECK(r.scale == 0.001);
+  REQUIRE(c.stages.size() == 1);
+  CHECK(c.stages[0].target_position.kind == RegisterKind::holding);
+  CHECK(c.stages[0].actual_position.kind == RegisterKind::input);
+  CHECK(c.stages[0].status.type == RegisterType::uint16);
+  CHECK(c.stages[0].stop_coil.kind == RegisterKind::coil);
+  CHECK_FALSE(c.gpio.has_value());
+  CHECK(c.sample_rate_hz(c.buses[0]) == c.sampler.rate_hz);
+}
+
+TEST_CASE("config/simulator.toml parses and is self-consistent") {
+  const auto path = errsep::test::source_dir() / "config" / "simulator.toml";
+  const MachineConfig c = load_machine_config(path);
+  CHECK(c.simulator.embedded);
+  CHECK(c.simulator.host == "127.0.0.1");
+  CHECK(c.simulator.port == 0);
+  CHECK(c.buses.size() == 2);
+  for (const auto& b : c.buses)
+    CHECK(b.port == 0);  // filled in from the simulator
+  CHECK(c.scan.method == ScanMethod::four_sensor);
+  CHECK(c.scan.single_sensor);
+  CHECK(c.scan.sensors == std::vector<std::string>{"sensor1"});
+  CHECK(c.scan.geometry.N == 69);
+  CHECK(c.scan.geometry.positions() == 62);
+  CHECK(c.scan.averages == 100);
+  CHECK(c.simulator.e_um[3] == 4.0);
+  REQUIRE(c.find_stage("reference_piece"));
+  CHECK(c.find_stage("reference_piece")->target_position.type == RegisterType::int32);
+  CHECK(c.find_stage("reference_piece")->target_position.word_order == WordOrder::little);
+  CHECK(c.simulator.m_um.harmonics.size() == 1);
+  MachineConfig copy = c;
+  CHECK(apply_simulator_port(copy, 40123) == 2);
+  CHECK(copy.buses[1].port == 40123);
+}
+
+TEST_CASE("config/machine-example.toml parses (RTU, TCP drive, GPIO)") {
+  const auto path = errsep::test::source_dir() / "config" / "machine-example.toml";
+  const MachineConfig c = load_machine_config(path);
+  const BusConfig* rs = c.find_bus("rs485");
+  REQUIRE(rs);
+  CHECK(rs->kind == BusKind::rtu);
+  CHECK(rs->device == "/dev/ttyUSB0");
+  CHECK(rs->parity == Parity::even);
+  CHECK(c.sample_rate_hz(*rs) == 50.0);
+  REQUIRE(c.gpio.has_value());
+  CHECK(c.gpio->chip == "gpiochip0");
+  CHECK(c.gpio->start_line == 17);
+  CHECK_FALSE(c.scan.single_sensor);
+  CHECK(c.scan.sensors.size() == 4);
+  CHECK(c.find_sensor("s1")->reg.unit_id == 3);  // device unit id passed to the register
+  CHECK(c.find_stage("x")->fault_bit == 3);
+  CHECK_FALSE(c.simulator.embedded);
+}
+
+TEST_CASE("mistakes name the file, the line and the key") {
+  // Unknown (misspelt) key, on line 11 of the text.
+  std::string m;
+  std::string t = kMinimal;
+  t.replace(t.find("register ="), 8, "regster");
+  m = error_of(t);
+  CHECK(m.find("t.toml:11: sensor[0].regster: unknown key") == 0);
+
+  // Wrong type.
+  t = kMinimal;
+  t.replace(t.find("port = 1502"), 11, "port = \"1502\"");
+  m = error_of(t);
+  CHECK(m.find("t.toml:6: bus[0].port: expected an integer") == 0);
+
+  // Missing required key: reported at the table's line.
+  t = kMinimal;
+  t.replace(t.find("bus = \"b\"\nregister"), 9, "");
+  m = error_of(t);
+  CHECK(m.find("t.toml:") == 0);
+  CHECK(m.find("sensor[0]: missing required key 'bus'") != std::string::npos);
+
+  // Dangling reference.
+  t = kMinimal;
+  t.replace(t.find("bus = \"b\"\nregister"), 9, "bus = \"c\"");
+  CHECK(error_of(t).find("sensor[0].bus: no [[bus]] named 'c'") != std::string::npos);
+
+  // Bad enum value, inside an inline table.
+  t = kMinimal;
+  t.replace(t.find("\"int32\""), 7, "\"float64\"");
+  m = error_of(t);
+  CHECK(m.find("t.toml:11: sensor[0].register.type: 'float64' is not one of") == 0);
+
+  // Out-of-range values.
+  CHECK(error_of(std::string(kMinimal) + "[sampler]\nfifo_priority = 120\n")
+            .find("sampler.fifo_priority: 120 is out of range 1..99") != std::string::npos);
+  CHECK(error_of(std::string(kMinimal) + "[[sensor]]\nname = \"r\"\nbus = \"b\"\n"
+                                         "register = { address = 8 }\nrange_min_um = 5\n"
+                                         "range_max_um = -5\n")
+            .find("sensor[1].range_max_um: must be greater than range_min_um") !=
+        std::string::npos);
+
+  // TOML syntax error: line of the error.
+  m = error_of("[[bus]]\nname = \"b\"\nport = = 3\n");
+  CHECK(m.find("t.toml:3: TOML syntax error") == 0);
+}
+
+TEST_CASE("cross-field rules of scan and simulator") {
+  std::string m = error_of(std::string(kMinimal) +
+                           "[scan]\nsingle_sensor = false\n"
+                           "sensors = [\"s\"]\nslide_stage = \"x\"\n");
+  CHECK(m.find("scan.sensors: has 1 names; single_sensor = false needs exactly 4") !=
+        std::string::npos);
+  m = error_of(std::string(kMinimal) +
+               "[scan]\nsensors = [\"s\"]\nslide_stage = \"x\"\n"
+               "sensor_stage = \"x\"\n");
+  CHECK(m.find("scan.sensor_stage: stage 'x' has role slide, expected sensor_stage") !=
+        std::string::npos);
+  m = error_of(std::string(kMinimal) + "[scan]\nN = 8\nsensors = [\"s\"]\n");
+  CHECK(m.find("scan.N: N = 8 must exceed s2 + s3 + s4 + 1 = 8") != std::string::npos);
+  m = error_of(std::string(kMinimal) + "[simulator]\nhost = \"0.0.0.0\"\n");
+  CHECK(m.find("simulator.host: '0.0.0.0': the simulator binds to loopback only") !=
+        std::string::npos);
+  std::string t = kMinimal;
+  t.replace(t.find("port = 1502"), 11, "port = 0");
+  CHECK(error_of(t).find("t.toml:6: bus[0].port: port 0 is only allowed with [simulator] "
+                         "embedded = true") == 0);
+  CHECK_NOTHROW(parse_machine_config(t + "[simulator]\nembedded = true\n", "t.toml"));
+  m = error_of(std::string(kMinimal) + "[simulator]\ne_um = [1, 2]\n");
+  CHECK(m.find("simulator.e_um: expected 4 numbers") != std::string::npos);
+}
+
+TEST_CASE("file errors carry the path") {
+  errsep::test::TempDir dir;
+  const auto missing = dir / "nope.toml";
+  try {
+    load_machine_config(missing);
+    FAIL("no error for a missing file");
+  } catch (const ConfigError& e) {
+    CHECK(std::string(e.what()).find(missing.string() + ": cannot open") == 0);
+  }
+  const auto bad = dir / "bad.toml";
+  std::ofstream(bad) << "[[bus]]\nname = \"b\"\nkind = \"can\"\n";
+  try {
+    load_machine_config(bad);
+    FAIL("no error for a bad bus kind");
+  } catch (const ConfigError& e) {
+    CHECK(std::string(e.what()) == bad.string() + ":3: bus[0].kind: 'can' is not one of tcp, rtu");
+    CHECK(e.line() == 3);
+    CHECK(e.key() == "bus[0].kind");
+  }
+}
