@@ -16,10 +16,10 @@ using ProfileFn = std::function<double(double x_mm)>;
 
 /// The truth a simulation (or the device simulator) plays.
 struct SlidewayTruth {
-  ProfileFn f_um;                             ///< reference surface profile f(x)
-  ProfileFn S_um;                             ///< straightness error S(x)
-  ProfileFn gamma_rad;                        ///< tilt error γ(x)
-  std::array<double, 4> e_um{0, 0, 0, 0};     ///< zero-adjustment values e_1..e_4 (e_1 = 0)
+  ProfileFn f_um;                          ///< reference surface profile f(x)
+  ProfileFn S_um;                          ///< straightness error S(x)
+  ProfileFn gamma_rad;                     ///< tilt error γ(x)
+  std::array<double, 4> e_um{0, 0, 0, 0};  ///< zero-adjustment values e_1..e_4 (e_1 = 0)
 };
 
 /// Eq. (1) for one configuration: the reading of a sensor offset by `offset_mm` from

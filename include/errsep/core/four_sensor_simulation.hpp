@@ -23,12 +23,12 @@ struct FourSensorSimOptions {
 };
 
 struct FourSensorSimData {
-  Eigen::MatrixXd m_um;        ///< P × 4 sensor outputs, row n = slide position x_n
-  Eigen::VectorXd x_mm;        ///< P slide positions x_n = n·Δx
-  Eigen::VectorXd S_um;        ///< truth S(x_n), P
-  Eigen::VectorXd gamma_rad;   ///< truth γ(x_n), P
-  Eigen::VectorXd f_x_mm;      ///< N reference-surface sample positions
-  Eigen::VectorXd f_um;        ///< truth f(x_0..x_{N-1}), N
+  Eigen::MatrixXd m_um;       ///< P × 4 sensor outputs, row n = slide position x_n
+  Eigen::VectorXd x_mm;       ///< P slide positions x_n = n·Δx
+  Eigen::VectorXd S_um;       ///< truth S(x_n), P
+  Eigen::VectorXd gamma_rad;  ///< truth γ(x_n), P
+  Eigen::VectorXd f_x_mm;     ///< N reference-surface sample positions
+  Eigen::VectorXd f_um;       ///< truth f(x_0..x_{N-1}), N
 };
 
 /// Samples the model of Eq. (1) on the configuration's grid.  Throws std::invalid_argument if the

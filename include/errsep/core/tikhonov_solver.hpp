@@ -1,0 +1,62 @@
+#pragma once
+// Tikhonov solutions of A·X ≈ b (Eq. 17 of Zhao 2019): X_λ = (AᵀA + λ²I)⁻¹Aᵀb, by CHOLMOD on the
+// regularised normal equations.  AᵀA is formed once; the symbolic analysis (natural ordering,
+// simplicial LDLᵀ: AᵀA is banded with a few dense trailing rows) is done once in the constructor
+// and each λ costs one numeric factorisation with CHOLMOD's diagonal shift β = λ² (Ceres-style:
+// Tikhonov is a per-solve option, not a matrix edit).  This is the only place that talks to
+// CHOLMOD (through Eigen's CholmodSupport, in tikhonov_solver.cpp).
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+#include <memory>
+#include <string>
+
+namespace errsep::core {
+
+enum class SolverStatus {
+  success,
+  not_positive_definite,  ///< CHOLMOD reported a zero/negative pivot (rank-deficient A at λ = 0)
+  analysis_failed,
+  not_factorized,
+};
+const char* to_string(SolverStatus s);
+
+struct TikhonovSolverStats {
+  int factorizations = 0;
+  int solves = 0;
+  double analyze_s = 0;
+  double factorize_s = 0;  ///< total over all factorisations
+  double solve_s = 0;
+};
+
+class TikhonovSolver {
+ public:
+  /// Forms AᵀA and Aᵀ-product structures and runs the symbolic analysis.  Throws
+  /// std::runtime_error if CHOLMOD's analysis fails.
+  explicit TikhonovSolver(const Eigen::SparseMatrix<double>& A);
+  ~TikhonovSolver();
+  TikhonovSolver(const TikhonovSolver&) = delete;
+  TikhonovSolver& operator=(const TikhonovSolver&) = delete;
+
+  /// Numeric factorisation of AᵀA + λ²I.  λ = 0 gives the plain least-squares normal equations.
+  SolverStatus factorize(double lambda);
+  /// Solves (AᵀA + λ²I)·y = rhs with the current factor.
+  Eigen::VectorXd solve_normal(const Eigen::VectorXd& rhs);
+  /// X_λ for right-hand side b: solve_normal(Aᵀb).
+  Eigen::VectorXd solve(const Eigen::VectorXd& b);
+
+  const Eigen::SparseMatrix<double>& A() const { return A_; }
+  double lambda() const { return lambda_; }
+  /// An upper bound of the largest singular value of A (sqrt of ‖AᵀA‖₁), for λ ranges.
+  double sigma_max_bound() const { return sigma_max_bound_; }
+  const TikhonovSolverStats& stats() const { return stats_; }
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  Eigen::SparseMatrix<double> A_;
+  double lambda_ = -1.0;
+  double sigma_max_bound_ = 0.0;
+  TikhonovSolverStats stats_;
+};
+
+}  // namespace errsep::core

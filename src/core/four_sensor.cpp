@@ -1,0 +1,245 @@
+#include "errsep/core/four_sensor.hpp"
+
+#include <Eigen/Dense>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <stdexcept>
+
+namespace errsep::core {
+
+const char* to_string(LambdaRule r) {
+  switch (r) {
+    case LambdaRule::lcurve:
+      return "lcurve";
+    case LambdaRule::discrepancy:
+      return "discrepancy";
+    case LambdaRule::fixed:
+      return "fixed";
+    case LambdaRule::least_squares:
+      return "least_squares";
+  }
+  return "unknown";
+}
+
+bool FourSensorOptions::is_valid(std::string* why) const {
+  auto fail = [&](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  if (rule == LambdaRule::fixed && !(fixed_lambda >= 0 && std::isfinite(fixed_lambda)))
+    return fail("fixed_lambda = " + std::to_string(fixed_lambda) + ": must be finite and >= 0");
+  if (!(discrepancy_tau > 0)) return fail("discrepancy_tau must be > 0");
+  if (iterated_refinements < 0 || iterated_refinements > 100)
+    return fail("iterated_refinements = " + std::to_string(iterated_refinements) +
+                ": must be in [0, 100]");
+  if (uncertainty_probes < 1) return fail("uncertainty_probes must be >= 1");
+  return lcurve.is_valid(why);
+}
+
+namespace {
+
+// Everything after the factorisation that is linear in the outputs m: solve, refine, gauge, and
+// the S/γ estimate.  Used once for the data and again for each uncertainty probe.
+struct Pipeline {
+  const FourSensorConfig& cfg;
+  const FourSensorOptions& opts;
+  TikhonovSolver& solver;
+  Eigen::Matrix4d C;
+  Eigen::Matrix<double, 4, 2> C23;  // columns 2 and 3 of C (e_2, e_3 with e_1 = e_4 = 0)
+  std::array<int, 4> k;
+  std::array<double, 4> O_mm;
+
+  Eigen::VectorXd solve_X(const Eigen::VectorXd& b) const {
+    Eigen::VectorXd X = solver.solve(b);
+    for (int i = 0; i < opts.iterated_refinements; ++i)
+      X += solver.solve(b - solver.A() * X);
+    apply_gauge(cfg, opts.gauge, X);
+    return X;
+  }
+
+  struct Motion {
+    Eigen::VectorXd S, gamma_rad;
+    Eigen::Vector4d e;
+    Eigen::MatrixXd resid;
+  };
+
+  Motion motion(const Eigen::MatrixXd& m, const Eigen::VectorXd& X) const {
+    const int N = cfg.N, P = cfg.positions();
+    Motion out;
+    out.S.resize(P);
+    out.gamma_rad.resize(P);
+    out.resid.resize(P, 4);
+    // ê from Δe = C·e with e_1 = 0 and e_4 = 0 (the constant of γ, as Eq. 19 leaves it).
+    const Eigen::Vector4d de = X.tail<4>();
+    const Eigen::Vector2d e23 = C23.colPivHouseholderQr().solve(de);
+    out.e << 0.0, e23(0), e23(1), 0.0;
+    // Least-squares line S + O·γ through four points: precomputed normal equations.
+    double so = 0, soo = 0;
+    for (double o : O_mm)
+      so += o, soo += o * o;
+    const double det = 4.0 * soo - so * so;
+    for (int n = 0; n < P; ++n) {
+      Eigen::Vector4d r;
+      for (int j = 0; j < 4; ++j)
+        r(j) = m(n, j) - X(n + k[j]) - out.e(j);
+      double S, g_um_per_mm;
+      if (opts.motion == MotionEstimator::paper_eq18_19) {
+        S = m(n, 0) - X(n);                                                  // Eq. (18)
+        g_um_per_mm = (m(n, 3) - m(n, 0) - (X(n + k[3]) - X(n))) / O_mm[3];  // Eq. (19), no e_4
+      } else {
+        double sr = 0, sor = 0;
+        for (int j = 0; j < 4; ++j)
+          sr += r(j), sor += O_mm[j] * r(j);
+        S = (soo * sr - so * sor) / det;
+        g_um_per_mm = (4.0 * sor - so * sr) / det;
+      }
+      out.S(n) = S;
+      out.gamma_rad(n) = g_um_per_mm * 1e-3;  // µm/mm = mrad
+      for (int j = 0; j < 4; ++j)
+        out.resid(n, j) = r(j) - S - O_mm[j] * g_um_per_mm;
+    }
+    (void)N;
+    return out;
+  }
+};
+
+}  // namespace
+
+std::string FourSensorResult::brief_report() const {
+  char buf[512];
+  std::snprintf(buf, sizeof buf,
+                "four-sensor N=%d P=%d s=(%d,%d,%d) dx=%.4g mm: lambda=%.4g (%s%s) |AX-b|=%.4g "
+                "|X|=%.4g sigma_hat=%.3g um (dof %d) factorizations=%d time=%.3f s",
+                config.N, config.positions(), config.s2, config.s3, config.s4, config.dx_mm, lambda,
+                to_string(rule),
+                (rule == LambdaRule::lcurve && lcurve.at_edge) ? ", CORNER AT RANGE EDGE" : "",
+                residual_norm, solution_norm, sigma_um, redundancy_dof, solver_stats.factorizations,
+                total_s);
+  return buf;
+}
+
+FourSensorResult separate_four_sensor(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
+                                      const FourSensorOptions& opts) {
+  const auto t0 = std::chrono::steady_clock::now();
+  std::string why;
+  if (!cfg.is_valid(&why)) throw std::invalid_argument("invalid configuration: " + why);
+  if (!opts.is_valid(&why)) throw std::invalid_argument("invalid options: " + why);
+  if (!m_um.allFinite()) throw std::invalid_argument("sensor outputs contain non-finite values");
+
+  const AugmentedSystem sys = assemble_four_sensor_system(cfg, m_um, opts.gauge, opts.weighting);
+  TikhonovSolver solver(sys.A);
+  Pipeline pipe{
+      cfg, opts, solver, combination_matrix(cfg), {}, cfg.offsets_samples(), cfg.offsets_mm()};
+  pipe.C23 = pipe.C.middleCols<2>(1);
+  const int N = cfg.N, P = cfg.positions();
+
+  FourSensorResult res;
+  res.config = cfg;
+  res.rule = opts.rule;
+
+  // With the exact gauge A has the known 3-dimensional null space, so "λ = 0" means the smallest
+  // λ that keeps AᵀA + λ²I factorisable; the null-space part it leaves is zero anyway (Aᵀb is
+  // orthogonal to it) and apply_gauge() sets it.
+  const double lambda_floor = opts.gauge == CurvatureGauge::reference_without_curvature
+                                  ? 1e-7 * solver.sigma_max_bound()
+                                  : 0.0;
+  auto floor_lambda = [&](double l) { return std::max(l, lambda_floor); };
+
+  // Noise level from the redundancy: the unregularised fit leaves 4P readings explained by
+  // N + 2P − 1 identifiable parameters (f, S, γ, e less the 4 gauge directions), so
+  // σ̂² = RSS / (2P − N + 1).
+  if (solver.factorize(floor_lambda(0.0)) != SolverStatus::success)
+    throw std::runtime_error(
+        "the augmented matrix A is rank-deficient beyond the known null space (spacings s = (" +
+        std::to_string(cfg.s2) + ", " + std::to_string(cfg.s3) + ", " + std::to_string(cfg.s4) +
+        ") with N = " + std::to_string(N) + ")");
+  {
+    FourSensorOptions ls_opts = opts;
+    ls_opts.iterated_refinements = 0;
+    Pipeline ls{cfg, ls_opts, solver, pipe.C, pipe.C23, pipe.k, pipe.O_mm};
+    const Eigen::VectorXd X_ls = ls.solve_X(sys.b);
+    const auto mo = ls.motion(m_um, X_ls);
+    res.redundancy_dof = 2 * P - N + 1;
+    res.sigma_um = std::sqrt(mo.resid.squaredNorm() / std::max(1, res.redundancy_dof));
+  }
+
+  const double lmax =
+      opts.lcurve.lambda_max > 0 ? opts.lcurve.lambda_max : solver.sigma_max_bound();
+  const double lmin = opts.lcurve.lambda_min > 0 ? opts.lcurve.lambda_min
+                                                 : lmax * std::pow(10.0, -opts.lcurve.decades);
+  switch (opts.rule) {
+    case LambdaRule::lcurve:
+      res.lcurve = lcurve_corner(solver, sys.b, opts.lcurve);
+      res.lambda = res.lcurve.lambda_corner;
+      break;
+    case LambdaRule::discrepancy: {
+      // δ = expected norm of the noise in b: b₀ = C·m per position, so E‖noise‖² = σ²·P·‖C‖_F².
+      const double per_pos = opts.weighting == RowWeighting::paper ? pipe.C.squaredNorm() : 2.0;
+      const double delta = res.sigma_um * std::sqrt(P * per_pos);
+      res.lambda = discrepancy_lambda(solver, sys.b, opts.discrepancy_tau * delta, lmin, lmax);
+      break;
+    }
+    case LambdaRule::fixed:
+      res.lambda = opts.fixed_lambda;
+      break;
+    case LambdaRule::least_squares:
+      res.lambda = 0.0;
+      break;
+  }
+  res.lambda = floor_lambda(res.lambda);
+  if (solver.factorize(res.lambda) != SolverStatus::success)
+    throw std::runtime_error("factorisation failed at the chosen lambda = " +
+                             std::to_string(res.lambda));
+  const Eigen::VectorXd X = pipe.solve_X(sys.b);
+  res.residual_norm = (sys.A * X - sys.b).norm();
+  res.solution_norm = X.norm();
+  res.f_um = X.head(N);
+  res.delta_e_um = X.tail<4>();
+  res.f_x_mm = Eigen::VectorXd::LinSpaced(N, 0.0, (N - 1) * cfg.dx_mm);
+  res.x_mm = res.f_x_mm.head(P);
+  auto mo = pipe.motion(m_um, X);
+  res.S_um = std::move(mo.S);
+  res.gamma_rad = std::move(mo.gamma_rad);
+  res.e_um = mo.e;
+  res.sensor_residual_um = std::move(mo.resid);
+
+  if (opts.compute_uncertainty) {
+    // The whole pipeline is linear in m for a fixed λ, so u² = σ̂²·Σ_k (∂·/∂m_k)²: exact with the
+    // 4P unit vectors when that is small, else a Rademacher estimate of the diagonal of J·Jᵀ.
+    res.u_S_um = Eigen::VectorXd::Zero(P);
+    res.u_gamma_rad = Eigen::VectorXd::Zero(P);
+    res.u_f_um = Eigen::VectorXd::Zero(N);
+    const int total = 4 * P;
+    const bool exact = total <= 4 * std::max(opts.uncertainty_probes, 100);
+    const int probes = exact ? total : opts.uncertainty_probes;
+    std::mt19937_64 rng(12345);
+    std::bernoulli_distribution coin(0.5);
+    Eigen::MatrixXd v(P, 4);
+    for (int p = 0; p < probes; ++p) {
+      if (exact) {
+        v.setZero();
+        v(p / 4, p % 4) = 1.0;
+      } else {
+        for (int i = 0; i < P; ++i)
+          for (int j = 0; j < 4; ++j)
+            v(i, j) = coin(rng) ? 1.0 : -1.0;
+      }
+      const Eigen::VectorXd Xv = pipe.solve_X(right_hand_side(cfg, v, opts.gauge, opts.weighting));
+      const auto mv = pipe.motion(v, Xv);
+      res.u_S_um.array() += mv.S.array().square();
+      res.u_gamma_rad.array() += mv.gamma_rad.array().square();
+      res.u_f_um.array() += Xv.head(N).array().square();
+    }
+    const double scale = res.sigma_um * res.sigma_um / (exact ? 1.0 : probes);
+    res.u_S_um = (res.u_S_um * scale).cwiseSqrt();
+    res.u_gamma_rad = (res.u_gamma_rad * scale).cwiseSqrt();
+    res.u_f_um = (res.u_f_um * scale).cwiseSqrt();
+  }
+  res.solver_stats = solver.stats();
+  res.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return res;
+}
+
+}  // namespace errsep::core
