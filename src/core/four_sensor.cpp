@@ -138,6 +138,7 @@ FourSensorResult separate_four_sensor(const FourSensorConfig& cfg, const Eigen::
   FourSensorResult res;
   res.config = cfg;
   res.rule = opts.rule;
+  res.gauge = opts.gauge;
 
   // With the exact gauge A has the known 3-dimensional null space, so "λ = 0" means the smallest
   // λ that keeps AᵀA + λ²I factorisable; the null-space part it leaves is zero anyway (Aᵀb is

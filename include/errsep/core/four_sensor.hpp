@@ -61,6 +61,7 @@ struct FourSensorResult {
 
   double lambda = 0;
   LambdaRule rule = LambdaRule::lcurve;
+  CurvatureGauge gauge = CurvatureGauge::sensor_stage_without_curvature;
   LCurveResult lcurve;       ///< the whole curve (filled for rule lcurve)
   double residual_norm = 0;  ///< ‖A·X_λ − b‖
   double solution_norm = 0;  ///< ‖X_λ‖

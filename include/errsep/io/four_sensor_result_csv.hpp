@@ -1,0 +1,32 @@
+#pragma once
+// The four-sensor result directory, written by errsep-separate, errsep-simulate and errsep-scan
+// and read by errsep-report:
+//   DIR/motion.csv     x_mm,S_um,gamma_deg,gamma_urad,u_S_um,u_gamma_urad        (P rows)
+//   DIR/reference.csv  x_mm,f_um,u_f_um                                          (N rows)
+//   DIR/lcurve.csv     lambda,residual_norm,solution_norm,curvature  (+ "# lambda_chosen")
+//   DIR/residuals.csv  x_mm,config,residual_um                        (4P rows)
+//   DIR/summary.txt    brief_report() and the identifiability assumptions
+// Every file goes through write_file_atomic: a result is whole or absent.  γ is reported up to the
+// constant e_4/(D2+D3+D4) (Eq. 19), u_* are standard uncertainties (k = 1) from the noise level
+// implied by the redundant equations.
+#include <filesystem>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "errsep/core/four_sensor.hpp"
+
+namespace errsep::io {
+
+struct ResultWriteInfo {
+  std::string source;  ///< raw-data file the result came from ("simulation" for errsep-simulate)
+  std::string axis = "X";                    ///< moving axis (ISO 230-1 naming)
+  std::string straightness_direction = "Y";  ///< direction of S
+  std::vector<std::pair<std::string, std::string>> extra_metadata;
+};
+
+/// Creates DIR if needed and writes the files above.  Throws std::runtime_error on I/O errors.
+void write_four_sensor_result(const std::filesystem::path& dir, const core::FourSensorResult& r,
+                              const ResultWriteInfo& info);
+
+}  // namespace errsep::io

@@ -1,0 +1,124 @@
+#include "errsep/io/four_sensor_result_csv.hpp"
+
+#include <sstream>
+
+#include "errsep/core/four_sensor_model.hpp"
+#include "errsep/io/atomic_file.hpp"
+#include "errsep/io/csv.hpp"
+#include "errsep/version.hpp"
+
+namespace errsep::io {
+namespace {
+
+std::string fmt(double v) {
+  std::ostringstream os;
+  os.precision(10);
+  os << v;
+  return os.str();
+}
+
+std::vector<double> vec(const Eigen::VectorXd& v) {
+  return {v.data(), v.data() + v.size()};
+}
+
+const char* gauge_name(core::CurvatureGauge g) {
+  switch (g) {
+    case core::CurvatureGauge::sensor_stage_without_curvature:
+      return "sensor_stage_without_curvature";
+    case core::CurvatureGauge::reference_without_curvature:
+      return "reference_without_curvature";
+    case core::CurvatureGauge::paper_eq12_literal:
+      return "paper_eq12_literal";
+  }
+  return "unknown";
+}
+
+void common_meta(CsvTable& t, const core::FourSensorResult& r, const ResultWriteInfo& info) {
+  t.set_meta("errsep", kVersion);
+  t.set_meta("method", "four-sensor");
+  t.set_meta("source", info.source);
+  t.set_meta("axis", info.axis);
+  t.set_meta("straightness_direction", info.straightness_direction);
+  t.set_meta("dx_mm", fmt(r.config.dx_mm));
+  t.set_meta("s2", std::to_string(r.config.s2));
+  t.set_meta("s3", std::to_string(r.config.s3));
+  t.set_meta("s4", std::to_string(r.config.s4));
+  t.set_meta("N", std::to_string(r.config.N));
+  t.set_meta("lambda", fmt(r.lambda));
+  t.set_meta("lambda_rule", core::to_string(r.rule));
+  t.set_meta("sigma_hat_um", fmt(r.sigma_um));
+  for (const auto& [k, v] : info.extra_metadata)
+    t.set_meta(k, v);
+}
+
+}  // namespace
+
+void write_four_sensor_result(const std::filesystem::path& dir, const core::FourSensorResult& r,
+                              const ResultWriteInfo& info) {
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) throw std::runtime_error("cannot create '" + dir.string() + "': " + ec.message());
+  const auto P = r.S_um.size();
+  const Eigen::VectorXd zeroP = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(P));
+
+  CsvTable motion;
+  common_meta(motion, r, info);
+  motion.set_meta("units", "x in mm, S in um, gamma in deg and urad, u = standard uncertainty k=1");
+  motion.set_meta("gamma_note", "gamma up to the constant e4/(D2+D3+D4) (Zhao 2019 Eq. 19)");
+  motion.add_column("x_mm", vec(r.x_mm));
+  motion.add_column("S_um", vec(r.S_um));
+  motion.add_column("gamma_deg", vec(r.gamma_rad * core::kDegPerRad));
+  motion.add_column("gamma_urad", vec(r.gamma_rad * 1e6));
+  motion.add_column("u_S_um", vec(r.u_S_um.size() == r.S_um.size() ? r.u_S_um : zeroP));
+  motion.add_column("u_gamma_urad",
+                    vec(r.u_gamma_rad.size() == r.S_um.size() ? r.u_gamma_rad * 1e6 : zeroP));
+
+  CsvTable ref;
+  common_meta(ref, r, info);
+  ref.set_meta("units", "x in mm, f in um");
+  ref.set_meta("gauge", gauge_name(r.gauge));
+  ref.add_column("x_mm", vec(r.f_x_mm));
+  ref.add_column("f_um", vec(r.f_um));
+  ref.add_column(
+      "u_f_um",
+      vec(r.u_f_um.size() == r.f_um.size() ? r.u_f_um : Eigen::VectorXd::Zero(r.f_um.size())));
+
+  CsvTable lc;
+  common_meta(lc, r, info);
+  lc.set_meta("lambda_chosen", fmt(r.lambda));
+  lc.set_meta("corner_at_edge", r.lcurve.at_edge ? "true" : "false");
+  std::vector<double> l, rn, sn, k;
+  for (const auto& p : r.lcurve.points) {
+    l.push_back(p.lambda);
+    rn.push_back(p.residual_norm);
+    sn.push_back(p.solution_norm);
+    k.push_back(p.curvature);
+  }
+  lc.columns = {"lambda", "residual_norm", "solution_norm", "curvature"};
+  for (std::size_t i = 0; i < l.size(); ++i)
+    lc.rows.push_back({l[i], rn[i], sn[i], k[i]});
+
+  CsvTable res;
+  common_meta(res, r, info);
+  res.set_meta("units", "x in mm, residual in um; config 1..4");
+  res.columns = {"x_mm", "config", "residual_um"};
+  for (Eigen::Index n = 0; n < r.sensor_residual_um.rows(); ++n)
+    for (int j = 0; j < 4; ++j)
+      res.rows.push_back({r.x_mm(n), static_cast<double>(j + 1), r.sensor_residual_um(n, j)});
+
+  std::ostringstream summary;
+  summary << r.brief_report() << "\n"
+          << "source: " << info.source << "\n"
+          << "identifiability: the constant and linear parts of f are fixed by f(x_0) = "
+             "f(x_{N-1}) = 0 (Eq. 11); its quadratic part by the assumption that the sensor "
+             "stage's zero-adjustment values have no quadratic component in the sensor position "
+             "(replaces Eq. 12); gamma is reported up to the constant e4/(D2+D3+D4).\n";
+
+  write_csv(dir / "motion.csv", motion);
+  write_csv(dir / "reference.csv", ref);
+  write_csv(dir / "lcurve.csv", lc);
+  write_csv(dir / "residuals.csv", res);
+  write_file_atomic(dir / "summary.txt", summary.str());
+}
+
+}  // namespace errsep::io
