@@ -1,0 +1,87 @@
+#pragma once
+// The raw-scan CSV: what a scan recorded, before any separation.  Written by errsep-scan, read by
+// errsep-separate, the refine app and the daemon.
+//
+// Four-sensor scan (Zhao 2019), one row per slide position x_n, one column per configuration:
+//
+//   # format: errsep raw four-sensor scan
+//   # complete: true                       <- false: aborted/failed, cells not measured are nan
+//   # dx_mm: 5                              <- geometry (FourSensorConfig), when known
+//   # s2: 1 ...
+//   x_mm,m1_um,m2_um,m3_um,m4_um[,t1_s,t2_s,t3_s,t4_s]
+//
+// t_i_s: mean time of the K averaged readings of configuration i, seconds since scan start.
+//
+// Displacement-method scan (Haramiishi 2024, Eqs. 1-3): S1 reads the workpiece, S2 the
+// reference piece; scan 2 after the reference piece was displaced by d:
+//
+//   # format: errsep raw displacement scan
+//   # d_mm: 5
+//   x_mm,s1_scan1_um,s2_scan1_um,s1_scan2_um,s2_scan2_um[,t_scan1_s,t_scan2_s]
+#include <array>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "errsep/core/four_sensor_config.hpp"
+#include "errsep/io/csv.hpp"
+
+namespace errsep::io {
+
+inline constexpr const char* kRawFourSensorFormat = "errsep raw four-sensor scan";
+inline constexpr const char* kRawDisplacementFormat = "errsep raw displacement scan";
+
+struct RawFourSensorScan {
+  std::vector<double> x_mm;                 ///< P slide positions
+  std::array<std::vector<double>, 4> m_um;  ///< m_i(x_n), P each; nan where not measured
+  std::optional<std::array<std::vector<double>, 4>> t_s;  ///< reading times, s since start
+  std::optional<core::FourSensorConfig> geometry;         ///< from metadata dx_mm, s2, s3, s4, N
+  bool complete = false;                                  ///< "# complete: true" (absent = false)
+  /// Other "# key: value" lines (counts, timestamps, config, ...), in order, written after the
+  /// format/complete/geometry lines.
+  std::vector<std::pair<std::string, std::string>> metadata;
+
+  std::size_t positions() const { return x_mm.size(); }
+  /// Value of a metadata key, or nullopt.
+  std::optional<std::string> meta(const std::string& key) const;
+};
+
+struct RawDisplacementScan {
+  std::vector<double> x_mm;
+  std::vector<double> s1_scan1_um, s2_scan1_um, s1_scan2_um, s2_scan2_um;
+  std::optional<std::vector<double>> t_scan1_s, t_scan2_s;
+  double d_mm = 0.0;
+  bool complete = false;
+  std::vector<std::pair<std::string, std::string>> metadata;
+  std::optional<std::string> meta(const std::string& key) const;
+};
+
+/// Builds the CSV table (for writing, or for tests).  Throws std::invalid_argument when the
+/// columns' lengths differ.
+CsvTable to_csv_table(const RawFourSensorScan& scan);
+CsvTable to_csv_table(const RawDisplacementScan& scan);
+
+/// Writes atomically (write_csv).  Throws std::runtime_error / std::invalid_argument.
+void write_raw_four_sensor_csv(const std::filesystem::path& file, const RawFourSensorScan& scan);
+void write_raw_displacement_csv(const std::filesystem::path& file, const RawDisplacementScan& scan);
+
+struct RawReadOptions {
+  /// Refuse a file marked "# complete: false" (or without the key) with a CsvError that says so.
+  /// Tools that separate must not present a partial scan as a result; set false to inspect one.
+  bool require_complete = true;
+};
+
+/// Reads a four-sensor raw scan: columns x_mm, m1_um..m4_um required, t1_s..t4_s optional (all
+/// four or none).  Completeness: a file written by a scan (it has a "# format:" line) is complete
+/// only with "# complete: true"; any other CSV with those columns (hand-made, simulated) is taken
+/// as complete unless it says "# complete: false".  Throws CsvError ("file:line: problem") for
+/// missing columns, non-numbers, nan in a complete scan, a bad geometry line, or an incomplete
+/// scan when require_complete is set.
+RawFourSensorScan read_raw_four_sensor_csv(const std::filesystem::path& file,
+                                           const RawReadOptions& opts = {});
+RawDisplacementScan read_raw_displacement_csv(const std::filesystem::path& file,
+                                              const RawReadOptions& opts = {});
+
+}  // namespace errsep::io

@@ -1,0 +1,246 @@
+#include "errsep/io/raw_scan_csv.hpp"
+
+#include <charconv>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace errsep::io {
+namespace {
+
+std::optional<std::string> find_meta(const std::vector<std::pair<std::string, std::string>>& md,
+                                     const std::string& key) {
+  for (const auto& [k, v] : md)
+    if (k == key) return v;
+  return std::nullopt;
+}
+
+std::string fmt(double v) {
+  std::ostringstream os;
+  os.precision(12);
+  os << v;
+  return os.str();
+}
+
+void check_len(const std::vector<double>& v, std::size_t n, const std::string& col) {
+  if (v.size() != n)
+    throw std::invalid_argument("raw scan: column '" + col + "' has " + std::to_string(v.size()) +
+                                " values for " + std::to_string(n) + " positions");
+}
+
+/// Completeness rule of both formats (see the header).
+bool read_complete(const CsvTable& t, const std::filesystem::path& file) {
+  const auto c = t.meta("complete");
+  if (c && *c != "true" && *c != "false")
+    throw CsvError(file, 0, "metadata 'complete: " + *c + "': must be true or false");
+  if (t.meta("format")) return c && *c == "true";
+  return !(c && *c == "false");
+}
+
+void require_complete(bool complete, const CsvTable& t, const std::filesystem::path& file,
+                      const RawReadOptions& opts) {
+  if (!complete && opts.require_complete) {
+    std::string why = t.meta("stop_reason").value_or("no reason recorded");
+    throw CsvError(file, 0,
+                   "scan is marked incomplete (complete: false; stop_reason: " + why +
+                       "): it is kept as a record but cannot be separated");
+  }
+}
+
+void check_finite(const CsvTable& t, const std::filesystem::path& file) {
+  for (std::size_t r = 0; r < t.rows.size(); ++r)
+    for (std::size_t c = 0; c < t.columns.size(); ++c)
+      if (!std::isfinite(t.rows[r][c]))
+        throw CsvError(file, t.row_line.empty() ? 0 : t.row_line[r],
+                       "column '" + t.columns[c] +
+                           "': value not measured (nan) in a scan marked "
+                           "complete");
+}
+
+std::vector<std::pair<std::string, std::string>> other_meta(
+    const CsvTable& t, std::initializer_list<const char*> known) {
+  std::vector<std::pair<std::string, std::string>> out;
+  for (const auto& kv : t.metadata) {
+    bool skip = false;
+    for (const char* k : known)
+      skip = skip || kv.first == k;
+    if (!skip) out.push_back(kv);
+  }
+  return out;
+}
+
+int parse_int_meta(const CsvTable& t, const std::string& key, const std::filesystem::path& file) {
+  const std::string v = *t.meta(key);
+  int out = 0;
+  const auto [p, ec] = std::from_chars(v.data(), v.data() + v.size(), out);
+  if (ec != std::errc() || p != v.data() + v.size())
+    throw CsvError(file, 0, "metadata '" + key + ": " + v + "': not an integer");
+  return out;
+}
+
+double parse_double_meta(const CsvTable& t, const std::string& key,
+                         const std::filesystem::path& file) {
+  const std::string v = *t.meta(key);
+  double out = 0;
+  const auto [p, ec] = std::from_chars(v.data(), v.data() + v.size(), out);
+  if (ec != std::errc() || p != v.data() + v.size() || !std::isfinite(out))
+    throw CsvError(file, 0, "metadata '" + key + ": " + v + "': not a number");
+  return out;
+}
+
+}  // namespace
+
+std::optional<std::string> RawFourSensorScan::meta(const std::string& key) const {
+  return find_meta(metadata, key);
+}
+std::optional<std::string> RawDisplacementScan::meta(const std::string& key) const {
+  return find_meta(metadata, key);
+}
+
+CsvTable to_csv_table(const RawFourSensorScan& scan) {
+  const std::size_t n = scan.x_mm.size();
+  CsvTable t;
+  t.set_meta("format", kRawFourSensorFormat);
+  t.set_meta("complete", scan.complete ? "true" : "false");
+  t.set_meta("units", "x in mm, m in um, t in s since scan start");
+  if (scan.geometry) {
+    t.set_meta("dx_mm", fmt(scan.geometry->dx_mm));
+    t.set_meta("s2", std::to_string(scan.geometry->s2));
+    t.set_meta("s3", std::to_string(scan.geometry->s3));
+    t.set_meta("s4", std::to_string(scan.geometry->s4));
+    t.set_meta("N", std::to_string(scan.geometry->N));
+  }
+  for (const auto& [k, v] : scan.metadata)
+    t.set_meta(k, v);
+  t.add_column("x_mm", scan.x_mm);
+  for (int i = 0; i < 4; ++i) {
+    const std::string col = "m" + std::to_string(i + 1) + "_um";
+    check_len(scan.m_um[static_cast<std::size_t>(i)], n, col);
+    t.add_column(col, scan.m_um[static_cast<std::size_t>(i)]);
+  }
+  if (scan.t_s)
+    for (int i = 0; i < 4; ++i) {
+      const std::string col = "t" + std::to_string(i + 1) + "_s";
+      check_len((*scan.t_s)[static_cast<std::size_t>(i)], n, col);
+      t.add_column(col, (*scan.t_s)[static_cast<std::size_t>(i)]);
+    }
+  return t;
+}
+
+CsvTable to_csv_table(const RawDisplacementScan& scan) {
+  const std::size_t n = scan.x_mm.size();
+  CsvTable t;
+  t.set_meta("format", kRawDisplacementFormat);
+  t.set_meta("complete", scan.complete ? "true" : "false");
+  t.set_meta("units", "x in mm, s in um, t in s since scan start");
+  t.set_meta("d_mm", fmt(scan.d_mm));
+  for (const auto& [k, v] : scan.metadata)
+    t.set_meta(k, v);
+  t.add_column("x_mm", scan.x_mm);
+  const std::pair<const char*, const std::vector<double>*> cols[] = {
+      {"s1_scan1_um", &scan.s1_scan1_um},
+      {"s2_scan1_um", &scan.s2_scan1_um},
+      {"s1_scan2_um", &scan.s1_scan2_um},
+      {"s2_scan2_um", &scan.s2_scan2_um}};
+  for (const auto& [name, v] : cols) {
+    check_len(*v, n, name);
+    t.add_column(name, *v);
+  }
+  if (scan.t_scan1_s && scan.t_scan2_s) {
+    check_len(*scan.t_scan1_s, n, "t_scan1_s");
+    check_len(*scan.t_scan2_s, n, "t_scan2_s");
+    t.add_column("t_scan1_s", *scan.t_scan1_s);
+    t.add_column("t_scan2_s", *scan.t_scan2_s);
+  }
+  return t;
+}
+
+void write_raw_four_sensor_csv(const std::filesystem::path& file, const RawFourSensorScan& scan) {
+  write_csv(file, to_csv_table(scan), 12);
+}
+
+void write_raw_displacement_csv(const std::filesystem::path& file,
+                                const RawDisplacementScan& scan) {
+  write_csv(file, to_csv_table(scan), 12);
+}
+
+RawFourSensorScan read_raw_four_sensor_csv(const std::filesystem::path& file,
+                                           const RawReadOptions& opts) {
+  CsvReadOptions ro;
+  ro.allow_non_finite = true;  // nan marks cells an incomplete scan did not reach
+  const CsvTable t = read_csv(file, ro);
+  if (const auto f = t.meta("format"); f && *f != kRawFourSensorFormat)
+    throw CsvError(
+        file, 0,
+        "format '" + *f + "' is not a four-sensor raw scan ('" + kRawFourSensorFormat + "')");
+  RawFourSensorScan s;
+  s.complete = read_complete(t, file);
+  require_complete(s.complete, t, file, opts);
+  if (s.complete) check_finite(t, file);
+  s.x_mm = t.column("x_mm", file);
+  for (int i = 0; i < 4; ++i)
+    s.m_um[static_cast<std::size_t>(i)] = t.column("m" + std::to_string(i + 1) + "_um", file);
+  int n_t = 0;
+  for (int i = 0; i < 4; ++i)
+    n_t += t.find_column("t" + std::to_string(i + 1) + "_s") ? 1 : 0;
+  if (n_t != 0 && n_t != 4)
+    throw CsvError(file, 1, "timestamp columns t1_s..t4_s: give all four or none");
+  if (n_t == 4) {
+    s.t_s.emplace();
+    for (int i = 0; i < 4; ++i)
+      (*s.t_s)[static_cast<std::size_t>(i)] = t.column("t" + std::to_string(i + 1) + "_s", file);
+  }
+  if (t.meta("dx_mm")) {
+    for (const char* k : {"s2", "s3", "s4", "N"})
+      if (!t.meta(k))
+        throw CsvError(file, 0,
+                       std::string("metadata has dx_mm but not '") + k +
+                           "': give the whole geometry (dx_mm, s2, s3, s4, N) or none");
+    core::FourSensorConfig g;
+    g.dx_mm = parse_double_meta(t, "dx_mm", file);
+    g.s2 = parse_int_meta(t, "s2", file);
+    g.s3 = parse_int_meta(t, "s3", file);
+    g.s4 = parse_int_meta(t, "s4", file);
+    g.N = parse_int_meta(t, "N", file);
+    std::string why;
+    if (!g.is_valid(&why)) throw CsvError(file, 0, "geometry in metadata: " + why);
+    if (s.complete && static_cast<std::size_t>(g.positions()) != s.x_mm.size())
+      throw CsvError(file, 0,
+                     "geometry N - s2 - s3 - s4 = " + std::to_string(g.positions()) +
+                         " slide positions, but the file has " + std::to_string(s.x_mm.size()) +
+                         " rows");
+    s.geometry = g;
+  }
+  s.metadata = other_meta(t, {"format", "complete", "units", "dx_mm", "s2", "s3", "s4", "N"});
+  return s;
+}
+
+RawDisplacementScan read_raw_displacement_csv(const std::filesystem::path& file,
+                                              const RawReadOptions& opts) {
+  CsvReadOptions ro;
+  ro.allow_non_finite = true;
+  const CsvTable t = read_csv(file, ro);
+  if (const auto f = t.meta("format"); f && *f != kRawDisplacementFormat)
+    throw CsvError(
+        file, 0,
+        "format '" + *f + "' is not a displacement raw scan ('" + kRawDisplacementFormat + "')");
+  RawDisplacementScan s;
+  s.complete = read_complete(t, file);
+  require_complete(s.complete, t, file, opts);
+  if (s.complete) check_finite(t, file);
+  if (!t.meta("d_mm")) throw CsvError(file, 0, "metadata 'd_mm' (displacement d) missing");
+  s.d_mm = parse_double_meta(t, "d_mm", file);
+  s.x_mm = t.column("x_mm", file);
+  s.s1_scan1_um = t.column("s1_scan1_um", file);
+  s.s2_scan1_um = t.column("s2_scan1_um", file);
+  s.s1_scan2_um = t.column("s1_scan2_um", file);
+  s.s2_scan2_um = t.column("s2_scan2_um", file);
+  if (t.find_column("t_scan1_s") && t.find_column("t_scan2_s")) {
+    s.t_scan1_s = t.column("t_scan1_s", file);
+    s.t_scan2_s = t.column("t_scan2_s", file);
+  }
+  s.metadata = other_meta(t, {"format", "complete", "units", "d_mm"});
+  return s;
+}
+
+}  // namespace errsep::io
