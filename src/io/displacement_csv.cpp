@@ -41,10 +41,11 @@ double uniform_interval(const CsvTable& t, const std::vector<double>& x,
   return dx;
 }
 
-/// Distinct values of a grid coordinate (tolerance 1e-6 of the spacing scale), sorted, checked
-/// for a uniform spacing.  Returns the values and sets *spacing.
-std::vector<double> grid_axis(const std::vector<double>& v, const std::filesystem::path& file,
-                              const char* col, double* spacing) {
+/// The grid positions of one coordinate: v_min + k·d, k = 0..K, with d the smallest step between
+/// distinct values.  A value off that lattice is an error at its line; lattice positions with no
+/// row are left to the completeness check (a ragged grid).  Sets *spacing.
+std::vector<double> grid_axis(const CsvTable& t, const std::vector<double>& v,
+                              const std::filesystem::path& file, const char* col, double* spacing) {
   std::vector<double> s = v;
   std::sort(s.begin(), s.end());
   std::vector<double> u;
@@ -52,14 +53,28 @@ std::vector<double> grid_axis(const std::vector<double>& v, const std::filesyste
     if (u.empty() || std::abs(a - u.back()) > 1e-6 * std::max(1.0, std::abs(a))) u.push_back(a);
   if (u.size() < 2)
     throw CsvError(file, 0, std::string("the grid has a single ") + col + " value; need >= 2");
-  const double d = u[1] - u[0];
+  double d = u[1] - u[0];
   for (std::size_t k = 1; k < u.size(); ++k)
-    if (std::abs(u[k] - u[k - 1] - d) > 1e-6 * std::max(1.0, d))
-      throw CsvError(file, 0,
-                     std::string(col) + " values are not evenly spaced: " + num(u[k - 1]) + " to " +
-                         num(u[k]) + " but the first step is " + num(d));
+    d = std::min(d, u[k] - u[k - 1]);
+  for (std::size_t r = 0; r < v.size(); ++r) {
+    const double q = (v[r] - u[0]) / d;
+    if (std::abs(q - std::round(q)) > 1e-6) {
+      std::string seen;
+      for (std::size_t k = 0; k < u.size() && k < 8; ++k)
+        seen += (k ? ", " : "") + num(u[k]);
+      if (u.size() > 8) seen += ", ...";
+      throw CsvError(file, line_of(t, r),
+                     std::string(col) + " = " + num(v[r]) + " is not on the grid " + num(u[0]) +
+                         " + k*" + num(d) + ": the " + col + " values (" + seen +
+                         ") are not evenly spaced");
+    }
+  }
+  const auto count = static_cast<std::size_t>(std::lround((u.back() - u[0]) / d)) + 1;
+  std::vector<double> axis(count);
+  for (std::size_t k = 0; k < count; ++k)
+    axis[k] = u[0] + static_cast<double>(k) * d;
   *spacing = d;
-  return u;
+  return axis;
 }
 
 std::size_t index_of(const std::vector<double>& axis, double v) {
@@ -103,8 +118,8 @@ TwoAxisInput read_two_axis_csv(const std::filesystem::path& file) {
   for (const char* n : names)
     cols.push_back(t.column(n, file));
   TwoAxisInput in;
-  const auto xs = grid_axis(x, file, "x_mm", &in.dx_mm);
-  const auto ys = grid_axis(y, file, "y_mm", &in.dy_mm);
+  const auto xs = grid_axis(t, x, file, "x_mm", &in.dx_mm);
+  const auto ys = grid_axis(t, y, file, "y_mm", &in.dy_mm);
   const auto nx = static_cast<Eigen::Index>(xs.size()), ny = static_cast<Eigen::Index>(ys.size());
   core::TwoAxisScan& s = in.scan;
   s.x_mm = to_vec(xs);
