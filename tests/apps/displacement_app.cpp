@@ -202,7 +202,7 @@ TEST_CASE("bad input: clear error, non-zero exit, nothing written") {
   CHECK(slurp(res) == "previous result\n");
 }
 
-TEST_CASE("errsep-budget prints and writes the paper's budget; a bad config fails cleanly") {
+TEST_CASE("errsep-budget prints and writes the paper budget, and fails cleanly on a bad config") {
   TempDir dir;
   const std::string budget = test::app_path("budget").string();
   const std::string cfg = (test::source_dir() / "config" / "budget-haramiishi2024.toml").string();

@@ -40,7 +40,7 @@ TEST_CASE("noise-free scans give back r, m and w exactly (d = sampling interval)
   CHECK((dw.array() - dw(0)).abs().maxCoeff() < 1e-9);
 }
 
-TEST_CASE("d = 2 dx: two chains joined by least roughness; given initial values leave a comb") {
+TEST_CASE("d = 2 dx: two chains joined by least roughness, given initial values leave a comb") {
   OneAxisTruth truth;
   truth.w_um = [](double x) { return 3.0 * std::sin(x / 17.0); };
   truth.m_um = [](double x) { return 15.0 * std::cos(x / 23.0); };

@@ -8,7 +8,7 @@
 
 using namespace errsep::core;
 
-TEST_CASE("GUM: uniform half-width a gives a/sqrt(3); contributions add in quadrature") {
+TEST_CASE("GUM: uniform half-width a gives a/sqrt(3), contributions add in quadrature") {
   CHECK(standard_uncertainty(2.0, Distribution::uniform) == Approx(2.0 / std::sqrt(3.0)));
   CHECK(standard_uncertainty(2.0, Distribution::normal) == 2.0);
   const Budget b = combine_uncorrelated({{"a", "", 3.0, 1.0}, {"b", "", 2.0, -2.0}}, "y", "um");
