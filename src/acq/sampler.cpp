@@ -74,13 +74,19 @@ std::string SamplerStats::brief() const {
 }
 
 Sampler::Sampler(std::vector<DisplacementSensor*> sensors, SpscRing<Sample>& ring,
-                 SamplerOptions opts)
-    : sensors_(std::move(sensors)), ring_(ring), opts_(opts) {
+                 SamplerOptions opts, std::vector<std::uint16_t> channels)
+    : sensors_(std::move(sensors)), channels_(std::move(channels)), ring_(ring), opts_(opts) {
   std::string why;
   if (!opts_.is_valid(&why)) throw std::invalid_argument("Sampler: " + why);
   if (sensors_.empty()) throw std::invalid_argument("Sampler: no sensors on this bus");
   for (auto* s : sensors_)
     if (s == nullptr) throw std::invalid_argument("Sampler: null sensor");
+  if (channels_.empty())
+    for (std::size_t i = 0; i < sensors_.size(); ++i)
+      channels_.push_back(static_cast<std::uint16_t>(opts_.channel_base + i));
+  if (channels_.size() != sensors_.size())
+    throw std::invalid_argument("Sampler: " + std::to_string(channels_.size()) + " channels for " +
+                                std::to_string(sensors_.size()) + " sensors");
   period_ns_ = opts_.period_ns();
   const auto bins = static_cast<std::size_t>(opts_.jitter_histogram_us) + 1;
   hist_ = std::make_unique<std::atomic<std::uint64_t>[]>(bins);
@@ -144,7 +150,7 @@ void Sampler::loop() noexcept {
       const IoStatus st = sensors_[i]->read(s);
       s.status = st;
       s.seq = k;
-      s.channel = static_cast<std::uint16_t>(opts_.channel_base + i);
+      s.channel = channels_[i];
       if (s.t_ns == 0) s.t_ns = monotonic_ns();  // a driver that does not stamp
       bump(by_status_[static_cast<std::size_t>(st) < kIoStatusCount
                           ? static_cast<std::size_t>(st)

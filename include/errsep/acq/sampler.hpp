@@ -85,7 +85,10 @@ class Sampler {
   /// `sensors` must be configured and outlive the sampler; `ring` receives the samples and must
   /// outlive it.  Allocates the jitter histogram.  Throws std::invalid_argument for invalid
   /// options or no sensors.  Not real-time safe.
-  Sampler(std::vector<DisplacementSensor*> sensors, SpscRing<Sample>& ring, SamplerOptions opts);
+  /// `channels`, when given, is Sample::channel per sensor (same length as `sensors`); when
+  /// empty, sensor i gets channel_base + i.
+  Sampler(std::vector<DisplacementSensor*> sensors, SpscRing<Sample>& ring, SamplerOptions opts,
+          std::vector<std::uint16_t> channels = {});
   ~Sampler();  ///< stops the thread if running
   Sampler(const Sampler&) = delete;
   Sampler& operator=(const Sampler&) = delete;
@@ -114,6 +117,7 @@ class Sampler {
   }
 
   std::vector<DisplacementSensor*> sensors_;
+  std::vector<std::uint16_t> channels_;
   SpscRing<Sample>& ring_;
   SamplerOptions opts_;
   std::int64_t period_ns_;

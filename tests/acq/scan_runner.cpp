@@ -1,0 +1,319 @@
+#include "errsep/acq/scan_runner.hpp"
+
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <memory>
+
+#include "errsep/acq/fake_drivers.hpp"
+#include "errsep/core/four_sensor_model.hpp"
+#include "errsep/io/raw_scan_csv.hpp"
+#include "support/support.hpp"
+
+using namespace errsep;
+using namespace errsep::acq;
+using namespace std::chrono_literals;
+
+namespace {
+
+// A slideway played by fake stages: S, γ, f and e known exactly (Eq. 1 of Zhao 2019), so every
+// recorded average can be checked against the model.
+struct FakeMachine {
+  core::SlidewayTruth truth;
+  core::FourSensorConfig g;
+  FakeStage slide{"slide", 2000.0, 1ms};
+  FakeStage sensor_stage{"sensor_stage", 2000.0, 1ms};
+  FakeStage reference{"reference_piece", 2000.0, 1ms};
+  std::vector<std::unique_ptr<FakeSensor>> sensors;
+
+  FakeMachine() {
+    g.dx_mm = 2.0;
+    g.s2 = 1;
+    g.s3 = 1;
+    g.s4 = 2;
+    g.N = 13;  // P = 9
+    truth.f_um = [](double x) { return 0.3 * std::sin(x / 3.0); };
+    truth.S_um = [](double x) { return 1e-3 * x * x - 0.02 * x; };
+    truth.gamma_rad = [](double x) { return 2e-6 * std::cos(x / 5.0); };
+    truth.e_um = {0.0, 1.0, -0.5, 2.0};
+    slide.configure();
+    sensor_stage.configure();
+    reference.configure();
+  }
+  double expected_um(int config, int n) const {
+    const double x = n * g.dx_mm;
+    const auto off = g.offsets_mm();
+    return core::four_sensor_reading_um(truth, x, off[static_cast<std::size_t>(config)]) +
+           truth.e_um[static_cast<std::size_t>(config)];
+  }
+  // The single sensor: its configuration is wherever the sensor stage is.
+  FakeSensor& add_single(FakeSensorFaults faults = {}) {
+    sensors.push_back(std::make_unique<FakeSensor>(
+        "sensor1",
+        [this](std::int64_t) {
+          const double o = sensor_stage.position_now_mm();
+          const auto off = g.offsets_mm();
+          std::size_t nearest = 0;
+          for (std::size_t i = 1; i < 4; ++i)
+            if (std::fabs(o - off[i]) < std::fabs(o - off[nearest])) nearest = i;
+          return core::four_sensor_reading_um(truth, slide.position_now_mm(), o) +
+                 truth.e_um[nearest];
+        },
+        faults));
+    sensors.back()->configure();
+    return *sensors.back();
+  }
+  void add_fixed() {
+    for (int i = 0; i < 4; ++i) {
+      sensors.push_back(
+          std::make_unique<FakeSensor>("probe" + std::to_string(i + 1), [this, i](std::int64_t) {
+            const auto off = g.offsets_mm();
+            return core::four_sensor_reading_um(truth, slide.position_now_mm(),
+                                                off[static_cast<std::size_t>(i)]) +
+                   truth.e_um[static_cast<std::size_t>(i)];
+          }));
+      sensors.back()->configure();
+    }
+  }
+  ScanDevices devices() {
+    ScanDevices d;
+    d.slide = &slide;
+    d.sensor_stage = &sensor_stage;
+    d.reference_stage = &reference;
+    for (auto& s : sensors)
+      d.sensors.push_back(s.get());
+    return d;
+  }
+  ScanOptions options() const {
+    ScanOptions o;
+    o.geometry = g;
+    o.averages = 5;
+    o.settle_ms = 1;
+    o.sampler.rate_hz = 2000.0;
+    o.move_timeout_ms = 2000;
+    o.ring_capacity = 4096;
+    return o;
+  }
+};
+
+}  // namespace
+
+TEST_CASE("complete four-sensor scan with one sensor on the sensor stage records Eq. (1)") {
+  FakeMachine m;
+  m.add_single();
+  int calls = 0;
+  ScanHooks hooks;
+  hooks.progress = [&](const ScanProgress& p) {
+    ++calls;
+    CHECK(p.point == calls);
+    CHECK(p.points_total == 36);
+  };
+  const auto res = run_scan(m.devices(), m.options(), hooks);
+  INFO(res.brief_report());
+  REQUIRE(res.complete());
+  CHECK(res.stop_reason.empty());
+  CHECK(calls == 36);
+  REQUIRE(res.four_sensor);
+  const auto& raw = *res.four_sensor;
+  CHECK(raw.complete);
+  REQUIRE(raw.positions() == 9);
+  for (int i = 0; i < 4; ++i)
+    for (int n = 0; n < 9; ++n) {
+      INFO("configuration " << i + 1 << ", n = " << n);
+      CHECK(raw.m_um[static_cast<std::size_t>(i)][static_cast<std::size_t>(n)] ==
+            Approx(m.expected_um(i, n)).margin(1e-9));
+    }
+  // Configurations are measured one after the other: times increase through the whole scan.
+  double last = -1;
+  for (std::size_t i = 0; i < 4; ++i)
+    for (std::size_t n = 0; n < 9; ++n) {
+      CHECK((*raw.t_s)[i][n] > last);
+      last = (*raw.t_s)[i][n];
+    }
+  // Every sample the sampler pushed was drained; K per point went into the averages.
+  CHECK(res.counts.samples_consumed == res.counts.samples);
+  CHECK(res.counts.samples_averaged == 36u * 5u);
+  CHECK(res.counts.overruns == 0);
+  CHECK(res.counts.read_errors == 0);
+  CHECK(m.slide.stops() == 0);
+  CHECK(raw.meta("samples") == std::to_string(res.counts.samples));
+  CHECK(raw.meta("outcome") == std::optional<std::string>("complete"));
+}
+
+TEST_CASE("complete scan with four fixed sensors, and transient read errors retried") {
+  FakeMachine m;
+  m.add_fixed();
+  FakeSensorFaults flaky;
+  flaky.fail_every_n = 3;  // probe 3 fails every third read: still K ok readings per window
+  m.sensors[2]->set_faults(flaky);
+  const auto res = run_scan(m.devices(), m.options());
+  INFO(res.brief_report());
+  REQUIRE(res.complete());
+  const auto& raw = *res.four_sensor;
+  for (int i = 0; i < 4; ++i)
+    for (int n = 0; n < 9; ++n)
+      CHECK(raw.m_um[static_cast<std::size_t>(i)][static_cast<std::size_t>(n)] ==
+            Approx(m.expected_um(i, n)).margin(1e-9));
+  CHECK(res.counts.read_errors > 0);
+  CHECK(res.counts.reads_by_status[static_cast<std::size_t>(IoStatus::timeout)] ==
+        res.counts.read_errors);
+  CHECK(raw.meta("read_errors_timeout") == std::to_string(res.counts.read_errors));
+}
+
+TEST_CASE("abort mid-scan: stages stopped, data so far kept, result incomplete") {
+  FakeMachine m;
+  m.add_single();
+  std::atomic<bool> abort{false};
+  ScanHooks hooks;
+  hooks.abort = &abort;
+  hooks.progress = [&](const ScanProgress& p) {
+    if (p.point == 12) abort = true;  // configuration 2, third point
+  };
+  const auto res = run_scan(m.devices(), m.options(), hooks);
+  CHECK(res.outcome == ScanRunOutcome::aborted);
+  CHECK_THAT(res.stop_reason, Catch::Contains("aborted"));
+  CHECK(m.slide.stops() >= 1);
+  CHECK(m.sensor_stage.stops() >= 1);
+  const auto& raw = *res.four_sensor;
+  CHECK_FALSE(raw.complete);
+  CHECK(res.counts.points_done == 12);
+  // Configuration 1 complete and right, configuration 2 up to n = 2, nothing after.
+  for (int n = 0; n < 9; ++n)
+    CHECK(raw.m_um[0][static_cast<std::size_t>(n)] == Approx(m.expected_um(0, n)).margin(1e-9));
+  for (int n = 0; n < 3; ++n)
+    CHECK(raw.m_um[1][static_cast<std::size_t>(n)] == Approx(m.expected_um(1, n)).margin(1e-9));
+  for (std::size_t n = 3; n < 9; ++n)
+    CHECK(std::isnan(raw.m_um[1][n]));
+  for (std::size_t n = 0; n < 9; ++n)
+    CHECK(std::isnan(raw.m_um[3][n]));
+
+  // Written and read back: kept as a record, refused for separation.
+  test::TempDir dir;
+  io::write_raw_four_sensor_csv(dir / "raw.csv", raw);
+  CHECK_THROWS_WITH(io::read_raw_four_sensor_csv(dir / "raw.csv"),
+                    Catch::Contains("incomplete") && Catch::Contains("aborted"));
+  io::RawReadOptions inspect;
+  inspect.require_complete = false;
+  const auto back = io::read_raw_four_sensor_csv(dir / "raw.csv", inspect);
+  CHECK(back.m_um[1][2] == Approx(m.expected_um(1, 2)).margin(1e-9));
+  CHECK(back.meta("points") == std::optional<std::string>("12 of 36"));
+}
+
+TEST_CASE("a sensor that stops answering: clear error naming it, stages stopped, incomplete") {
+  FakeMachine m;
+  FakeSensorFaults dead;
+  dead.fail_from_read = 400;  // dies during the scan, for good
+  dead.fail_status = IoStatus::timeout;
+  m.add_single(dead);
+  auto opts = m.options();
+  opts.max_errors_per_point = 4;
+  opts.point_retries = 2;
+  const auto res = run_scan(m.devices(), opts);
+  INFO(res.brief_report());
+  CHECK(res.outcome == ScanRunOutcome::failed);
+  CHECK_THAT(res.stop_reason, Catch::Contains("sensor 'sensor1'") && Catch::Contains("timeout") &&
+                                  Catch::Contains("after 2 retries"));
+  CHECK(res.counts.point_retries == 2);
+  CHECK(m.slide.stops() >= 1);
+  CHECK_FALSE(res.four_sensor->complete);
+  CHECK(res.counts.points_done > 0);
+  CHECK(res.counts.points_done < 36);
+  // What was measured before the failure is kept and right.
+  CHECK(res.four_sensor->m_um[0][0] == Approx(m.expected_um(0, 0)).margin(1e-9));
+  CHECK(res.counts.samples_consumed == res.counts.samples);
+}
+
+TEST_CASE("an out-of-range sensor fails the scan with the status named") {
+  FakeMachine m;
+  FakeSensorFaults oor;
+  oor.fail_every_n = 1;  // every reading out of range
+  oor.fail_status = IoStatus::out_of_range;
+  m.add_single(oor);
+  auto opts = m.options();
+  opts.point_retries = 0;
+  const auto res = run_scan(m.devices(), opts);
+  CHECK(res.outcome == ScanRunOutcome::failed);
+  CHECK_THAT(res.stop_reason, Catch::Contains("out_of_range"));
+  CHECK(res.counts.points_done == 0);
+  CHECK_FALSE(res.four_sensor->complete);
+}
+
+TEST_CASE("a drive fault on the slide fails the scan with the fault code") {
+  FakeMachine m;
+  FakeStageFaults f;
+  f.fault_on_move = 5;
+  FakeStage faulty("slide", 2000.0, 1ms, 0.0, f);
+  faulty.configure();
+  m.add_single();
+  auto dev = m.devices();
+  dev.slide = &faulty;
+  const auto res = run_scan(dev, m.options());
+  CHECK(res.outcome == ScanRunOutcome::failed);
+  CHECK_THAT(res.stop_reason, Catch::Contains("stage 'slide'") && Catch::Contains("drive fault") &&
+                                  Catch::Contains("0x2310"));
+  CHECK(faulty.stops() >= 1);
+  CHECK(res.counts.points_done == 4);
+}
+
+TEST_CASE("a stuck slide times out and is stopped") {
+  FakeMachine m;
+  FakeStageFaults f;
+  f.stuck_on_move = 2;
+  FakeStage stuck("slide", 2000.0, 1ms, 0.0, f);
+  stuck.configure();
+  m.add_single();
+  auto dev = m.devices();
+  dev.slide = &stuck;
+  auto opts = m.options();
+  opts.move_timeout_ms = 300;
+  const auto res = run_scan(dev, opts);
+  CHECK(res.outcome == ScanRunOutcome::failed);
+  CHECK_THAT(res.stop_reason, Catch::Contains("not in position after 300 ms"));
+  CHECK(stuck.stops() >= 1);
+}
+
+TEST_CASE("displacement scan: two passes, reference piece displaced by d in between") {
+  FakeMachine m;
+  auto w = [](double x) { return 0.5 * std::sin(x / 7.0); };
+  auto r = [](double x) { return 0.2 * std::cos(x / 4.0); };
+  auto mo = [](double x) { return 0.01 * x; };
+  m.sensors.push_back(std::make_unique<FakeSensor>("workpiece", [&](std::int64_t) {
+    return w(m.slide.position_now_mm()) + mo(m.slide.position_now_mm());
+  }));
+  m.sensors.push_back(std::make_unique<FakeSensor>("reference", [&](std::int64_t) {
+    const double x = m.slide.position_now_mm();
+    return r(x + m.reference.position_now_mm()) + mo(x);
+  }));
+  for (auto& s : m.sensors)
+    s->configure();
+  auto opts = m.options();
+  opts.kind = ScanKind::displacement;
+  opts.d_mm = 3.0;
+  opts.displacement_points = 6;
+  const auto res = run_scan(m.devices(), opts);
+  INFO(res.brief_report());
+  REQUIRE(res.complete());
+  REQUIRE(res.displacement);
+  const auto& raw = *res.displacement;
+  CHECK(raw.d_mm == 3.0);
+  for (std::size_t k = 0; k < 6; ++k) {
+    const double x = 3.0 * static_cast<double>(k);
+    CHECK(raw.x_mm[k] == x);
+    CHECK(raw.s1_scan1_um[k] == Approx(w(x) + mo(x)).margin(1e-9));
+    CHECK(raw.s2_scan1_um[k] == Approx(r(x) + mo(x)).margin(1e-9));
+    CHECK(raw.s2_scan2_um[k] == Approx(r(x + 3.0) + mo(x)).margin(1e-9));
+    CHECK(raw.s1_scan2_um[k] == Approx(w(x) + mo(x)).margin(1e-9));
+  }
+}
+
+TEST_CASE("devices that do not fit the scan are refused before anything moves") {
+  FakeMachine m;
+  m.add_fixed();
+  auto dev = m.devices();
+  dev.sensors.pop_back();
+  CHECK_THROWS_WITH(run_scan(dev, m.options()),
+                    Catch::Contains("1 sensor") && Catch::Contains("got 3"));
+  auto opts = m.options();
+  opts.averages = 0;
+  CHECK_THROWS_WITH(run_scan(m.devices(), opts), Catch::Contains("averages = 0"));
+  CHECK(m.slide.moves() == 0);
+}
