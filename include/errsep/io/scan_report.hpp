@@ -1,0 +1,72 @@
+#pragma once
+// Turns a result directory into what a metrologist uses: the ISO 230-1 evaluation (CSV and
+// text), figures (gnuplot), one self-contained HTML report, and compensation tables for the CNC.
+//
+// Inputs in DIR (formats fixed by the four-sensor and displacement apps):
+//   motion.csv     x_mm, S_um, gamma_deg|gamma_urad [, u_S_um, u_gamma_urad]   (four-sensor)
+//                  metadata: method, lambda, source (raw CSV), axis (default X),
+//                  straightness_direction (default Y)
+//   reference.csv  x_mm, f_um [, u_f_um]                                         (optional)
+//   lcurve.csv     lambda, residual_norm, solution_norm, curvature; "# lambda_chosen", "#
+//   lambda_rule" residuals.csv  x_mm, config, residual_um (optional) refine.csv     free-form
+//   numeric columns, rendered as a table                 (optional) a grid CSV     x_mm, y_mm, w_um
+//   [, m_um | m_w_um] [, u_w_um]  (displacement method; found
+//                  by its columns, or given as ScanReportOptions::grid_csv)
+// At least motion.csv or a grid CSV must be present.
+//
+// Outputs in DIR: evaluation.csv (one row, ISO 230-1 symbols in the column names),
+// evaluation.txt, plots/*.png|svg|gp|dat, report.html, compensation/* — each written atomically.
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "errsep/core/compensation.hpp"
+#include "errsep/core/iso230.hpp"
+#include "errsep/io/controller_tables.hpp"
+#include "errsep/io/plots.hpp"
+
+namespace errsep::io {
+
+struct ScanReportOptions {
+  core::EvaluationOptions evaluation;
+  /// Local straightness length; 0 = a quarter of the travel.
+  double local_length_mm = 0;
+  core::ReferenceLine local_reference = core::ReferenceLine::least_squares;
+  /// Moving axis and straightness direction (X, Y or Z); 0 = from motion.csv metadata, else X / Y.
+  char axis = 0;
+  char direction = 0;
+  core::CompensationOptions compensation;  ///< step_mm etc. of the uniform tables
+  std::size_t lincurve_points = 16;
+  bool tables = true;  ///< write compensation tables (four-sensor results only)
+  /// Sinumerik machine axis names; empty = AX1/AX2/AX3 for X/Y/Z.
+  std::string cec_input_axis, cec_output_axis;
+  int cec_table_index = 0;
+  /// Beckhoff logical axis numbers; 0 = 1/2/3 for X/Y/Z.
+  int beckhoff_axis_number = 0, beckhoff_master_axis_number = 0;
+  bool plots = true;
+  PlotOptions plot;
+  std::filesystem::path grid_csv;  ///< empty = look for one in the directory
+  /// Standard uncertainty of every w(x, y) node (from the displacement method's budget) when the
+  /// grid CSV has no u_w_um column; 0 = not known.
+  double u_w_um = 0;
+  bool is_valid(std::string* why) const;
+};
+
+struct ScanReportResult {
+  std::vector<std::filesystem::path> written;
+  std::string text;  ///< evaluation.txt
+  std::vector<std::string> warnings;
+  bool four_sensor = false, grid = false;
+  double lincurve_max_error_um = -1;  ///< -1 when no lincurve table was made
+};
+
+/// Evaluates DIR and writes the outputs into it.  Throws CsvError / std::runtime_error /
+/// std::invalid_argument with a message naming the file and the problem.
+ScanReportResult write_scan_report(const std::filesystem::path& dir,
+                                   const ScanReportOptions& opts = {});
+
+/// "12.34 ± 0.56" with U rounded to two significant digits and the value to the same decimal
+/// place (GUM 7.2.6); without U ("—" for U <= 0) the value with 4 significant digits.
+std::string format_value_with_uncertainty(double value, double expanded_uncertainty);
+
+}  // namespace errsep::io

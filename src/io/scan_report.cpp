@@ -1,0 +1,577 @@
+#include "errsep/io/scan_report.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <optional>
+#include <sstream>
+#include <stdexcept>
+
+#include "errsep/io/atomic_file.hpp"
+#include "errsep/io/csv.hpp"
+#include "errsep/io/html_report.hpp"
+#include "errsep/version.hpp"
+
+namespace errsep::io {
+namespace fs = std::filesystem;
+namespace {
+
+using core::ReferenceLine;
+using core::ReferencePlane;
+
+std::string sig(double v, int digits = 4) {
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "%.*g", digits, v);
+  return buf;
+}
+
+char upper_axis(char c, const char* what) {
+  const char u = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  if (u != 'X' && u != 'Y' && u != 'Z')
+    throw std::invalid_argument(std::string(what) + " '" + std::string(1, c) +
+                                "' is not X, Y or Z");
+  return u;
+}
+
+int axis_number(char a) {
+  return a == 'X' ? 1 : a == 'Y' ? 2 : 3;
+}
+
+std::vector<double> optional_column(const CsvTable& t, const std::string& name) {
+  if (!t.find_column(name)) return {};
+  return t.column(name);
+}
+
+bool all_zero(const std::vector<double>& v) {
+  return std::all_of(v.begin(), v.end(), [](double d) { return d == 0.0; });
+}
+
+std::vector<double> scaled(const std::vector<double>& v, double k) {
+  std::vector<double> o(v);
+  for (auto& d : o)
+    d *= k;
+  return o;
+}
+
+struct Row {  // one line of the evaluation table
+  std::string symbol, quantity, reference, csv_name, unit;
+  double value = 0, expanded = 0;  // expanded <= 0: not known
+};
+
+struct MotionData {
+  fs::path file;
+  CsvTable table;
+  std::vector<double> x, s, u_s, gamma_urad, u_gamma;
+};
+
+struct GridData {
+  fs::path file;
+  CsvTable table;
+  std::vector<double> x, y, w, m, u_w;
+  std::string m_column;
+};
+
+std::optional<GridData> find_grid(const fs::path& dir, const fs::path& given) {
+  std::vector<fs::path> candidates;
+  if (!given.empty()) {
+    candidates.push_back(given);
+  } else {
+    for (const auto& e : fs::directory_iterator(dir))
+      if (e.is_regular_file() && e.path().extension() == ".csv") candidates.push_back(e.path());
+    std::sort(candidates.begin(), candidates.end());
+  }
+  for (const auto& p : candidates) {
+    const std::string stem = p.stem().string();
+    if (stem == "motion" || stem == "reference" || stem == "lcurve" || stem == "residuals" ||
+        stem == "refine" || stem == "evaluation")
+      continue;
+    CsvTable t = read_csv(p);
+    if (!t.find_column("x_mm") || !t.find_column("y_mm") || !t.find_column("w_um")) {
+      if (!given.empty()) throw CsvError(p, 1, "grid CSV needs columns x_mm, y_mm, w_um");
+      continue;
+    }
+    GridData g;
+    g.file = p;
+    g.x = t.column("x_mm", p);
+    g.y = t.column("y_mm", p);
+    g.w = t.column("w_um", p);
+    for (const char* mc : {"m_um", "m_w_um"})
+      if (t.find_column(mc)) {
+        g.m = t.column(mc, p);
+        g.m_column = mc;
+        break;
+      }
+    g.u_w = optional_column(t, "u_w_um");
+    g.table = std::move(t);
+    return g;
+  }
+  return std::nullopt;
+}
+
+std::string text_table(const std::vector<Row>& rows, double k) {
+  std::ostringstream o;
+  char buf[256];
+  std::snprintf(buf, sizeof buf, "%-6s %-40s %-20s %14s %12s  %s\n", "ISO", "quantity", "reference",
+                "value", "U (k=2)", "unit");
+  o << buf;
+  for (const auto& r : rows) {
+    std::snprintf(buf, sizeof buf, "%-6s %-40s %-20s %14s %12s  %s\n", r.symbol.c_str(),
+                  r.quantity.c_str(), r.reference.c_str(), sig(r.value, 6).c_str(),
+                  r.expanded > 0 ? sig(r.expanded, 2).c_str() : "-", r.unit.c_str());
+    o << buf;
+  }
+  o << "U: expanded uncertainty, coverage factor k = " << k << "\n";
+  return o.str();
+}
+
+}  // namespace
+
+bool ScanReportOptions::is_valid(std::string* why) const {
+  auto fail = [&](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  std::string w;
+  if (!evaluation.is_valid(&w)) return fail("evaluation: " + w);
+  if (!compensation.is_valid(&w)) return fail("compensation: " + w);
+  if (plots && !plot.is_valid(&w)) return fail("plot: " + w);
+  if (local_length_mm < 0 || !std::isfinite(local_length_mm))
+    return fail("local_length_mm = " + std::to_string(local_length_mm) + " must be >= 0");
+  if (lincurve_points < 2 || lincurve_points > 16)
+    return fail("lincurve_points = " + std::to_string(lincurve_points) + " must be 2..16");
+  if (u_w_um < 0 || !std::isfinite(u_w_um))
+    return fail("u_w_um = " + std::to_string(u_w_um) + " must be >= 0");
+  for (char c : {axis, direction})
+    if (c != 0 && std::string("XYZxyz").find(c) == std::string::npos)
+      return fail(std::string("axis '") + c + "' is not X, Y or Z");
+  return true;
+}
+
+std::string format_value_with_uncertainty(double value, double u) {
+  if (!(u > 0) || !std::isfinite(u)) return sig(value, 4) + " \xC2\xB1 \xE2\x80\x94";
+  // Two significant digits of U decide the decimal place.
+  const int exp10 = static_cast<int>(std::floor(std::log10(u)));
+  const int decimals = std::max(0, 1 - exp10);
+  const double scale = std::pow(10.0, 1 - exp10);
+  const double ur = std::ceil(u * scale - 1e-9) / scale;  // round U up (conservative)
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "%.*f \xC2\xB1 %.*f", decimals, value, decimals, ur);
+  return buf;
+}
+
+ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions& opts) {
+  std::string why;
+  if (!opts.is_valid(&why)) throw std::invalid_argument("ScanReportOptions: " + why);
+  if (!fs::is_directory(dir))
+    throw std::runtime_error(dir.string() + ": not a directory (expected a result directory)");
+  ScanReportResult res;
+  const double k = opts.evaluation.coverage_factor;
+  std::vector<Row> rows;
+  HtmlReport html;
+  html.result_dir = fs::absolute(dir).lexically_normal().string();
+  html.generated_by = std::string("errsep-report ") + kVersion;
+  html.raw_data_file = "unknown (no '# source:' metadata)";
+  const fs::path plot_dir = dir / "plots";
+  bool plots = opts.plots;
+  if (plots && !gnuplot_available(opts.plot)) {
+    plots = false;
+    res.warnings.push_back("gnuplot ('" + opts.plot.gnuplot +
+                           "') cannot be run: the report has no figures (apt-get install "
+                           "gnuplot-nox).");
+  }
+  const fs::path comp_dir = dir / "compensation";
+  std::vector<HtmlFigure> figures;
+  CsvTable eval_csv;
+  eval_csv.set_meta("errsep evaluation", std::string("v") + kVersion);
+  eval_csv.set_meta("coverage_factor", sig(k));
+  eval_csv.set_meta("correlation", core::to_string(opts.evaluation.correlation));
+  auto add_eval = [&](const Row& r) {
+    rows.push_back(r);
+    eval_csv.add_column(r.csv_name + "_" + r.unit, {r.value});
+    eval_csv.add_column(r.csv_name + "_U_" + r.unit, {r.expanded > 0 ? r.expanded : 0.0});
+  };
+  auto plot_line = [&](const LinePlot& p, const std::string& caption) {
+    if (!plots) return;
+    const PlotFiles f = render_line_plot(p, plot_dir, opts.plot);
+    for (const auto& q : {f.png, f.svg, f.script, f.data})
+      if (!q.empty()) res.written.push_back(q);
+    figures.push_back({caption, opts.plot.png ? f.png : f.svg});
+  };
+  auto plot_map = [&](const HeatMap& m, const std::string& caption) {
+    if (!plots) return;
+    const PlotFiles f = render_heat_map(m, plot_dir, opts.plot);
+    for (const auto& q : {f.png, f.svg, f.script, f.data})
+      if (!q.empty()) res.written.push_back(q);
+    figures.push_back({caption, opts.plot.png ? f.png : f.svg});
+  };
+  // Files to write last, so that nothing is written when evaluation fails half-way.
+  std::vector<std::pair<fs::path, std::string>> outputs;
+
+  // ---- four-sensor result -------------------------------------------------------------------
+  const fs::path motion_file = dir / "motion.csv";
+  if (fs::exists(motion_file)) {
+    res.four_sensor = true;
+    MotionData md;
+    md.file = motion_file;
+    md.table = read_csv(motion_file, {.allow_non_finite = false, .min_rows = 2});
+    md.x = md.table.column("x_mm", motion_file);
+    md.s = md.table.column("S_um", motion_file);
+    md.u_s = optional_column(md.table, "u_S_um");
+    if (md.table.find_column("gamma_urad"))
+      md.gamma_urad = md.table.column("gamma_urad", motion_file);
+    else if (md.table.find_column("gamma_deg"))
+      md.gamma_urad = scaled(md.table.column("gamma_deg", motion_file), core::kUradPerDeg);
+    md.u_gamma = optional_column(md.table, "u_gamma_urad");
+    for (std::size_t i = 1; i < md.x.size(); ++i)
+      if (!(md.x[i] > md.x[i - 1]))
+        throw CsvError(motion_file, md.table.row_line.empty() ? 0 : md.table.row_line[i],
+                       "x_mm must be strictly increasing");
+    for (const auto& [key, v] : md.table.metadata)
+      html.configuration.emplace_back(key, v);
+    if (auto src = md.table.meta("source")) html.raw_data_file = *src;
+    const char axis =
+        upper_axis(opts.axis ? opts.axis : md.table.meta("axis").value_or("X").c_str()[0], "axis");
+    const char dirn = upper_axis(
+        opts.direction ? opts.direction
+                       : md.table.meta("straightness_direction").value_or("Y").c_str()[0],
+        "straightness direction");
+    if (axis == dirn)
+      throw std::invalid_argument("axis and straightness direction are both " +
+                                  std::string(1, axis));
+    const std::string es = core::straightness_symbol(axis, dirn);
+    const std::string ea = core::angular_symbol(axis, dirn);
+    html.title =
+        "errsep scan report: " + es + " / " + ea + " of the " + std::string(1, axis) + " slideway";
+    if (md.u_s.empty() || all_zero(md.u_s))
+      res.warnings.push_back(
+          "motion.csv gives no u_S_um (or only zeros): straightness "
+          "uncertainties are not available (shown as \xE2\x80\x94).");
+
+    for (const auto ref :
+         {ReferenceLine::end_points, ReferenceLine::least_squares, ReferenceLine::minimum_zone}) {
+      const auto r = core::evaluate_straightness(md.x, md.s, md.u_s, ref, opts.evaluation);
+      add_eval({es, "straightness S(x)", core::label(ref), es + "_" + core::to_string(ref), "um",
+                r.straightness_um, r.uncertainty.expanded});
+    }
+    const double travel = md.x.back() - md.x.front();
+    const double local = opts.local_length_mm > 0 ? opts.local_length_mm : travel / 4;
+    if (local <= travel + 1e-9 * std::max(1.0, travel)) {
+      const auto r = core::evaluate_local_straightness(md.x, md.s, md.u_s, local,
+                                                       opts.local_reference, opts.evaluation);
+      add_eval({es, "local straightness over " + sig(local) + " mm",
+                core::label(opts.local_reference), es + "_local", "um", r.straightness_um,
+                r.uncertainty.expanded});
+      eval_csv.add_column("local_length_mm", {local});
+    } else {
+      res.warnings.push_back("local length " + sig(local) + " mm exceeds the travel " +
+                             sig(travel) + " mm: local straightness not evaluated.");
+    }
+    if (!md.gamma_urad.empty()) {
+      const auto a = core::evaluate_angular_deviation(md.gamma_urad, md.u_gamma, opts.evaluation);
+      add_eval({ea, "angular deviation gamma(x)", "max - min", ea, "urad", a.deviation_urad,
+                a.uncertainty.expanded});
+      add_eval({ea, "angular deviation gamma(x)", "max - min", ea, "arcsec", a.deviation_arcsec,
+                a.expanded_uncertainty_arcsec});
+    } else {
+      res.warnings.push_back("motion.csv has no gamma_urad/gamma_deg column: no angular figure.");
+    }
+
+    // Reference profile f(x) (the artefact, not the machine).
+    std::vector<double> fx, f, uf;
+    if (fs::exists(dir / "reference.csv")) {
+      const auto t = read_csv(dir / "reference.csv", {.allow_non_finite = false, .min_rows = 2});
+      fx = t.column("x_mm", dir / "reference.csv");
+      f = t.column("f_um", dir / "reference.csv");
+      uf = optional_column(t, "u_f_um");
+      const auto r =
+          core::evaluate_straightness(fx, f, uf, ReferenceLine::minimum_zone, opts.evaluation);
+      add_eval({"-", "reference profile f(x) straightness",
+                core::label(ReferenceLine::minimum_zone), "f_minimum_zone", "um", r.straightness_um,
+                r.uncertainty.expanded});
+    }
+
+    // Figures.
+    {
+      LinePlot p;
+      p.name = "straightness";
+      p.title = es + ": straightness S(x) of the " + std::string(1, axis) + " slideway in " +
+                std::string(1, dirn);
+      p.xlabel = "x / mm";
+      p.ylabel = "S / \xC2\xB5m";
+      p.series.push_back({"S(x)", md.x, md.s, md.u_s.empty() ? md.u_s : scaled(md.u_s, k)});
+      plot_line(p, es + ": S(x) with its expanded uncertainty band (k = " + sig(k) + ")");
+    }
+    if (!md.gamma_urad.empty()) {
+      LinePlot p;
+      p.name = "tilt";
+      p.title = ea + ": tilt gamma(x)";
+      p.xlabel = "x / mm";
+      p.ylabel = "γ / \xC2\xB5rad";
+      p.series.push_back({"gamma(x)", md.x, md.gamma_urad,
+                          md.u_gamma.empty() ? md.u_gamma : scaled(md.u_gamma, k)});
+      plot_line(p, ea + ": tilt gamma(x) in urad with its expanded uncertainty band");
+    }
+    if (!f.empty()) {
+      LinePlot p;
+      p.name = "reference";
+      p.title = "Reference surface profile f(x)";
+      p.xlabel = "x / mm";
+      p.ylabel = "f / \xC2\xB5m";
+      p.series.push_back({"f(x)", fx, f, uf.empty() ? uf : scaled(uf, k)});
+      plot_line(p, "Reference profile f(x) with its expanded uncertainty band");
+    }
+    if (fs::exists(dir / "residuals.csv")) {
+      const auto t = read_csv(dir / "residuals.csv");
+      const auto rx = t.column("x_mm", dir / "residuals.csv");
+      const auto rc = t.column("config", dir / "residuals.csv");
+      const auto rr = t.column("residual_um", dir / "residuals.csv");
+      std::map<double, Series> by_config;
+      for (std::size_t i = 0; i < rx.size(); ++i) {
+        auto& s = by_config[rc[i]];
+        s.title = "config " + sig(rc[i]);
+        s.points = true;
+        s.x.push_back(rx[i]);
+        s.y.push_back(rr[i]);
+      }
+      LinePlot p;
+      p.name = "residuals";
+      p.title = "Residuals of the separation";
+      p.xlabel = "x / mm";
+      p.ylabel = "residual / \xC2\xB5m";
+      for (auto& [c, s] : by_config)
+        p.series.push_back(std::move(s));
+      plot_line(p, "Residuals per sensor configuration");
+      double sq = 0;
+      for (double v : rr)
+        sq += v * v;
+      html.configuration.emplace_back("residual rms (um)",
+                                      sig(std::sqrt(sq / static_cast<double>(rr.size()))));
+    }
+    if (fs::exists(dir / "lcurve.csv")) {
+      const auto t = read_csv(dir / "lcurve.csv", {.allow_non_finite = false, .min_rows = 2});
+      const auto lam = t.column("lambda", dir / "lcurve.csv");
+      const auto rn = t.column("residual_norm", dir / "lcurve.csv");
+      const auto sn = t.column("solution_norm", dir / "lcurve.csv");
+      LinePlot p;
+      p.name = "lcurve";
+      p.title = "L-curve";
+      p.xlabel = "residual norm ||A x - b||";
+      p.ylabel = "solution norm ||x||";
+      p.log_x = p.log_y = true;
+      p.series.push_back({"L-curve", rn, sn, {}});
+      if (auto lc = t.meta("lambda_chosen")) {
+        double chosen = 0;
+        try {
+          chosen = std::stod(*lc);
+        } catch (const std::exception&) {
+          throw CsvError(dir / "lcurve.csv", 0, "lambda_chosen '" + *lc + "' is not a number");
+        }
+        std::size_t best = 0;
+        for (std::size_t i = 1; i < lam.size(); ++i)
+          if (std::abs(std::log(lam[i] / chosen)) < std::abs(std::log(lam[best] / chosen)))
+            best = i;
+        p.marker = {rn[best], sn[best]};
+        p.marker_label =
+            "lambda = " + sig(chosen, 3) + " (" + t.meta("lambda_rule").value_or("?") + ")";
+        const auto [mn, mx] = std::minmax_element(lam.begin(), lam.end());
+        if (best == static_cast<std::size_t>(mn - lam.begin()) ||
+            best == static_cast<std::size_t>(mx - lam.begin()))
+          res.warnings.push_back("the chosen lambda " + sig(chosen, 3) +
+                                 " is at the edge of the swept range: widen the range.");
+        html.configuration.emplace_back("lambda chosen", *lc);
+        html.configuration.emplace_back("lambda rule", t.meta("lambda_rule").value_or("?"));
+      }
+      plot_line(p, "L-curve (log-log) with the chosen corner");
+    }
+
+    // Compensation tables.
+    if (opts.tables) {
+      core::CompensationOptions co = opts.compensation;
+      const auto uni = core::make_uniform_table(md.x, md.s, co);
+      core::BreakpointOptions bo;
+      bo.max_points = opts.lincurve_points;
+      const auto lin = core::make_breakpoint_table(md.x, md.s, co, bo);
+      res.lincurve_max_error_um = lin.max_interpolation_error_um;
+      const std::string title = es + " from " + html.raw_data_file;
+      SinumerikCecOptions so;
+      so.table_index = opts.cec_table_index;
+      so.input_axis = opts.cec_input_axis.empty() ? "AX" + std::to_string(axis_number(axis))
+                                                  : opts.cec_input_axis;
+      so.output_axis = opts.cec_output_axis.empty() ? "AX" + std::to_string(axis_number(dirn))
+                                                    : opts.cec_output_axis;
+      so.title = title;
+      LinuxCncLincurveOptions lo;
+      lo.instance = "errsep-" + es;
+      std::transform(lo.instance.begin(), lo.instance.end(), lo.instance.begin(),
+                     [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+      lo.input_pin = std::string("axis.") + static_cast<char>(std::tolower(axis)) + ".pos-cmd";
+      lo.output_axis = dirn;
+      lo.title = title;
+      BeckhoffCrosscompOptions bko;
+      bko.axis_number = opts.beckhoff_axis_number ? opts.beckhoff_axis_number : axis_number(dirn);
+      bko.master_axis_number =
+          opts.beckhoff_master_axis_number ? opts.beckhoff_master_axis_number : axis_number(axis);
+      bko.axis_name = std::string(1, dirn);
+      bko.title = title;
+      const fs::path cec = comp_dir / (es + "_sinumerik_cec.ini");
+      const fs::path hal = comp_dir / (es + "_linuxcnc_lincurve.hal");
+      const fs::path bk = comp_dir / (es + "_beckhoff_crosscomp.lis");
+      const fs::path csv = comp_dir / (es + "_table.csv");
+      outputs.emplace_back(cec, format_sinumerik_cec(uni, so));
+      outputs.emplace_back(hal, format_linuxcnc_lincurve_hal(lin, lo));
+      outputs.emplace_back(bk, format_beckhoff_crosscomp(uni, bko));
+      CsvTable ct;
+      ct.set_meta("errsep compensation table", std::string("v") + kVersion);
+      ct.set_meta("sign", "comp = -(error), added to the " + std::string(1, dirn) + " command");
+      ct.set_meta("removed_line", opts.compensation.remove_line
+                                      ? core::to_string(*opts.compensation.remove_line)
+                                      : "none");
+      std::vector<double> tx;
+      for (std::size_t i = 0; i < uni.comp_um.size(); ++i)
+        tx.push_back(uni.start_mm + uni.step_mm * static_cast<double>(i));
+      ct.add_column("x_mm", tx);
+      ct.add_column("comp_um", uni.comp_um);
+      outputs.emplace_back(csv, format_csv(ct));
+      html.files.emplace_back("compensation/" + cec.filename().string(),
+                              "Sinumerik CEC table, step " + sig(uni.step_mm) + " mm, " +
+                                  std::to_string(uni.comp_um.size()) + " points");
+      html.files.emplace_back("compensation/" + hal.filename().string(),
+                              "LinuxCNC lincurve (" + std::to_string(lin.x_mm.size()) +
+                                  " points) to axis." + static_cast<char>(std::tolower(dirn)) +
+                                  ".eoffset-counts; max interpolation error " +
+                                  sig(lin.max_interpolation_error_um, 3) + " um");
+      html.files.emplace_back("compensation/" + bk.filename().string(),
+                              "Beckhoff TwinCAT CNC kw.crosscomp list (0.1 um)");
+      html.files.emplace_back("compensation/" + csv.filename().string(),
+                              "the uniform table as CSV");
+      eval_csv.add_column("lincurve_max_interpolation_error_um", {lin.max_interpolation_error_um});
+      eval_csv.add_column("table_step_mm", {uni.step_mm});
+      html.notes.push_back(
+          "Compensation sign: comp(x) = -error(x), added to the " + std::string(1, dirn) +
+          " command (actual = commanded + comp + error = commanded). The " +
+          (opts.compensation.remove_line ? std::string(core::label(*opts.compensation.remove_line))
+                                         : std::string("no line")) +
+          " was removed from S(x) first (the alignment of the artefact is not a machine error).");
+      {
+        LinePlot p;
+        p.name = "compensation";
+        p.title = es + " compensation";
+        p.xlabel = "x / mm";
+        p.ylabel = "\xC2\xB5m";
+        const auto e = core::error_to_compensate(md.x, md.s, co);
+        p.series.push_back({"-error (line removed)", md.x, scaled(e, -1.0), {}});
+        p.series.push_back({"uniform table", tx, uni.comp_um, {}});
+        p.series.push_back({"lincurve points", lin.x_mm, lin.comp_um, {}, true});
+        plot_line(p, "Compensation: measured -error, uniform table and the " +
+                         std::to_string(lin.x_mm.size()) + " lincurve points");
+      }
+    }
+  }
+
+  // ---- displacement-method grid ------------------------------------------------------------
+  if (auto g = find_grid(dir, opts.grid_csv)) {
+    res.grid = true;
+    if (!res.four_sensor) {
+      for (const auto& [key, v] : g->table.metadata)
+        html.configuration.emplace_back(key, v);
+      if (auto src = g->table.meta("source")) html.raw_data_file = *src;
+      html.title = "errsep scan report: flatness of w(x, y)";
+    }
+    html.configuration.emplace_back("grid file", g->file.filename().string());
+    std::vector<double> u = g->u_w;
+    if (u.empty() && opts.u_w_um > 0) u.assign(g->w.size(), opts.u_w_um);
+    if (u.empty() || all_zero(u))
+      res.warnings.push_back(
+          "no uncertainty for w(x, y) (column u_w_um or --u-w-um): flatness "
+          "uncertainties are not available.");
+    for (const auto ref : {ReferencePlane::least_squares, ReferencePlane::minimum_zone}) {
+      const auto r = core::evaluate_flatness(g->x, g->y, g->w, u, ref, opts.evaluation);
+      if (!r.converged)
+        res.warnings.push_back(
+            "minimum-zone flatness: pivot limit reached; value is an upper bound.");
+      add_eval({"-", "flatness of w(x, y)", core::label(ref),
+                std::string("flatness_") + core::to_string(ref), "um", r.flatness_um,
+                r.uncertainty.expanded});
+    }
+    HeatMap hm;
+    hm.name = "surface_w";
+    hm.title = "Surface profile w(x, y)";
+    hm.xlabel = "x / mm";
+    hm.ylabel = "y / mm";
+    hm.cblabel = "w / \xC2\xB5m";
+    hm.x = g->x;
+    hm.y = g->y;
+    hm.z = g->w;
+    plot_map(hm, "Heat map of the separated surface w(x, y) (cf. Haramiishi et al. 2024, Fig. 13)");
+    if (!g->m.empty()) {
+      const auto [mn, mx] = std::minmax_element(g->m.begin(), g->m.end());
+      add_eval({"-", "motion error " + g->m_column + " (peak to valley)", "max - min",
+                "motion_error_pv", "um", *mx - *mn, 0});
+      HeatMap mm = hm;
+      mm.name = "motion_error";
+      mm.title = "Motion error " + g->m_column.substr(0, g->m_column.size() - 3) + "(x, y)";
+      mm.cblabel = "m / \xC2\xB5m";
+      mm.z = g->m;
+      plot_map(mm, "Heat map of the motion error (cf. Haramiishi et al. 2024, Figs. 18-19)");
+    }
+  }
+
+  if (!res.four_sensor && !res.grid)
+    throw std::runtime_error(dir.string() +
+                             ": no motion.csv and no grid CSV (x_mm, y_mm, w_um) found");
+
+  // ---- tables, text, html --------------------------------------------------------------------
+  HtmlTable ev;
+  ev.id = "evaluation";
+  ev.caption = "ISO 230-1 evaluation (U: expanded uncertainty, k = " + sig(k) + ", correlation " +
+               core::to_string(opts.evaluation.correlation) + ")";
+  ev.header = {"ISO 230-1", "quantity", "reference", "value \xC2\xB1 U", "unit"};
+  for (const auto& r : rows)
+    ev.rows.push_back({r.symbol, r.quantity, r.reference,
+                       format_value_with_uncertainty(r.value, r.expanded),
+                       r.unit == "um"     ? "\xC2\xB5m"
+                       : r.unit == "urad" ? "\xC2\xB5rad"
+                                          : r.unit});
+  html.tables.push_back(ev);
+  if (fs::exists(dir / "refine.csv")) {
+    const auto t = read_csv(dir / "refine.csv", {.allow_non_finite = true, .min_rows = 1});
+    HtmlTable rt;
+    rt.id = "refine";
+    rt.caption = "Refine steps (refine.csv)";
+    rt.header = t.columns;
+    for (const auto& row : t.rows) {
+      std::vector<std::string> cells;
+      for (double v : row)
+        cells.push_back(sig(v, 6));
+      rt.rows.push_back(std::move(cells));
+    }
+    html.tables.push_back(rt);
+  }
+  html.notes.insert(html.notes.begin(), res.warnings.begin(), res.warnings.end());
+  html.notes.push_back(
+      std::string("Uncertainty: each figure is linear in the profile at the solution (active "
+                  "points fixed); U = k u_c with ") +
+      (opts.evaluation.correlation == core::Correlation::bound
+           ? "u_c = sum |c_i| u_i, an upper bound valid for any correlation between points"
+           : "u_c = sqrt(sum c_i^2 u_i^2), points taken as uncorrelated") +
+      ". Minimum zone: exact (hull-edge slopes for lines, simplex on the Chebyshev dual for "
+      "planes).");
+  html.figures = figures;
+  html.files.insert(html.files.begin(), {"evaluation.csv", "the evaluation, one row"});
+  html.files.insert(html.files.begin() + 1, {"evaluation.txt", "the evaluation as text"});
+
+  res.text = text_table(rows, k);
+  outputs.emplace_back(dir / "evaluation.csv", format_csv(eval_csv, 12));
+  outputs.emplace_back(dir / "evaluation.txt", res.text);
+  outputs.emplace_back(dir / "report.html", render_html_report(html));
+  for (const auto& [path, content] : outputs) {
+    fs::create_directories(path.parent_path());
+    write_file_atomic(path, content);
+    res.written.push_back(path);
+  }
+  return res;
+}
+
+}  // namespace errsep::io

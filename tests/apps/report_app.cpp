@@ -1,0 +1,183 @@
+// errsep-report end to end: a result directory written from closed-form profiles goes in; the
+// evaluation, figures, report.html and compensation tables come out.  The Chromium case renders
+// the report of the simulated demo scan (Zhao 2019 Eqs. 21-23) to PNG.
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+#include "errsep/core/iso230.hpp"
+#include "errsep/io/csv.hpp"
+#include "support/controller_tables.hpp"
+#include "support/result_dir.hpp"
+#include "support/support.hpp"
+
+namespace fs = std::filesystem;
+using errsep::test::app_path;
+using errsep::test::run_command;
+using errsep::test::TempDir;
+
+namespace {
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::string quote(const fs::path& p) {
+  return "'" + p.string() + "'";
+}
+
+constexpr double kPi = 3.14159265358979323846;
+
+}  // namespace
+
+TEST_CASE("errsep-report evaluates a bow and a sine tilt exactly and writes everything") {
+  TempDir tmp;
+  const fs::path dir = tmp / "result";
+  errsep::test::ResultDirSpec spec;
+  spec.travel_mm = 300;  // 61 samples: the midpoint and the quarter points are samples
+  const double h = 6.0, tilt = 0.01, a_deg = 0.002;
+  spec.S_um = [&](double x) { return 4 * h * (x / 300) * (1 - x / 300) + tilt * x - 1; };
+  spec.gamma_deg = [&](double x) { return a_deg * std::sin(2 * kPi * x / 300); };
+  errsep::test::write_four_sensor_result(dir, spec);
+  errsep::test::write_grid_csv(
+      dir / "surface.csv", 13, 9, 10.0,
+      [](double x, double y) { return 0.5 * ((x - 60) / 60) * ((y - 40) / 40) + 0.01 * x; },
+      [](double x, double y) { return 0.001 * (x - 60) * (x - 60) + 0.0 * y; });
+
+  std::string out;
+  const int rc = run_command(
+      quote(app_path("report")) + " " + quote(dir) + " --table-step 10 --local-length 50", &out);
+  INFO(out);
+  REQUIRE(rc == 0);
+  for (const char* f :
+       {"evaluation.csv", "evaluation.txt", "report.html", "compensation/EYX_sinumerik_cec.ini",
+        "compensation/EYX_linuxcnc_lincurve.hal", "compensation/EYX_beckhoff_crosscomp.lis",
+        "compensation/EYX_table.csv", "plots/straightness.png", "plots/straightness.svg",
+        "plots/tilt.png", "plots/reference.png", "plots/residuals.png", "plots/lcurve.png",
+        "plots/surface_w.png", "plots/motion_error.png", "plots/compensation.png"})
+    CHECK(fs::exists(dir / f));
+
+  // The numbers: a pure bow has straightness h about every reference line (closed form), the
+  // sine tilt has an angular deviation of 2 a (its extremes are samples).
+  const auto ev = errsep::io::read_csv(dir / "evaluation.csv");
+  for (const char* c : {"EYX_end_points_um", "EYX_least_squares_um", "EYX_minimum_zone_um"})
+    CHECK(ev.column(c)[0] == Approx(h).epsilon(1e-9));
+  CHECK(ev.column("ECX_urad")[0] == Approx(2 * a_deg * errsep::core::kUradPerDeg).epsilon(1e-9));
+  CHECK(ev.column("ECX_arcsec")[0] == Approx(2 * a_deg * 3600).epsilon(1e-9));
+  // The saddle 0.5 x' y' on a symmetric 13 x 9 grid: flatness 2 * 0.5 for both planes.
+  CHECK(ev.column("flatness_least_squares_um")[0] == Approx(1.0).epsilon(1e-9));
+  CHECK(ev.column("flatness_minimum_zone_um")[0] == Approx(1.0).epsilon(1e-9));
+  // Uncertainties are propagated (u_S = 0.15 um per point given) and positive.
+  CHECK(ev.column("EYX_minimum_zone_U_um")[0] > 0);
+  CHECK(ev.column("ECX_U_urad")[0] == Approx(2 * (2.0 + 2.0)));  // bound: k (u_a + u_b)
+  // Local straightness of a parabola over 50 mm (10 samples, window midpoints sampled):
+  // h (50/300)^2.
+  CHECK(ev.column("EYX_local_um")[0] == Approx(h / 36).epsilon(1e-9));
+  CHECK(ev.column("local_length_mm")[0] == 50);
+
+  const std::string html = slurp(dir / "report.html");
+  CHECK_THAT(html, Catch::Contains("<table id=\"evaluation\">"));
+  CHECK_THAT(html, Catch::Contains("<td>EYX</td>"));
+  CHECK_THAT(html, Catch::Contains("<td>ECX</td>"));
+  CHECK_THAT(html, Catch::Contains("minimum zone"));
+  CHECK_THAT(html, Catch::Contains("/data/scans/simulated-demo-scan.csv"));  // raw data file
+  CHECK_THAT(html, Catch::Contains("<table id=\"refine\">"));
+  CHECK_THAT(html, Catch::Contains("<table id=\"configuration\">"));
+  CHECK_THAT(html, Catch::Contains("data:image/png;base64,"));
+  CHECK_THAT(html, !Catch::Contains("src=\"plots/"));  // self-contained: no external images
+
+  // The tables read back and compensate the measured bow at the table nodes.
+  const auto cec =
+      errsep::test::parse_sinumerik_cec(slurp(dir / "compensation/EYX_sinumerik_cec.ini"));
+  CHECK(cec.input_axis == "(AX1)");
+  CHECK(cec.output_axis == "(AX2)");
+  CHECK(cec.step_mm == 10);
+  for (double x = 0; x <= 300; x += 10) {
+    const double bow = 4 * h * (x / 300) * (1 - x / 300);  // the end-point line is removed
+    CHECK(cec.apply_mm(x) * 1e3 == Approx(-bow).margin(0.5e-3 + 1e-9));  // 1 nm resolution
+  }
+  const auto hal =
+      errsep::test::parse_lincurve_hal(slurp(dir / "compensation/EYX_linuxcnc_lincurve.hal"));
+  CHECK(hal.input_pin == "axis.x.pos-cmd");
+  CHECK(hal.output_pin == "axis.y.eoffset-counts");
+  CHECK_THAT(out, Catch::Contains("lincurve: max interpolation error"));
+}
+
+TEST_CASE("errsep-report fails with a message and writes nothing for an empty directory") {
+  TempDir tmp;
+  fs::create_directories(tmp / "empty");
+  std::string out;
+  const int rc = run_command(quote(app_path("report")) + " " + quote(tmp / "empty"), &out);
+  CHECK(rc != 0);
+  CHECK_THAT(out, Catch::Contains("no motion.csv and no grid CSV"));
+  CHECK_FALSE(fs::exists(tmp / "empty" / "report.html"));
+  CHECK_FALSE(fs::exists(tmp / "empty" / "evaluation.csv"));
+  // A malformed motion.csv names the file and line.
+  std::ofstream(tmp / "empty" / "motion.csv") << "x_mm,S_um\n0,1\n5,abc\n";
+  const int rc2 = run_command(quote(app_path("report")) + " " + quote(tmp / "empty"), &out);
+  CHECK(rc2 != 0);
+  CHECK_THAT(out, Catch::Contains("motion.csv:3"));
+  CHECK_FALSE(fs::exists(tmp / "empty" / "report.html"));
+}
+
+// Registered separately (tests/apps/report_app.cmake) with SKIP_RETURN_CODE 77: exits with 77
+// and a message when Chromium is not installed, so ctest reports it as skipped, not passed.
+TEST_CASE("report of the simulated demo scan renders in headless Chromium", "[chromium]") {
+  const fs::path chromium = "/usr/bin/chromium";
+  if (!fs::exists(chromium)) {
+    std::cout << "SKIPPED: /usr/bin/chromium is not installed (apt-get install chromium); the "
+                 "report was not rendered."
+              << std::endl;
+    std::exit(77);
+  }
+  TempDir tmp;
+  const fs::path dir = tmp / "demo";
+  errsep::test::write_four_sensor_result(dir);  // Zhao 2019 Eqs. (21)-(23)
+  errsep::test::write_grid_csv(
+      dir / "surface.csv", 25, 25, 10.0,
+      [](double x, double y) { return 3 * std::sin(x / 40) * std::cos(y / 50) + 0.01 * x; },
+      [](double x, double y) { return -0.0005 * (x - 120) * (x - 120) + 0.02 * y; });
+  std::string out;
+  REQUIRE(run_command(quote(app_path("report")) + " " + quote(dir), &out) == 0);
+  const fs::path shot = errsep::test::binary_dir() / "report_app_chromium.png";
+  fs::remove(shot);
+  const std::string flags =
+      " --headless --no-sandbox --disable-gpu --disable-quic --no-first-run"
+      " --disable-background-networking --disable-component-update --disable-sync"
+      " --user-data-dir=" +
+      quote(tmp / "profile");
+  const std::string url = "file://" + (dir / "report.html").string();
+  // The DOM Chromium built from the page holds the evaluation table.
+  std::string dom;
+  REQUIRE(run_command("timeout 60 " + chromium.string() + flags + " --dump-dom " + quote(url) +
+                          " 2>/dev/null",
+                      &dom) == 0);
+  CHECK_THAT(dom, Catch::Contains("<table id=\"evaluation\">"));
+  CHECK_THAT(dom, Catch::Contains("EYX"));
+  REQUIRE(run_command("timeout 60 " + chromium.string() + flags + " --screenshot=" + quote(shot) +
+                          " --window-size=1200,1600 " + quote(url),
+                      &out) == 0);
+  INFO(out);
+  REQUIRE(fs::exists(shot));
+  const std::string png = slurp(shot);
+  REQUIRE(png.size() > 33);
+  CHECK(png.compare(0, 8, "\x89PNG\r\n\x1a\n") == 0);
+  auto be32 = [&](std::size_t off) {
+    return (std::uint32_t(std::uint8_t(png[off])) << 24) |
+           (std::uint32_t(std::uint8_t(png[off + 1])) << 16) |
+           (std::uint32_t(std::uint8_t(png[off + 2])) << 8) |
+           std::uint32_t(std::uint8_t(png[off + 3]));
+  };
+  CHECK(be32(16) == 1200);  // IHDR width
+  CHECK(be32(20) == 1600);  // IHDR height
+  // A blank 1200 x 1600 page compresses to a few kB; text, tables and plots do not.
+  CHECK(png.size() > 50000);
+  std::cout << "screenshot: " << shot << " (" << png.size() << " bytes)" << std::endl;
+}
