@@ -1,0 +1,212 @@
+// errsep-scan: run a scan on a machine (or on the embedded device simulator), record the raw data,
+// then separate it.
+//   errsep-scan --config config/simulator.toml --out out/demo
+// Writes OUT/raw.csv (four-sensor: x_mm,m1_um..m4_um,t1_s..t4_s) or OUT/raw_displacement.csv,
+// then the result files of the separation (four-sensor: motion.csv, reference.csv, lcurve.csv,
+// residuals.csv, summary.txt).  Ctrl-C / SIGTERM: the stages are stopped, the raw data measured
+// so far is written marked "complete: false", nothing is separated, exit status 130.
+// Exit status: 0 complete, 1 usage/config/device set-up error, 3 scan failed (device fault),
+// 130 aborted.
+#include <unistd.h>
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <optional>
+
+#include "errsep/acq/scan_runner.hpp"
+#include "errsep/core/displacement_method.hpp"
+#include "errsep/core/four_sensor.hpp"
+#include "errsep/drivers/device_factory.hpp"
+#include "errsep/drivers/scan_devices.hpp"
+#include "errsep/drivers/simulator_process.hpp"
+#include "errsep/io/four_sensor_result_csv.hpp"
+#include "errsep/io/machine_config.hpp"
+#include "errsep/io/raw_scan_csv.hpp"
+#include "errsep/version.hpp"
+
+namespace {
+
+std::atomic<bool> g_abort{false};
+static_assert(std::atomic<bool>::is_always_lock_free);
+extern "C" void on_signal(int) {
+  g_abort.store(true);
+}  // async-signal-safe
+
+namespace fs = std::filesystem;
+using namespace errsep;
+
+/// Progress on the terminal: one rewritten line on a tty, a line per 10 % otherwise.
+struct ProgressPrinter {
+  bool tty = ::isatty(STDERR_FILENO) != 0;
+  int last_decile = -1;
+  void operator()(const acq::ScanProgress& p) {
+    const int pct = p.points_total ? 100 * p.point / p.points_total : 100;
+    if (tty) {
+      std::fprintf(stderr, "\r  %-16s point %4d/%-4d %3d%%  x = %8.3f mm  m = %10.4f um   ",
+                   p.phase.c_str(), p.point, p.points_total, pct, p.x_mm,
+                   p.values_um.empty() ? 0.0 : p.values_um.front());
+      if (p.point == p.points_total) std::fputc('\n', stderr);
+    } else if (pct / 10 != last_decile) {
+      last_decile = pct / 10;
+      std::fprintf(stderr, "  %s: point %d/%d (%d%%)\n", p.phase.c_str(), p.point, p.points_total,
+                   pct);
+    }
+    std::fflush(stderr);
+  }
+};
+
+/// Separation of a complete four-sensor raw scan, with the defaults of errsep-separate.
+void separate_four_sensor(const io::RawFourSensorScan& raw, const fs::path& raw_file,
+                          const fs::path& out) {
+  const auto& g = *raw.geometry;
+  const auto P = static_cast<Eigen::Index>(raw.positions());
+  Eigen::MatrixXd m(P, 4);
+  for (Eigen::Index j = 0; j < 4; ++j)
+    for (Eigen::Index n = 0; n < P; ++n)
+      m(n, j) = raw.m_um[static_cast<std::size_t>(j)][static_cast<std::size_t>(n)];
+  core::FourSensorOptions opts;
+  opts.gauge = core::CurvatureGauge::sensor_stage_without_curvature;  // as errsep-separate
+  const auto res = core::separate_four_sensor(g, m, opts);
+  io::write_four_sensor_result(out, res, {raw_file.string(), "X", "Y", {}});
+  std::cout << "separation: " << res.brief_report() << "\n";
+  if (res.rule == core::LambdaRule::lcurve && res.lcurve.at_edge)
+    std::cerr << "warning: the L-curve corner is at the edge of the lambda range\n";
+}
+
+void separate_displacement(const io::RawDisplacementScan& raw) {
+  core::DisplacementOptions o;
+  o.sample_interval_mm = raw.x_mm.size() > 1 ? raw.x_mm[1] - raw.x_mm[0] : raw.d_mm;
+  o.displacement_mm = raw.d_mm;
+  auto vec = [](const std::vector<double>& v) {
+    return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()));
+  };
+  const auto res = core::separate_displacement(vec(raw.s1_scan1_um), vec(raw.s2_scan1_um),
+                                               vec(raw.s2_scan2_um), o);
+  std::cout << "separation (displacement method): " << res.brief_report() << "\n"
+            << "  (errsep-separate-displacement writes the profile files from the raw CSV)\n";
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "errsep-scan: run a four-sensor or displacement-method scan on the machine of a config "
+      "(the embedded default starts the device simulator itself), write the raw CSV, then "
+      "separate it."};
+  app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
+  std::string config_path = "config/simulator.toml", out_dir, method, devsim;
+  int averages = 0, settle_ms = -1;
+  bool no_separate = false;
+  app.add_option("-c,--config", config_path, "machine config (TOML)")->capture_default_str();
+  app.add_option("-o,--out", out_dir, "output directory (default: [scan] output_dir)");
+  app.add_option("--method", method, "four_sensor, displacement or both (default: [scan] method)")
+      ->check(CLI::IsMember({"four_sensor", "displacement", "both"}));
+  app.add_option("--averages", averages, "K readings per point (default: [scan] averages)")
+      ->check(CLI::Range(1, 100000));
+  app.add_option("--settle-ms", settle_ms, "settling time per point (default: [scan] settle_ms)")
+      ->check(CLI::Range(0, 600000));
+  app.add_option("--devsim", devsim,
+                 "device simulator executable for an embedded config (default: errsep-devsim "
+                 "next to this program)");
+  app.add_flag("--no-separate", no_separate, "record the raw scan only");
+  CLI11_PARSE(app, argc, argv);
+
+  struct sigaction sa {};
+  sa.sa_handler = on_signal;
+  sigemptyset(&sa.sa_mask);
+  ::sigaction(SIGINT, &sa, nullptr);
+  ::sigaction(SIGTERM, &sa, nullptr);
+
+  int exit_code = 0;
+  try {
+    io::MachineConfig cfg = io::load_machine_config(config_path);
+    if (averages > 0) cfg.scan.averages = averages;
+    if (settle_ms >= 0) cfg.scan.settle_ms = settle_ms;
+    io::ScanMethod m = cfg.scan.method;
+    if (method == "four_sensor") m = io::ScanMethod::four_sensor;
+    if (method == "displacement") m = io::ScanMethod::displacement;
+    if (method == "both") m = io::ScanMethod::both;
+    const fs::path out = out_dir.empty() ? cfg.scan.output_dir : fs::path(out_dir);
+
+    // The embedded default: no machine, start the device simulator and talk to it.
+    std::unique_ptr<drivers::SimulatorProcess> sim;
+    if (cfg.simulator.embedded) {
+      const fs::path exe = devsim.empty() ? drivers::default_devsim_path() : fs::path(devsim);
+      if (exe.empty())
+        throw std::runtime_error(
+            "config " + config_path +
+            " uses the embedded device simulator, but errsep-devsim was not found next to this "
+            "program; give its path with --devsim");
+      sim = std::make_unique<drivers::SimulatorProcess>(exe, config_path);
+      io::apply_simulator_port(cfg, sim->port());
+      std::cout << "device simulator: pid " << sim->pid() << ", listening " << sim->host() << ":"
+                << sim->port() << "\n";
+    }
+
+    std::optional<drivers::Devices> dev;  // destroyed (buses closed) before the simulator stops
+    dev.emplace(drivers::make_devices(cfg));
+    dev->configure();
+    fs::create_directories(out);
+
+    std::vector<acq::ScanKind> kinds;
+    if (m != io::ScanMethod::displacement) kinds.push_back(acq::ScanKind::four_sensor);
+    if (m != io::ScanMethod::four_sensor) kinds.push_back(acq::ScanKind::displacement);
+    for (const auto kind : kinds) {
+      const auto opts = acq::scan_options_from_config(cfg, kind);
+      const auto devices = drivers::scan_devices(*dev, cfg, kind);
+      std::cout << "scan: " << acq::to_string(kind) << " on " << config_path << " ("
+                << opts.averages << " readings per point at " << opts.sampler.rate_hz << " Hz)\n";
+      ProgressPrinter printer;
+      acq::ScanHooks hooks;
+      hooks.progress = [&printer](const acq::ScanProgress& p) { printer(p); };
+      hooks.abort = &g_abort;
+      auto res = acq::run_scan(devices, opts, hooks);
+      if (printer.tty && res.counts.points_done != res.counts.points_total)
+        std::fputc('\n', stderr);
+
+      // The raw record first, whatever happened: complete or not, it is kept.
+      const fs::path raw_file =
+          out / (kind == acq::ScanKind::four_sensor ? "raw.csv" : "raw_displacement.csv");
+      if (res.four_sensor) {
+        res.four_sensor->metadata.insert(res.four_sensor->metadata.begin(),
+                                         {"config", fs::absolute(config_path).string()});
+        io::write_raw_four_sensor_csv(raw_file, *res.four_sensor);
+      } else {
+        res.displacement->metadata.insert(res.displacement->metadata.begin(),
+                                          {"config", fs::absolute(config_path).string()});
+        io::write_raw_displacement_csv(raw_file, *res.displacement);
+      }
+      std::cout << res.brief_report() << "\n"
+                << "raw data: " << raw_file.string()
+                << (res.complete() ? "" : " (marked incomplete)") << "\n";
+      for (const auto& s : res.samplers)
+        if (!s.realtime.all_ok())
+          std::cerr << "warning: real-time set-up: " << s.realtime.brief() << "\n";
+
+      if (!res.complete()) {
+        std::cerr << "errsep-scan: scan " << acq::to_string(res.outcome) << ": " << res.stop_reason
+                  << "; stages stopped; nothing separated\n";
+        exit_code = res.outcome == acq::ScanRunOutcome::aborted ? 130 : 3;
+        break;
+      }
+      if (no_separate) continue;
+      if (res.four_sensor) {
+        separate_four_sensor(*res.four_sensor, raw_file, out);
+        std::cout << "results: " << out.string()
+                  << "/ (motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt)\n";
+      } else {
+        separate_displacement(*res.displacement);
+      }
+    }
+    dev.reset();  // close the buses before the simulator goes
+    if (sim) sim->stop();
+  } catch (const std::exception& e) {
+    std::cerr << "errsep-scan: " << e.what() << "\n";
+    return 1;
+  }
+  return exit_code;
+}
