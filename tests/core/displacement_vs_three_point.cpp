@@ -7,6 +7,8 @@
 
 #include "errsep/core/displacement_method.hpp"
 #include "errsep/core/displacement_simulation.hpp"
+#include "errsep/core/four_sensor.hpp"
+#include "errsep/core/four_sensor_simulation.hpp"
 #include "errsep/core/three_point_method.hpp"
 
 using namespace errsep::core;
@@ -124,4 +126,65 @@ TEST_CASE("displacement vs three-point method on the same slideway (noise 0.1 um
   // the displacement method's error is expected to be the smaller one.
   CHECK(rms_d < rms_t);
   CHECK(rms_d > 0.0);
+}
+
+TEST_CASE("displacement, three-point and four-sensor methods on the same slideway") {
+  // The four-sensor method (Zhao 2019, the lead's core/four_sensor.hpp) on the same f, S, γ and
+  // σ = 0.1 µm: configuration D2 = D3 = 5 mm, D4 = 25 mm, N = 25 reference samples (0..120 mm),
+  // so P = 18 slide positions.  Checked: noise-free least squares recovers f (so the three are
+  // compared on the same surface); printed: rms error of each method against the endpoint datum.
+  const auto truth = slideway();
+  SlidewayTruth fs_truth;
+  fs_truth.f_um = truth.f_um;
+  fs_truth.S_um = truth.S_um;
+  fs_truth.gamma_rad = truth.gamma_rad;
+  FourSensorConfig cfg;
+  cfg.dx_mm = 5.0;
+  cfg.s2 = 1;
+  cfg.s3 = 1;
+  cfg.s4 = 5;
+  cfg.N = 25;
+  const Eigen::VectorXd f_true = endpoint_datum(sample(truth.f_um, 25, 5.0));
+  {
+    FourSensorOptions o;
+    o.rule = LambdaRule::least_squares;
+    o.compute_uncertainty = false;
+    const auto r = separate_four_sensor(cfg, simulate_four_sensor(cfg, fs_truth, {}).m_um, o);
+    REQUIRE(r.f_um.size() == 25);
+    CHECK((r.f_um - f_true).cwiseAbs().maxCoeff() < 1e-6);
+  }
+  constexpr double kSigma = 0.1;
+  constexpr int kRuns = 100;
+  double ms[3] = {0, 0, 0};
+  for (int run = 0; run < kRuns; ++run) {
+    OneAxisTruth ot{truth.f_um, [](double x) { return 0.03 * x + std::sin(x / 30.0); }, truth.S_um};
+    OneAxisSimOptions od;
+    od.workpiece_sensor.noise_sigma_um = kSigma;
+    od.reference_sensor.noise_sigma_um = kSigma;
+    od.seed = 100 + run;
+    const auto sd = simulate_one_axis(ot, od);
+    const auto rd =
+        separate_displacement(sd.s1_1_um, sd.s2_1_um, sd.s2_2_um, DisplacementOptions{});
+    ms[0] += (endpoint_datum(rd.w_um) - f_true).squaredNorm() / 25;
+
+    ThreeSensorSimOptions ts;
+    ts.sensor.noise_sigma_um = kSigma;
+    ts.seed = 100 + run;
+    const auto rt = separate_three_point(simulate_three_sensor(truth, ts), ThreePointOptions{});
+    ms[1] += (rt.f_um - f_true).squaredNorm() / 25;
+
+    FourSensorSimOptions fo;
+    fo.sigma_um = kSigma;
+    fo.seed = 100 + run;
+    FourSensorOptions o;  // L-curve λ, as the paper
+    o.compute_uncertainty = false;
+    const auto r4 = separate_four_sensor(cfg, simulate_four_sensor(cfg, fs_truth, fo).m_um, o);
+    ms[2] += (r4.f_um - f_true).squaredNorm() / 25;
+  }
+  std::printf(
+      "\nsame slideway, sigma %.2f um, %d runs, rms profile error over 0..120 mm [um]:\n"
+      "  displacement (two-point) %.3f, three-point %.3f, four-sensor (L-curve) %.3f\n",
+      kSigma, kRuns, std::sqrt(ms[0] / kRuns), std::sqrt(ms[1] / kRuns), std::sqrt(ms[2] / kRuns));
+  for (double m : ms)
+    CHECK(std::isfinite(m));
 }
