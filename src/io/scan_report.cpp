@@ -110,6 +110,14 @@ std::optional<GridData> find_grid(const fs::path& dir, const fs::path& given) {
   return std::nullopt;
 }
 
+// U rounded up to two significant digits (GUM 7.2.6; rounding up keeps it conservative).
+double round_up_2sig(double u) {
+  if (!(u > 0) || !std::isfinite(u)) return u;
+  const int exp10 = static_cast<int>(std::floor(std::log10(u)));
+  const double scale = std::pow(10.0, 1 - exp10);
+  return std::ceil(u * scale - 1e-9) / scale;
+}
+
 std::string text_table(const std::vector<Row>& rows, double k) {
   std::ostringstream o;
   char buf[256];
@@ -119,7 +127,7 @@ std::string text_table(const std::vector<Row>& rows, double k) {
   for (const auto& r : rows) {
     std::snprintf(buf, sizeof buf, "%-6s %-40s %-20s %14s %12s  %s\n", r.symbol.c_str(),
                   r.quantity.c_str(), r.reference.c_str(), sig(r.value, 6).c_str(),
-                  r.expanded > 0 ? sig(r.expanded, 2).c_str() : "-", r.unit.c_str());
+                  r.expanded > 0 ? sig(round_up_2sig(r.expanded), 2).c_str() : "-", r.unit.c_str());
     o << buf;
   }
   o << "U: expanded uncertainty, coverage factor k = " << k << "\n";
@@ -151,11 +159,10 @@ bool ScanReportOptions::is_valid(std::string* why) const {
 
 std::string format_value_with_uncertainty(double value, double u) {
   if (!(u > 0) || !std::isfinite(u)) return sig(value, 4) + " \xC2\xB1 \xE2\x80\x94";
-  // Two significant digits of U decide the decimal place.
-  const int exp10 = static_cast<int>(std::floor(std::log10(u)));
+  // Two significant digits of U (rounded up) decide the decimal place.
+  const double ur = round_up_2sig(u);
+  const int exp10 = static_cast<int>(std::floor(std::log10(ur) + 1e-12));
   const int decimals = std::max(0, 1 - exp10);
-  const double scale = std::pow(10.0, 1 - exp10);
-  const double ur = std::ceil(u * scale - 1e-9) / scale;  // round U up (conservative)
   char buf[96];
   std::snprintf(buf, sizeof buf, "%.*f \xC2\xB1 %.*f", decimals, value, decimals, ur);
   return buf;
@@ -463,7 +470,10 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
         const auto e = core::error_to_compensate(md.x, md.s, co);
         p.series.push_back({"-error (line removed)", md.x, scaled(e, -1.0), {}});
         p.series.push_back({"uniform table", tx, uni.comp_um, {}});
-        p.series.push_back({"lincurve points", lin.x_mm, lin.comp_um, {}, true});
+        p.series.push_back({"lincurve (" + std::to_string(lin.x_mm.size()) + " points)",
+                            lin.x_mm,
+                            lin.comp_um,
+                            {}});
         plot_line(p, "Compensation: measured -error, uniform table and the " +
                          std::to_string(lin.x_mm.size()) + " lincurve points");
       }
