@@ -1,0 +1,135 @@
+// errsep-daemon: errsep as a service.  Waits for a trigger (Modbus coil of its register map, a
+// schedule), runs the configured four-sensor scan and writes raw data and results durably to the
+// results directory.  Runs in the foreground under systemd (Type=notify; see
+// config/errsep.service); SIGHUP reloads the machine config between scans, SIGTERM stops the
+// stage, writes what was measured and exits.
+#include <CLI/CLI.hpp>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <exception>
+#include <iostream>
+
+#include "errsep/acq/daemon.hpp"
+#include "errsep/acq/sd_notify.hpp"
+#include "errsep/drivers/daemon_backend.hpp"
+#include "errsep/drivers/daemon_register_server.hpp"
+#include "errsep/io/machine_config.hpp"
+#include "errsep/version.hpp"
+
+namespace {
+errsep::acq::Daemon* g_daemon = nullptr;
+extern "C" void on_stop(int) {
+  if (g_daemon) g_daemon->request_stop();  // atomic store + write(2): async-signal-safe
+}
+extern "C" void on_hup(int) {
+  if (g_daemon) g_daemon->request_reload();
+}
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"errsep scan daemon: runs the configured scan on a trigger and keeps every result"};
+  app.set_version_flag("--version", std::string(errsep::kVersion));
+  app.set_config("--daemon-config", "", "daemon settings (TOML, keys = the long option names)");
+  std::string config_path;
+  std::string results_dir;
+  errsep::drivers::RegisterServerOptions reg;
+  int device_port = -1;
+  int keep_scans = 0;
+  double max_age_days = 0;
+  double schedule_s = 0;
+  int check_ms = 500, stop_timeout_ms = 5000;
+  double min_free_mb = 1.0;
+  bool no_separate = false, no_register_map = false;
+  app.add_option("-c,--config", config_path, "machine config (TOML); re-read on SIGHUP")
+      ->required()
+      ->check(CLI::ExistingFile);
+  app.add_option("--results-dir", results_dir,
+                 "results directory; default $STATE_DIRECTORY/results (systemd StateDirectory=), "
+                 "else ./results");
+  app.add_option("--modbus-host", reg.host, "address of the register map (default loopback)")
+      ->capture_default_str();
+  app.add_option("--modbus-port", reg.port, "port of the register map (0 = ephemeral)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 65535));
+  app.add_flag("--no-register-map", no_register_map, "do not serve the Modbus register map");
+  app.add_option("--device-port", device_port,
+                 "use this port for every TCP bus whose port is 0 (the port errsep-devsim printed)")
+      ->check(CLI::Range(1, 65535));
+  app.add_option("--keep-scans", keep_scans, "retention: keep the newest N scans (0 = keep all)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--max-age-days", max_age_days, "retention: delete scans older (0 = keep all)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--schedule-s", schedule_s, "also start a scan every this many seconds (0 = off)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--check-ms", check_ms, "device check period while idle or in fault")
+      ->capture_default_str();
+  app.add_option("--stop-timeout-ms", stop_timeout_ms, "SIGTERM: exit within this bound")
+      ->capture_default_str();
+  app.add_option("--min-free-mb", min_free_mb, "refuse to write with less free disk space")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  app.add_flag("--no-separate", no_separate, "write raw data only (no four-sensor result)");
+  CLI11_PARSE(app, argc, argv);
+
+  try {
+    errsep::acq::DaemonOptions opts;
+    if (results_dir.empty()) {
+      const char* state = std::getenv("STATE_DIRECTORY");
+      results_dir = state && *state ? std::string(state) + "/results" : "results";
+    }
+    opts.results.dir = results_dir;
+    opts.results.min_free_bytes = static_cast<std::uint64_t>(min_free_mb * 1048576.0);
+    opts.results.retention.keep_scans = keep_scans;
+    opts.results.retention.max_age_days = max_age_days;
+    opts.schedule_interval_s = schedule_s;
+    opts.check_interval = std::chrono::milliseconds(check_ms);
+    opts.stop_timeout = std::chrono::milliseconds(stop_timeout_ms);
+    opts.separate = !no_separate;
+
+    // Reads the file again on every call: SIGHUP picks up an edited config.
+    auto factory = [config_path, device_port]() -> std::unique_ptr<errsep::acq::ScanBackend> {
+      errsep::io::MachineConfig cfg = errsep::io::load_machine_config(config_path);
+      if (device_port > 0) errsep::io::apply_simulator_port(cfg, device_port);
+      for (const auto& b : cfg.buses)
+        if (b.kind == errsep::io::BusKind::tcp && b.port == 0)
+          throw std::runtime_error(config_path + ": bus '" + b.name +
+                                   "' has port 0: give --device-port (the simulator's port)");
+      return std::make_unique<errsep::drivers::DeviceScanBackend>(std::move(cfg));
+    };
+    // A bad config is an error at start (exit non-zero, message names file:line); later, on
+    // SIGHUP, the old config is kept.
+    factory();
+
+    const errsep::acq::SdNotifier notifier;
+    if (!notifier.error().empty()) std::cerr << "<4>" << notifier.error() << "\n";
+    errsep::acq::Daemon daemon(opts, factory, notifier);
+
+    std::unique_ptr<errsep::drivers::DaemonRegisterServer> server;
+    if (!no_register_map) {
+      server = std::make_unique<errsep::drivers::DaemonRegisterServer>(daemon, reg);
+      const int port = server->listen();
+      std::cout << "register map listening " << reg.host << ":" << port << std::endl;
+      std::cerr << "<6>register map listening " << reg.host << ":" << port << "\n";
+      server->start();
+    }
+
+    g_daemon = &daemon;
+    struct sigaction sa {};
+    sa.sa_handler = on_stop;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGTERM, &sa, nullptr);
+    sigaction(SIGINT, &sa, nullptr);
+    sa.sa_handler = on_hup;
+    sigaction(SIGHUP, &sa, nullptr);
+    std::signal(SIGPIPE, SIG_IGN);
+
+    const int rc = daemon.run();
+    if (server) server->stop();
+    g_daemon = nullptr;
+    return rc;
+  } catch (const std::exception& e) {
+    std::cerr << "<3>errsep-daemon: " << e.what() << "\n";
+    return 1;
+  }
+}

@@ -1,0 +1,224 @@
+#pragma once
+// The scan daemon: the state machine and main loop of errsep running as a service.
+//
+//   starting ──devices answer──▶ idle ──trigger──▶ scanning ──scan ends──▶ idle
+//      │  ▲                       │  ▲                │
+//      ▼  │ open fails / retry    ▼  │ check ok       ▼ device stops answering
+//     fault ◀────────────────── check fails        fault (raw data kept, marked incomplete)
+//   SIGTERM in any state ─▶ stopping: abort the scan, stop the stages, write what was measured,
+//   exit within DaemonOptions::stop_timeout.
+//
+// One scan at a time: a trigger (Modbus coil, GPIO edge, schedule) while a scan runs, while in
+// fault or while stopping is refused with a reason (TriggerReply + text) that the register map
+// exposes to the cell controller.  SIGHUP reloads the machine config between scans: during a scan
+// the reload waits for the scan to end, so no scan is dropped; a config with errors is reported
+// and the old one kept.
+//
+// The main loop sleeps in poll() on a wake-up pipe (signals, triggers and the end of a scan write
+// to it) with a timeout of at most the health-check / watchdog period: it never spins.  The scan
+// itself runs on a worker thread through a ScanBackend (drivers/daemon_backend.hpp for real
+// devices; tests may use their own), which records each measured point into the ScanContext, so
+// the main thread can always write the raw data measured so far, even if the worker hangs.
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+
+#include "errsep/acq/sd_notify.hpp"
+#include "errsep/io/raw_scan_csv.hpp"
+#include "errsep/io/results_store.hpp"
+
+namespace errsep::acq {
+
+/// Values are part of the register map (status register 0): do not renumber.
+enum class DaemonState : std::uint8_t {
+  starting = 0,
+  idle = 1,
+  scanning = 2,
+  fault = 3,
+  stopping = 4
+};
+enum class TriggerSource : std::uint8_t { modbus, gpio, schedule, command };
+/// Reply to a trigger (status register 1): accepted or why not.
+enum class TriggerReply : std::uint8_t {
+  none = 0,
+  accepted = 1,
+  refused_scanning = 2,  ///< a scan is running
+  refused_fault = 3,     ///< devices do not answer (fault state)
+  refused_stopping = 4,  ///< the daemon is shutting down
+  refused_starting = 5,  ///< devices not opened yet
+  refused_pending = 6,   ///< a trigger was accepted and the scan is about to start
+};
+/// How a scan ended (status register 7).
+enum class ScanOutcome : std::uint8_t {
+  none = 0,
+  complete = 1,
+  aborted = 2,       ///< abort coil / abort request
+  device_fault = 3,  ///< a device stopped answering or faulted
+  stopped = 4,       ///< SIGTERM during the scan
+  write_failed = 5,  ///< measured, but the results could not be written (disk full, ...)
+};
+
+const char* to_string(DaemonState s) noexcept;
+const char* to_string(TriggerSource s) noexcept;
+const char* to_string(TriggerReply r) noexcept;
+const char* to_string(ScanOutcome o) noexcept;
+
+/// What a scan worker and the main loop share.  Thread-safe.
+class ScanContext {
+ public:
+  ScanContext(std::uint64_t scan_id, const std::atomic<bool>& abort);
+  std::uint64_t scan_id() const noexcept { return id_; }
+  /// True once the scan is to stop (abort coil, SIGTERM).  Backends check it between steps.
+  bool abort_requested() const noexcept { return abort_.load(std::memory_order_acquire); }
+  const std::atomic<bool>& abort_flag() const noexcept { return abort_; }
+
+  /// Backend: the layout of the scan (x_mm, geometry, metadata; m_um all NaN) before measuring.
+  void begin(io::RawFourSensorScan layout);
+  /// Backend: one measured point of configuration `config` (0..3) at position index `n`.
+  void record(int config, std::size_t n, double m_um, double t_s);
+  /// Backend: proof of life while waiting (a move, a settle time).
+  void heartbeat() noexcept;
+
+  /// The raw data measured so far (complete = false).
+  io::RawFourSensorScan snapshot() const;
+  std::uint32_t points_done() const noexcept { return done_.load(); }
+  std::uint32_t points_total() const noexcept { return total_.load(); }
+  /// CLOCK_MONOTONIC ns of the last record() or heartbeat().
+  std::int64_t last_progress_ns() const noexcept { return progress_ns_.load(); }
+
+ private:
+  std::uint64_t id_;
+  const std::atomic<bool>& abort_;
+  mutable std::mutex mu_;
+  io::RawFourSensorScan raw_;
+  std::atomic<std::uint32_t> done_{0}, total_{0};
+  std::atomic<std::int64_t> progress_ns_{0};
+};
+
+/// How a backend's scan ended: complete, or why not.
+struct ScanEnd {
+  ScanOutcome outcome = ScanOutcome::complete;
+  std::string message;  ///< empty when complete
+};
+
+/// The devices side of the daemon.  Not thread-safe except where stated: the main loop calls
+/// open()/check() only while no scan runs; run_scan() runs on the worker thread.
+class ScanBackend {
+ public:
+  ScanBackend() = default;
+  ScanBackend(const ScanBackend&) = delete;
+  ScanBackend& operator=(const ScanBackend&) = delete;
+  virtual ~ScanBackend() = default;
+  /// Opens the devices; throws std::runtime_error naming the device that does not answer.
+  virtual void open() = 0;
+  /// One cheap request to every device kind: true when they answer, else `why`.
+  virtual bool check(std::string* why) = 0;
+  /// Runs one scan, recording into `ctx`, until complete, aborted or failed.  Must return soon
+  /// after ctx.abort_requested() becomes true (it stops the stages itself).
+  virtual ScanEnd run_scan(ScanContext& ctx) = 0;
+  /// Stops every stage now.  Thread-safe (called by the main loop during a scan on SIGTERM).
+  virtual void stop_motion() noexcept = 0;
+  /// One line for the journal ("machine config X: 5 sensors, 3 stages on 2 buses").
+  virtual std::string describe() const = 0;
+};
+
+/// Builds a backend from the current config (called at start and on SIGHUP).  Throws on config
+/// errors (message "file:line: key: problem").
+using BackendFactory = std::function<std::unique_ptr<ScanBackend>()>;
+
+struct DaemonOptions {
+  io::ResultsStoreOptions results;
+  std::chrono::milliseconds check_interval{500};  ///< device check while idle / in fault
+  std::chrono::milliseconds stop_timeout{5000};   ///< SIGTERM → exit bound
+  /// Longest a scan may go without progress before the watchdog is no longer pinged (systemd
+  /// then restarts a hung daemon).
+  std::chrono::milliseconds scan_stall_limit{60000};
+  double schedule_interval_s = 0.0;  ///< start a scan this often; 0 = no schedule
+  bool separate = true;              ///< compute and write the four-sensor result after a scan
+
+  bool is_valid(std::string* why = nullptr) const;
+};
+
+/// Everything the register map and the journal show.  A snapshot (copy).
+struct DaemonStatus {
+  DaemonState state = DaemonState::starting;
+  std::string message;            ///< what the daemon is doing / why it is in fault
+  std::uint64_t scan_id = 0;      ///< scan running now (0 = none)
+  std::uint32_t points_done = 0;  ///< of the running scan
+  std::uint32_t points_total = 0;
+  std::uint64_t scans_completed = 0;  ///< since start
+  std::uint64_t last_scan_id = 0;
+  ScanOutcome last_outcome = ScanOutcome::none;
+  double last_straightness_um = 0.0;  ///< max − min of S(x) of the last result (NaN: none)
+  std::string last_file;              ///< the last file written
+  TriggerReply last_trigger = TriggerReply::none;
+  std::string last_refusal;  ///< reason of the last refused trigger
+  std::uint32_t faults = 0;  ///< times the fault state was entered
+};
+
+class Daemon {
+ public:
+  /// `notifier` must outlive the daemon.  Throws std::invalid_argument for invalid options and
+  /// std::runtime_error when the results directory is unusable.
+  Daemon(DaemonOptions opts, BackendFactory factory, const SdNotifier& notifier);
+  ~Daemon();
+  Daemon(const Daemon&) = delete;
+  Daemon& operator=(const Daemon&) = delete;
+
+  /// The main loop; returns the process exit code once stopped (0 = clean stop).
+  int run();
+
+  /// Async-signal-safe (atomic store + write to a pipe): SIGTERM/SIGINT and SIGHUP handlers.
+  void request_stop() noexcept;
+  void request_reload() noexcept;
+
+  /// Asks for a scan.  Thread-safe.  Refused (with `reason`) unless idle with no scan pending.
+  TriggerReply trigger(TriggerSource source, std::string* reason = nullptr);
+  /// Aborts the running scan (raw data kept, marked incomplete).  False when none runs.
+  bool abort_scan();
+  DaemonStatus status() const;
+
+ private:
+  void wake() noexcept;
+  void set_state(DaemonState s, const std::string& message);
+  void log(int priority, const std::string& msg) const;
+  bool try_open();
+  void start_scan(TriggerSource src);
+  void finish_scan(bool stopping);
+  void write_scan_files(const io::RawFourSensorScan& raw, const ScanEnd& end);
+  void do_reload();
+  void ping_watchdog(std::int64_t now_ns);
+
+  DaemonOptions opts_;
+  BackendFactory factory_;
+  const SdNotifier& notify_;
+  io::ResultsStore store_;
+  std::unique_ptr<ScanBackend> backend_;
+  bool backend_open_ = false;
+  bool ready_sent_ = false;
+
+  int wake_pipe_[2] = {-1, -1};
+  std::atomic<bool> stop_{false}, reload_{false}, abort_{false};
+  std::atomic<bool> scan_done_{false};
+  std::atomic<bool> pending_{false};
+  TriggerSource pending_source_ = TriggerSource::command;
+
+  std::unique_ptr<ScanContext> ctx_;
+  std::thread worker_;
+  ScanEnd worker_end_;
+  std::uint64_t next_scan_id_ = 1;
+  std::chrono::system_clock::time_point scan_start_{};
+  std::string scan_stem_;
+  bool stop_during_scan_ = false;
+
+  mutable std::mutex mu_;  // guards status_ and pending_source_
+  DaemonStatus status_;
+  std::int64_t last_ping_ns_ = 0;
+};
+
+}  // namespace errsep::acq

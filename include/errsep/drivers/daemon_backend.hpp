@@ -1,0 +1,41 @@
+#pragma once
+// The daemon's ScanBackend on real devices (or the device simulator): the drivers a machine
+// config describes, sampled by one Sampler thread per bus, averaged per point by a WindowAverager
+// and recorded into the daemon's ScanContext point by point, so an interrupted scan leaves every
+// point it measured.
+//
+// Scan order (Zhao 2019, one sensor on a sensor stage): for each of the four configurations the
+// sensor stage moves to sensor_stage_origin_mm + offset_i, then the slide visits x_0..x_p; with
+// four fixed probes (single_sensor = false) the slide visits each x_n once and all four are
+// averaged together.  Only scan.method = "four_sensor" is run by the daemon.
+#include <memory>
+#include <string>
+
+#include "errsep/acq/daemon.hpp"
+#include "errsep/drivers/device_factory.hpp"
+#include "errsep/io/machine_config.hpp"
+
+namespace errsep::drivers {
+
+class DeviceScanBackend final : public acq::ScanBackend {
+ public:
+  /// Checks the config can be scanned by the daemon (four_sensor method, valid geometry, the
+  /// scan's stages and sensors present); throws std::runtime_error naming the config file and
+  /// key otherwise.  No I/O.
+  explicit DeviceScanBackend(io::MachineConfig cfg);
+  ~DeviceScanBackend() override;
+
+  /// make_devices + configure (buses, sensors, stages, reconnect supervisor).
+  void open() override;
+  /// Reads the slide's status word and the first scan sensor once.
+  bool check(std::string* why) override;
+  acq::ScanEnd run_scan(acq::ScanContext& ctx) override;
+  void stop_motion() noexcept override;
+  std::string describe() const override;
+
+ private:
+  io::MachineConfig cfg_;
+  std::unique_ptr<Devices> dev_;
+};
+
+}  // namespace errsep::drivers

@@ -1,0 +1,645 @@
+#include "errsep/acq/daemon.hpp"
+
+#include <fcntl.h>
+#include <poll.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <sstream>
+
+#include "errsep/acq/sampler.hpp"  // monotonic_ns
+#include "errsep/core/four_sensor.hpp"
+#include "errsep/io/csv.hpp"
+
+namespace errsep::acq {
+namespace {
+
+// sd-daemon(3) priority prefixes: the journal reads them from stderr lines.
+constexpr int kErr = 3, kWarning = 4, kInfo = 6;
+
+constexpr std::int64_t kMsNs = 1'000'000;
+
+std::string utc_iso(std::chrono::system_clock::time_point t) {
+  const std::time_t tt = std::chrono::system_clock::to_time_t(t);
+  std::tm tm{};
+  ::gmtime_r(&tt, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buf;
+}
+
+std::string fmt(double v, int prec = 4) {
+  std::ostringstream os;
+  os.precision(prec);
+  os << v;
+  return os.str();
+}
+
+}  // namespace
+
+const char* to_string(DaemonState s) noexcept {
+  switch (s) {
+    case DaemonState::starting:
+      return "starting";
+    case DaemonState::idle:
+      return "idle";
+    case DaemonState::scanning:
+      return "scanning";
+    case DaemonState::fault:
+      return "fault";
+    case DaemonState::stopping:
+      return "stopping";
+  }
+  return "unknown";
+}
+const char* to_string(TriggerSource s) noexcept {
+  switch (s) {
+    case TriggerSource::modbus:
+      return "modbus";
+    case TriggerSource::gpio:
+      return "gpio";
+    case TriggerSource::schedule:
+      return "schedule";
+    case TriggerSource::command:
+      return "command";
+  }
+  return "unknown";
+}
+const char* to_string(TriggerReply r) noexcept {
+  switch (r) {
+    case TriggerReply::none:
+      return "none";
+    case TriggerReply::accepted:
+      return "accepted";
+    case TriggerReply::refused_scanning:
+      return "refused: a scan is running";
+    case TriggerReply::refused_fault:
+      return "refused: devices in fault";
+    case TriggerReply::refused_stopping:
+      return "refused: shutting down";
+    case TriggerReply::refused_starting:
+      return "refused: devices not ready yet";
+    case TriggerReply::refused_pending:
+      return "refused: a scan is about to start";
+  }
+  return "unknown";
+}
+const char* to_string(ScanOutcome o) noexcept {
+  switch (o) {
+    case ScanOutcome::none:
+      return "none";
+    case ScanOutcome::complete:
+      return "complete";
+    case ScanOutcome::aborted:
+      return "aborted";
+    case ScanOutcome::device_fault:
+      return "device_fault";
+    case ScanOutcome::stopped:
+      return "stopped";
+    case ScanOutcome::write_failed:
+      return "write_failed";
+  }
+  return "unknown";
+}
+
+// --- ScanContext -----------------------------------------------------------------------------
+
+ScanContext::ScanContext(std::uint64_t scan_id, const std::atomic<bool>& abort)
+    : id_(scan_id), abort_(abort) {
+  progress_ns_.store(monotonic_ns());
+}
+
+void ScanContext::begin(io::RawFourSensorScan layout) {
+  std::lock_guard<std::mutex> lock(mu_);
+  raw_ = std::move(layout);
+  const std::size_t p = raw_.x_mm.size();
+  for (auto& col : raw_.m_um)
+    col.assign(p, std::numeric_limits<double>::quiet_NaN());
+  std::array<std::vector<double>, 4> t;
+  for (auto& col : t)
+    col.assign(p, std::numeric_limits<double>::quiet_NaN());
+  raw_.t_s = t;
+  raw_.complete = false;
+  total_.store(static_cast<std::uint32_t>(4 * p));
+  done_.store(0);
+  heartbeat();
+}
+
+void ScanContext::record(int config, std::size_t n, double m_um, double t_s) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (config < 0 || config > 3 || n >= raw_.x_mm.size()) return;
+    raw_.m_um[static_cast<std::size_t>(config)][n] = m_um;
+    (*raw_.t_s)[static_cast<std::size_t>(config)][n] = t_s;
+  }
+  done_.fetch_add(1);
+  heartbeat();
+}
+
+void ScanContext::heartbeat() noexcept {
+  progress_ns_.store(monotonic_ns());
+}
+
+io::RawFourSensorScan ScanContext::snapshot() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return raw_;
+}
+
+// --- options ---------------------------------------------------------------------------------
+
+bool DaemonOptions::is_valid(std::string* why) const {
+  auto bad = [&](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  if (!results.is_valid(why)) return false;
+  if (check_interval.count() < 10 || check_interval.count() > 600000)
+    return bad("check_interval = " + std::to_string(check_interval.count()) +
+               " ms: must be in [10, 600000]");
+  if (stop_timeout.count() < 100)
+    return bad("stop_timeout = " + std::to_string(stop_timeout.count()) + " ms: must be >= 100");
+  if (scan_stall_limit.count() < 1000)
+    return bad("scan_stall_limit = " + std::to_string(scan_stall_limit.count()) +
+               " ms: must be >= 1000");
+  if (!(schedule_interval_s >= 0) || (schedule_interval_s > 0 && schedule_interval_s < 1))
+    return bad("schedule_interval_s = " + fmt(schedule_interval_s) + ": must be 0 or >= 1");
+  return true;
+}
+
+// --- Daemon ----------------------------------------------------------------------------------
+
+Daemon::Daemon(DaemonOptions opts, BackendFactory factory, const SdNotifier& notifier)
+    : opts_([&] {
+        std::string why;
+        if (!opts.is_valid(&why)) throw std::invalid_argument("daemon options: " + why);
+        return std::move(opts);
+      }()),
+      factory_(std::move(factory)),
+      notify_(notifier),
+      store_(opts_.results) {
+  if (::pipe2(wake_pipe_, O_CLOEXEC | O_NONBLOCK) != 0)
+    throw std::runtime_error("daemon: cannot create the wake-up pipe");
+  status_.last_straightness_um = std::numeric_limits<double>::quiet_NaN();
+}
+
+Daemon::~Daemon() {
+  if (worker_.joinable()) {
+    abort_.store(true);
+    worker_.join();
+  }
+  for (int fd : wake_pipe_)
+    if (fd >= 0) ::close(fd);
+}
+
+void Daemon::wake() noexcept {
+  const char c = 1;
+  // Non-blocking: a full pipe already guarantees a wake-up.
+  [[maybe_unused]] const ssize_t n = ::write(wake_pipe_[1], &c, 1);
+}
+
+void Daemon::request_stop() noexcept {
+  stop_.store(true);
+  wake();
+}
+
+void Daemon::request_reload() noexcept {
+  reload_.store(true);
+  wake();
+}
+
+void Daemon::log(int priority, const std::string& msg) const {
+  // One write per line so lines of different threads do not interleave.
+  const std::string line = "<" + std::to_string(priority) + ">" + msg + "\n";
+  [[maybe_unused]] const ssize_t n = ::write(2, line.data(), line.size());
+}
+
+void Daemon::set_state(DaemonState s, const std::string& message) {
+  DaemonState old;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    old = status_.state;
+    status_.state = s;
+    status_.message = message;
+    if (s == DaemonState::fault && old != DaemonState::fault) ++status_.faults;
+  }
+  const int prio = s == DaemonState::fault ? kErr : kInfo;
+  if (old != s)
+    log(prio, std::string("state ") + to_string(old) + " -> " + to_string(s) + ": " + message);
+  notify_.status(std::string(to_string(s)) + ": " + message);
+}
+
+TriggerReply Daemon::trigger(TriggerSource source, std::string* reason) {
+  TriggerReply r;
+  std::string why;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (stop_.load()) {
+      r = TriggerReply::refused_stopping;
+    } else {
+      switch (status_.state) {
+        case DaemonState::idle:
+          r = pending_.load() ? TriggerReply::refused_pending : TriggerReply::accepted;
+          break;
+        case DaemonState::scanning:
+          r = TriggerReply::refused_scanning;
+          break;
+        case DaemonState::fault:
+          r = TriggerReply::refused_fault;
+          break;
+        case DaemonState::stopping:
+          r = TriggerReply::refused_stopping;
+          break;
+        case DaemonState::starting:
+          r = TriggerReply::refused_starting;
+          break;
+        default:
+          r = TriggerReply::refused_fault;
+      }
+    }
+    status_.last_trigger = r;
+    if (r == TriggerReply::accepted) {
+      pending_.store(true);
+      pending_source_ = source;
+    } else {
+      why = std::string(to_string(r));
+      if (status_.state == DaemonState::scanning)
+        why += " (scan " + std::to_string(status_.scan_id) + ")";
+      else if (status_.state == DaemonState::fault)
+        why += " (" + status_.message + ")";
+      status_.last_refusal = why;
+    }
+  }
+  if (r == TriggerReply::accepted) {
+    log(kInfo, std::string("trigger from ") + to_string(source) + ": accepted");
+    wake();
+  } else {
+    log(kWarning, std::string("trigger from ") + to_string(source) + " " + why);
+  }
+  if (reason) *reason = why;
+  return r;
+}
+
+bool Daemon::abort_scan() {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (status_.state != DaemonState::scanning) return false;
+  }
+  abort_.store(true);
+  log(kWarning, "abort requested");
+  wake();
+  return true;
+}
+
+DaemonStatus Daemon::status() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  DaemonStatus s = status_;
+  if (ctx_) {
+    s.points_done = ctx_->points_done();
+    s.points_total = ctx_->points_total();
+  }
+  return s;
+}
+
+bool Daemon::try_open() {
+  try {
+    if (!backend_) {
+      backend_ = factory_();
+      log(kInfo, backend_->describe());
+    }
+    backend_->open();
+    backend_open_ = true;
+    return true;
+  } catch (const std::exception& e) {
+    // A config error stays an error until SIGHUP; a device that does not answer is retried.
+    if (backend_) {
+      backend_.reset();  // rebuilt (and re-opened from scratch) on the next attempt
+    }
+    backend_open_ = false;
+    set_state(DaemonState::fault, std::string("cannot open devices: ") + e.what());
+    return false;
+  }
+}
+
+void Daemon::ping_watchdog(std::int64_t now_ns) {
+  const auto wd = notify_.watchdog_interval();
+  if (wd.count() <= 0) return;
+  const std::int64_t half_ns = wd.count() * 1000 / 2;
+  if (now_ns - last_ping_ns_ < half_ns) return;
+  // Prove progress: during a scan, only while the scan worker shows signs of life.
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (ctx_ && now_ns - ctx_->last_progress_ns() > opts_.scan_stall_limit.count() * kMsNs) {
+      return;
+    }
+  }
+  notify_.watchdog();
+  last_ping_ns_ = now_ns;
+}
+
+void Daemon::start_scan(TriggerSource src) {
+  const std::uint64_t id = next_scan_id_++;
+  scan_start_ = std::chrono::system_clock::now();
+  scan_stem_ = io::ResultsStore::stem(scan_start_, id);
+  abort_.store(false);
+  scan_done_.store(false);
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    ctx_ = std::make_unique<ScanContext>(id, abort_);
+    status_.scan_id = id;
+  }
+  pending_.store(false);
+  set_state(DaemonState::scanning,
+            "scan " + std::to_string(id) + " (" + to_string(src) + ") " + scan_stem_);
+  ScanContext* ctx = ctx_.get();
+  ScanBackend* be = backend_.get();
+  worker_ = std::thread([this, ctx, be] {
+    ScanEnd end;
+    try {
+      end = be->run_scan(*ctx);
+    } catch (const std::exception& e) {
+      end = {ScanOutcome::device_fault, e.what()};
+    }
+    worker_end_ = end;
+    scan_done_.store(true);
+    wake();
+  });
+}
+
+void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd& end) {
+  io::RawFourSensorScan raw = raw_in;
+  raw.complete = end.outcome == ScanOutcome::complete;
+  const std::uint64_t id = ctx_->scan_id();
+  std::vector<std::pair<std::string, std::string>> meta = {
+      {"scan_id", std::to_string(id)},
+      {"started_utc", utc_iso(scan_start_)},
+      {"ended_utc", utc_iso(std::chrono::system_clock::now())},
+      {"outcome", to_string(end.outcome)}};
+  if (!end.message.empty()) meta.emplace_back("outcome_reason", end.message);
+  meta.emplace_back("points_measured", std::to_string(ctx_->points_done()) + "/" +
+                                           std::to_string(ctx_->points_total()));
+  raw.metadata.insert(raw.metadata.begin(), meta.begin(), meta.end());
+
+  ScanOutcome outcome = end.outcome;
+  std::string last_file;
+  double straightness = std::numeric_limits<double>::quiet_NaN();
+  try {
+    const std::string kind = raw.complete ? "raw" : "raw-incomplete";
+    last_file = store_.write(scan_stem_, kind, io::format_csv(io::to_csv_table(raw), 12)).string();
+    log(raw.complete ? kInfo : kWarning,
+        "scan " + std::to_string(id) + " " + to_string(end.outcome) + ": wrote " + last_file);
+    if (raw.complete && opts_.separate && raw.geometry) {
+      try {
+        Eigen::MatrixXd m(static_cast<Eigen::Index>(raw.positions()), 4);
+        for (std::size_t i = 0; i < 4; ++i)
+          for (std::size_t n = 0; n < raw.positions(); ++n)
+            m(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(i)) = raw.m_um[i][n];
+        core::FourSensorOptions so;
+        so.compute_uncertainty = true;
+        const core::FourSensorResult r = core::separate_four_sensor(*raw.geometry, m, so);
+        io::CsvTable t;
+        t.set_meta("format", "errsep four-sensor result");
+        for (const auto& [k, v] : meta)
+          t.set_meta(k, v);
+        t.set_meta("raw_file", std::filesystem::path(last_file).filename().string());
+        t.set_meta("solver", r.brief_report());
+        straightness = r.S_um.maxCoeff() - r.S_um.minCoeff();
+        t.set_meta("straightness_um", fmt(straightness, 6));
+        const auto n = static_cast<std::size_t>(r.x_mm.size());
+        std::vector<double> x(n), s(n), g(n), us(n);
+        for (std::size_t k = 0; k < n; ++k) {
+          const auto e = static_cast<Eigen::Index>(k);
+          x[k] = r.x_mm(e);
+          s[k] = r.S_um(e);
+          g[k] = r.gamma_rad(e) * 1e6;
+          us[k] = r.u_S_um.size() == r.x_mm.size() ? r.u_S_um(e) : 0.0;
+        }
+        t.add_column("x_mm", x);
+        t.add_column("S_um", s);
+        t.add_column("gamma_urad", g);
+        t.add_column("u_S_um", us);
+        last_file = store_.write(scan_stem_, "result", io::format_csv(t, 10)).string();
+        log(kInfo, "scan " + std::to_string(id) + ": straightness " + fmt(straightness) +
+                       " um; wrote " + last_file);
+      } catch (const io::DiskFullError&) {
+        throw;
+      } catch (const std::exception& e) {
+        log(kWarning,
+            "scan " + std::to_string(id) + ": separation failed: " + e.what() + " (raw data kept)");
+      }
+    }
+  } catch (const io::DiskFullError& e) {
+    outcome = ScanOutcome::write_failed;
+    log(kErr, std::string("scan ") + std::to_string(id) + ": " + e.what());
+  } catch (const std::exception& e) {
+    outcome = ScanOutcome::write_failed;
+    log(kErr, std::string("scan ") + std::to_string(id) + ": results not written: " + e.what());
+  }
+  std::lock_guard<std::mutex> lock(mu_);
+  status_.last_scan_id = id;
+  status_.last_outcome = outcome;
+  status_.last_straightness_um = straightness;
+  if (!last_file.empty()) status_.last_file = last_file;
+  if (outcome == ScanOutcome::complete) ++status_.scans_completed;
+}
+
+void Daemon::finish_scan(bool stopping) {
+  worker_.join();
+  ScanEnd end = worker_end_;
+  if (stopping && end.outcome == ScanOutcome::aborted) end.outcome = ScanOutcome::stopped;
+  if (stopping && end.outcome == ScanOutcome::complete &&
+      ctx_->points_done() < ctx_->points_total())
+    end.outcome = ScanOutcome::stopped;
+  write_scan_files(ctx_->snapshot(), end);
+  const std::uint64_t id = ctx_->scan_id();
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    ctx_.reset();
+    status_.scan_id = 0;
+  }
+  if (opts_.results.retention.enabled()) {
+    const int n = store_.prune(std::chrono::system_clock::now());
+    if (n > 0) log(kInfo, "retention: removed " + std::to_string(n) + " old result files");
+  }
+  if (stopping) return;
+  const DaemonStatus st = status();
+  if (end.outcome == ScanOutcome::device_fault)
+    set_state(DaemonState::fault, "scan " + std::to_string(id) + ": " + end.message);
+  else
+    set_state(DaemonState::idle,
+              "last scan " + std::to_string(id) + " " + to_string(st.last_outcome) +
+                  (std::isnan(st.last_straightness_um)
+                       ? std::string()
+                       : ", straightness " + fmt(st.last_straightness_um) + " um"));
+}
+
+void Daemon::do_reload() {
+  reload_.store(false);
+  notify_.reloading();
+  log(kInfo, "SIGHUP: reloading the configuration");
+  std::unique_ptr<ScanBackend> fresh;
+  try {
+    fresh = factory_();
+  } catch (const std::exception& e) {
+    log(kErr, std::string("reload failed, keeping the previous configuration: ") + e.what());
+    notify_.ready();
+    return;
+  }
+  log(kInfo, fresh->describe());
+  backend_.reset();  // closes the old devices before the new ones open the same endpoints
+  backend_ = std::move(fresh);
+  backend_open_ = false;
+  try {
+    backend_->open();
+    backend_open_ = true;
+    set_state(DaemonState::idle, "configuration reloaded");
+  } catch (const std::exception& e) {
+    backend_.reset();
+    set_state(DaemonState::fault, std::string("cannot open devices: ") + e.what());
+  }
+  notify_.ready();
+}
+
+int Daemon::run() {
+  const int stale = store_.clean_stale_temporaries();
+  if (stale > 0)
+    log(kWarning, "removed " + std::to_string(stale) +
+                      " temporary files left by an interrupted write in " + store_.dir().string());
+  next_scan_id_ = store_.next_scan_id();
+  log(kInfo, "results in " + store_.dir().string() + ", next scan id " +
+                 std::to_string(next_scan_id_) +
+                 (opts_.results.retention.enabled() ? "" : ", retention off (nothing deleted)"));
+  set_state(DaemonState::starting, "opening devices");
+
+  using clock = std::chrono::steady_clock;
+  const auto interval = opts_.check_interval;
+  auto next_check = clock::now();
+  const auto sched = std::chrono::duration_cast<clock::duration>(
+      std::chrono::duration<double>(opts_.schedule_interval_s));
+  auto next_schedule = clock::now() + sched;
+  auto next_status = clock::now();
+  std::uint32_t fails = 0;
+
+  while (!stop_.load()) {
+    const auto now = clock::now();
+    ping_watchdog(monotonic_ns());
+
+    if (worker_.joinable() && scan_done_.load()) {
+      finish_scan(false);
+      next_check = now + interval;
+    }
+    if (reload_.load() && !worker_.joinable()) do_reload();
+
+    DaemonState st;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      st = status_.state;
+    }
+    if (st == DaemonState::starting || st == DaemonState::fault) {
+      if (now >= next_check) {
+        next_check = now + interval;
+        std::string why;
+        bool ok = false;
+        if (!backend_open_) {
+          ok = try_open();
+        } else {
+          ok = backend_->check(&why);
+          if (!ok) set_state(DaemonState::fault, "devices do not answer: " + why);
+        }
+        if (ok) {
+          set_state(DaemonState::idle,
+                    st == DaemonState::starting ? "devices answer, ready" : "devices answer again");
+          if (!ready_sent_) {
+            notify_.ready();
+            ready_sent_ = true;
+          }
+          pending_.store(false);
+          fails = 0;
+        }
+      }
+    } else if (st == DaemonState::idle) {
+      if (pending_.load()) {
+        TriggerSource src;
+        {
+          std::lock_guard<std::mutex> lock(mu_);
+          src = pending_source_;
+        }
+        start_scan(src);
+      } else if (sched.count() > 0 && now >= next_schedule) {
+        next_schedule = now + sched;
+        start_scan(TriggerSource::schedule);
+      } else if (now >= next_check) {
+        next_check = now + interval;
+        std::string why;
+        if (!backend_->check(&why)) {
+          // Two failed checks in a row: one lost request is not a fault.
+          if (++fails >= 2) set_state(DaemonState::fault, "devices do not answer: " + why);
+        } else {
+          fails = 0;
+        }
+      }
+    } else if (st == DaemonState::scanning && now >= next_status) {
+      next_status = now + std::chrono::seconds(1);
+      const DaemonStatus s = status();
+      notify_.status("scanning: scan " + std::to_string(s.scan_id) + ", " +
+                     std::to_string(s.points_done) + "/" + std::to_string(s.points_total) +
+                     " points");
+    }
+
+    // Sleep until woken (signal, trigger, end of scan) or the next periodic duty.
+    auto until = next_check;
+    if (sched.count() > 0) until = std::min(until, next_schedule);
+    if (worker_.joinable()) until = std::min(until, next_status);
+    auto wait = std::chrono::duration_cast<std::chrono::milliseconds>(until - clock::now());
+    const auto wd = notify_.watchdog_interval();
+    if (wd.count() > 0)
+      wait = std::min(wait, std::chrono::duration_cast<std::chrono::milliseconds>(wd / 4));
+    wait = std::clamp(wait, std::chrono::milliseconds(1), std::chrono::milliseconds(1000));
+    pollfd pfd{wake_pipe_[0], POLLIN, 0};
+    if (!stop_.load() && !(worker_.joinable() && scan_done_.load()) &&
+        !(pending_.load() && st == DaemonState::idle))
+      ::poll(&pfd, 1, static_cast<int>(wait.count()));
+    char buf[64];
+    while (::read(wake_pipe_[0], buf, sizeof buf) > 0) {
+    }
+  }
+
+  // --- stopping: abort the scan, stop the stages, write what was measured, exit in bound.
+  const auto deadline = clock::now() + opts_.stop_timeout;
+  set_state(DaemonState::stopping, "SIGTERM");
+  notify_.stopping();
+  int rc = 0;
+  if (worker_.joinable()) {
+    abort_.store(true);
+    if (backend_) backend_->stop_motion();
+    while (!scan_done_.load() && clock::now() < deadline) {
+      pollfd pfd{wake_pipe_[0], POLLIN, 0};
+      ::poll(&pfd, 1, 20);
+      char buf[64];
+      while (::read(wake_pipe_[0], buf, sizeof buf) > 0) {
+      }
+    }
+    if (scan_done_.load()) {
+      finish_scan(true);
+    } else {
+      // The worker hangs in a device call: write what it measured and leave it behind.
+      log(kErr, "scan worker did not stop within " + std::to_string(opts_.stop_timeout.count()) +
+                    " ms; writing the raw data measured so far");
+      worker_end_ = {ScanOutcome::stopped, "SIGTERM; worker did not stop in time"};
+      write_scan_files(ctx_->snapshot(), worker_end_);
+      worker_.detach();
+      (void)ctx_.release();      // still used by the detached worker: leaked on purpose
+      (void)backend_.release();  // idem
+      rc = 2;
+    }
+  } else if (backend_) {
+    backend_->stop_motion();
+  }
+  backend_.reset();
+  log(kInfo, "stopped");
+  return rc;
+}
+
+}  // namespace errsep::acq

@@ -1,0 +1,178 @@
+#include "errsep/io/results_store.hpp"
+
+#include <sys/statvfs.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <ctime>
+#include <map>
+#include <set>
+
+#include "errsep/io/atomic_file.hpp"
+
+namespace errsep::io {
+namespace fs = std::filesystem;
+
+bool RetentionOptions::is_valid(std::string* why) const {
+  auto bad = [&](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  if (keep_scans < 0)
+    return bad("retention.keep_scans = " + std::to_string(keep_scans) + ": must be >= 0");
+  if (!(max_age_days >= 0))
+    return bad("retention.max_age_days = " + std::to_string(max_age_days) + ": must be >= 0");
+  return true;
+}
+
+bool ResultsStoreOptions::is_valid(std::string* why) const {
+  if (dir.empty()) {
+    if (why) *why = "results dir: must not be empty";
+    return false;
+  }
+  return retention.is_valid(why);
+}
+
+ResultsStore::ResultsStore(ResultsStoreOptions opts) : opts_(std::move(opts)) {
+  std::string why;
+  if (!opts_.is_valid(&why)) throw std::invalid_argument("results store: " + why);
+  std::error_code ec;
+  fs::create_directories(opts_.dir, ec);
+  if (ec)
+    throw std::runtime_error("results directory '" + opts_.dir.string() +
+                             "' cannot be created: " + ec.message());
+  if (::access(opts_.dir.c_str(), W_OK | X_OK) != 0)
+    throw std::runtime_error("results directory '" + opts_.dir.string() +
+                             "' is not writable: " + std::strerror(errno));
+}
+
+std::string ResultsStore::stem(std::chrono::system_clock::time_point t, std::uint64_t scan_id) {
+  const std::time_t tt = std::chrono::system_clock::to_time_t(t);
+  std::tm tm{};
+  ::gmtime_r(&tt, &tm);
+  char buf[64];
+  std::strftime(buf, sizeof buf, "%Y%m%dT%H%M%SZ", &tm);
+  char id[32];
+  std::snprintf(id, sizeof id, "%06llu", static_cast<unsigned long long>(scan_id));
+  return std::string(buf) + "_scan" + id;
+}
+
+fs::path ResultsStore::path(std::string_view stem_, std::string_view kind) const {
+  return opts_.dir / (std::string(stem_) + "." + std::string(kind) + ".csv");
+}
+
+std::uint64_t ResultsStore::free_bytes() const {
+  struct statvfs st {};
+  if (::statvfs(opts_.dir.c_str(), &st) != 0) return 0;
+  return static_cast<std::uint64_t>(st.f_bavail) * st.f_frsize;
+}
+
+fs::path ResultsStore::write(std::string_view stem_, std::string_view kind,
+                             std::string_view content) {
+  const fs::path p = path(stem_, kind);
+  const std::uint64_t free = free_bytes();
+  if (free < opts_.min_free_bytes + content.size())
+    throw DiskFullError("cannot write '" + p.string() + "': disk full: " + std::to_string(free) +
+                        " bytes free, " + std::to_string(content.size()) +
+                        " needed plus a reserve of " + std::to_string(opts_.min_free_bytes) +
+                        " (free space in the results directory, or enable retention)");
+  try {
+    write_file_atomic(p, content);
+  } catch (const std::runtime_error& e) {
+    // write_file_atomic names ENOSPC/EDQUOT in its message; keep that as its own error type so
+    // the daemon reports "disk full" and not a generic write failure.
+    const std::string m = e.what();
+    if (m.find("(ENOSPC)") != std::string::npos || m.find("(EDQUOT)") != std::string::npos)
+      throw DiskFullError(m);
+    throw;
+  }
+  return p;
+}
+
+std::optional<StoredFile> parse_store_name(const fs::path& file) {
+  const std::string name = file.filename().string();
+  // <8 digits>T<6 digits>Z_scan<digits>.<kind>.csv
+  if (name.size() < 16 + 5 + 1 + 1 + 4 || name[0] == '.') return std::nullopt;
+  if (name.compare(name.size() - 4, 4, ".csv") != 0) return std::nullopt;
+  std::tm tm{};
+  int consumed = 0;
+  if (std::sscanf(name.c_str(), "%4d%2d%2dT%2d%2d%2dZ_scan%n", &tm.tm_year, &tm.tm_mon, &tm.tm_mday,
+                  &tm.tm_hour, &tm.tm_min, &tm.tm_sec, &consumed) != 6 ||
+      consumed != 21)
+    return std::nullopt;
+  std::size_t i = static_cast<std::size_t>(consumed), j = i;
+  while (j < name.size() && name[j] >= '0' && name[j] <= '9')
+    ++j;
+  if (j == i || j >= name.size() || name[j] != '.') return std::nullopt;
+  const std::size_t kind_end = name.size() - 4;
+  if (kind_end <= j + 1) return std::nullopt;
+  StoredFile f;
+  f.path = file;
+  f.stem = name.substr(0, j);
+  f.scan_id = std::stoull(name.substr(i, j - i));
+  f.kind = name.substr(j + 1, kind_end - j - 1);
+  tm.tm_year -= 1900;
+  tm.tm_mon -= 1;
+  f.time = std::chrono::system_clock::from_time_t(::timegm(&tm));
+  return f;
+}
+
+std::vector<StoredFile> ResultsStore::list() const {
+  std::vector<StoredFile> out;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(opts_.dir, ec)) {
+    if (!e.is_regular_file(ec)) continue;
+    if (auto f = parse_store_name(e.path())) out.push_back(std::move(*f));
+  }
+  std::sort(out.begin(), out.end(),
+            [](const StoredFile& a, const StoredFile& b) { return a.path < b.path; });
+  return out;
+}
+
+std::uint64_t ResultsStore::next_scan_id() const {
+  std::uint64_t hi = 0;
+  for (const auto& f : list())
+    hi = std::max(hi, f.scan_id);
+  return hi + 1;
+}
+
+int ResultsStore::clean_stale_temporaries() {
+  int n = 0;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(opts_.dir, ec)) {
+    const std::string name = e.path().filename().string();
+    // write_file_atomic's temporaries: ".<target name>.tmp.XXXXXX"
+    if (name.size() > 1 && name[0] == '.' && name.find(".tmp.") != std::string::npos &&
+        parse_store_name(name.substr(1, name.find(".tmp.") - 1)).has_value()) {
+      if (fs::remove(e.path(), ec)) ++n;
+    }
+  }
+  return n;
+}
+
+int ResultsStore::prune(std::chrono::system_clock::time_point now) {
+  if (!opts_.retention.enabled()) return 0;
+  // Group files by scan (stem), newest scan first.
+  std::map<std::string, std::vector<StoredFile>, std::greater<>> scans;
+  for (auto& f : list())
+    scans[f.stem].push_back(f);
+  const auto max_age = std::chrono::duration_cast<std::chrono::system_clock::duration>(
+      std::chrono::duration<double, std::ratio<86400>>(opts_.retention.max_age_days));
+  int removed = 0, rank = 0;
+  for (const auto& [stem_, files] : scans) {
+    ++rank;
+    const bool too_many = opts_.retention.keep_scans > 0 && rank > opts_.retention.keep_scans;
+    const bool too_old = opts_.retention.max_age_days > 0 && files.front().time < now - max_age;
+    if (!too_many && !too_old) continue;
+    for (const auto& f : files) {
+      std::error_code ec;
+      if (fs::remove(f.path, ec)) ++removed;
+    }
+  }
+  return removed;
+}
+
+}  // namespace errsep::io
