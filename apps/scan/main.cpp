@@ -61,15 +61,20 @@ struct ProgressPrinter {
 
 /// Separation of a complete four-sensor raw scan, with the defaults of errsep-separate.
 void separate_four_sensor(const io::RawFourSensorScan& raw, const fs::path& raw_file,
-                          const fs::path& out) {
+                          const fs::path& out, const std::string& gauge) {
   const auto& g = *raw.geometry;
   const auto P = static_cast<Eigen::Index>(raw.positions());
   Eigen::MatrixXd m(P, 4);
   for (Eigen::Index j = 0; j < 4; ++j)
     for (Eigen::Index n = 0; n < P; ++n)
       m(n, j) = raw.m_um[static_cast<std::size_t>(j)][static_cast<std::size_t>(n)];
-  core::FourSensorOptions opts;
-  opts.gauge = core::CurvatureGauge::sensor_stage_without_curvature;  // as errsep-separate
+  core::FourSensorOptions opts;  // lambda from the L-curve corner, as errsep-separate
+  if (gauge == "sensor_stage")
+    opts.gauge = core::CurvatureGauge::sensor_stage_without_curvature;
+  else if (gauge == "reference")
+    opts.gauge = core::CurvatureGauge::reference_without_curvature;
+  else
+    opts.gauge = core::CurvatureGauge::paper_eq12_literal;
   const auto res = core::separate_four_sensor(g, m, opts);
   io::write_four_sensor_result(out, res, {raw_file.string(), "X", "Y", {}});
   std::cout << "separation: " << res.brief_report() << "\n";
@@ -99,6 +104,7 @@ int main(int argc, char** argv) {
       "separate it."};
   app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
   std::string config_path = "config/simulator.toml", out_dir, method, devsim;
+  std::string gauge = "sensor_stage";
   int averages = 0, settle_ms = -1;
   bool no_separate = false;
   app.add_option("-c,--config", config_path, "machine config (TOML)")->capture_default_str();
@@ -113,6 +119,12 @@ int main(int argc, char** argv) {
                  "device simulator executable for an embedded config (default: errsep-devsim "
                  "next to this program)");
   app.add_flag("--no-separate", no_separate, "record the raw scan only");
+  app.add_option("--gauge", gauge,
+                 "curvature gauge of the separation, as errsep-separate: sensor_stage (the sensor "
+                 "stage's zero-adjustment values have no quadratic part), reference (the "
+                 "reference surface has no curvature), paper_eq12")
+      ->check(CLI::IsMember({"sensor_stage", "reference", "paper_eq12"}))
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
   struct sigaction sa {};
@@ -195,7 +207,7 @@ int main(int argc, char** argv) {
       }
       if (no_separate) continue;
       if (res.four_sensor) {
-        separate_four_sensor(*res.four_sensor, raw_file, out);
+        separate_four_sensor(*res.four_sensor, raw_file, out, gauge);
         std::cout << "results: " << out.string()
                   << "/ (motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt)\n";
       } else {
