@@ -1,0 +1,68 @@
+#pragma once
+// A candidate physical effect missing from the four-sensor model (Zhao et al. 2019, Eq. 1), as a
+// correction of the sensor outputs: with parameters p the corrected readings
+//
+//   m_c = m − correction(p)          (P × 4)
+//
+// obey Eq. (1) again, so the base solver runs unchanged on m_c.  The refinement loop (refine.hpp)
+// needs the Jacobian of the modelled readings with respect to p, J = −∂m_c/∂p, evaluated at the
+// current estimate of f, S, γ and e (the correction of a non-linear effect such as PE1 or PE2
+// depends on the slope of f̂; the loop is Gauss–Newton with f, S, γ, e eliminated by projection).
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "errsep/core/four_sensor_config.hpp"
+
+namespace errsep::core {
+
+/// The current estimate of the base model, from a least-squares solve of the corrected readings.
+struct EffectContext {
+  FourSensorConfig cfg;
+  Eigen::MatrixXd m_um;       ///< raw readings, P × 4
+  Eigen::MatrixXd t_s;        ///< reading times, P × 4 (scan order when none were recorded)
+  Eigen::VectorXd f_um;       ///< f̂(x_0..x_{N−1})
+  Eigen::VectorXd S_um;       ///< Ŝ(x_n), P
+  Eigen::VectorXd gamma_rad;  ///< γ̂(x_n), P
+  Eigen::Vector4d e_um = Eigen::Vector4d::Zero();
+  Eigen::MatrixXd residual_um;  ///< P × 4 reading residual of the current model (for searches)
+
+  /// f̂′ at reference sample j, µm/mm (central differences, one-sided at the ends).
+  double f_slope(int j) const;
+  /// Ŝ′(x_n) in µm/mm and γ̂′(x_n) in rad/mm.
+  double S_slope(int n) const;
+  double gamma_slope(int n) const;
+};
+
+/// First derivative of samples v spaced h apart (central inside, one-sided at the ends).
+double grid_derivative(const Eigen::VectorXd& v, double h, Eigen::Index j);
+
+class ModelEffect {
+ public:
+  virtual ~ModelEffect() = default;
+  /// Short identifier used in reports and model names, e.g. "gain", "pe1".
+  virtual std::string name() const = 0;
+  /// One line for the report.
+  virtual std::string description() const = 0;
+  /// Parameter names with unit suffix, e.g. "dD2_mm".  Their number is the effect's k.
+  virtual std::vector<std::string> parameter_names() const = 0;
+  int parameter_count() const { return static_cast<int>(parameter_names().size()); }
+  /// The correction subtracted from the raw readings (P × 4).
+  virtual Eigen::MatrixXd correction_um(const Eigen::VectorXd& p,
+                                        const EffectContext& ctx) const = 0;
+  /// J = −∂m_c/∂p, 4P × k, row 4n + i (reading of configuration i at x_n).
+  virtual Eigen::MatrixXd jacobian(const Eigen::VectorXd& p, const EffectContext& ctx) const = 0;
+  /// Versions of this effect to score (an effect with a structural choice such as a period
+  /// returns one per choice).  Default: a copy of itself.
+  virtual std::vector<std::unique_ptr<ModelEffect>> variants(const EffectContext& ctx) const;
+  /// How many independent trials `variants` amounts to, for the look-elsewhere correction of the
+  /// best variant's p-value (Šidák: 1 − (1 − p)^M).  Default 1.
+  virtual double effective_trials(const EffectContext& ctx) const;
+  virtual std::unique_ptr<ModelEffect> clone() const = 0;
+};
+
+/// The library: pe1, gain, drift, pe2, periodic (one file each).
+std::vector<std::unique_ptr<ModelEffect>> default_effect_library();
+
+}  // namespace errsep::core

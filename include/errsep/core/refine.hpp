@@ -1,0 +1,136 @@
+#pragma once
+// Closing the loop on the four-sensor model (Zhao et al. 2019, Eq. 1): fit the base model, look
+// at what it leaves unexplained, score every candidate effect of the library on that residual, add
+// the most significant one, re-solve, and stop when nothing is significant.
+//
+// Fitting.  Inside the loop the base model is the ordinary least-squares fit (λ = 0, whitened
+// rows: the BLUE for white sensor noise), because only an unregularised fit has a residual whose
+// distribution is known.  Effects enter as corrections of the readings (model_effect.hpp); their
+// parameters p are found by Gauss–Newton with f, S, γ, e eliminated (variable projection): each
+// iteration corrects the readings with the current p, re-solves the base model, linearises the
+// effects at the new f̂, Ŝ, γ̂, and takes the least-squares step of the projected residual on the
+// projected Jacobian.
+//
+// Scoring.  A candidate's columns are projected onto the complement of everything the model
+// already has (base unknowns and the effects added so far); directions that vanish there are not
+// identifiable (e.g. a gain common to all configurations, a drift common to all of them) and do
+// not count.  With k identifiable directions, F = (ΔRSS/k)/(RSS₁/(dof − k)) is compared with
+// F(k, dof − k); an effect searched over a structural choice (a period) has its best p-value
+// corrected for the number of independent choices (Šidák), and the step's threshold is α divided
+// by the number of candidates scored (Bonferroni), so on clean data the whole loop adds an effect
+// with probability of about α.
+//
+// Reporting.  Every step carries the effect, its parameters with standard uncertainties (k = 1,
+// from σ̂ of the augmented model; for a parameter set with non-identifiable directions the
+// minimum-norm estimate, i.e. the identifiable part), the residual RMS before and after, the
+// whiteness of the residual after it, and, when the truth is known, the error of S, γ and f
+// before and after (separations with the caller's solver options on raw and corrected readings).
+#include <Eigen/Core>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "errsep/core/four_sensor.hpp"
+#include "errsep/core/model_effect.hpp"
+#include "errsep/core/residual_analysis.hpp"
+
+namespace errsep::core {
+
+struct RefineOptions {
+  FourSensorOptions solve;               ///< for the reported separations (before and after)
+  ResidualAnalysisOptions residual;      ///< whiteness test of each step's residual
+  double alpha = 0.01;                   ///< family-wise significance of one step
+  int max_effects = 4;                   ///< stop after this many additions
+  int max_gauss_newton = 12;             ///< iterations per re-solve
+  double gauss_newton_tolerance = 1e-4;  ///< stop when every |Δp_j| < tolerance·u(p_j)
+  double identifiability_tol = 1e-6;  ///< relative singular value below which a direction is lost
+  /// A parameter direction stays in the corrected model only when its signal exceeds this many σ̂
+  /// (a barely determined direction would carry its large uncertainty into S, γ and f).
+  double direction_threshold = 3.0;
+  double speed_mm_per_s = 10.0;  ///< for scan-order times when none were recorded
+  bool is_valid(std::string* why = nullptr) const;
+};
+
+/// What the simulation (or a reference instrument) says the answer is.
+struct RefineTruth {
+  Eigen::VectorXd f_um;       ///< N
+  Eigen::VectorXd S_um;       ///< P
+  Eigen::VectorXd gamma_rad;  ///< P
+};
+
+/// RMS errors against the truth after the alignment the paper uses: the best-fit line of the
+/// difference removed for S and f (the 2-norm of the difference made least by rotating), its mean
+/// for γ (γ is known up to the constant e_4/(D2+D3+D4)).
+struct ProfileErrors {
+  double S_um = 0;
+  double gamma_urad = 0;
+  double f_um = 0;
+};
+ProfileErrors profile_errors(const FourSensorResult& r, const RefineTruth& truth);
+
+struct CandidateScore {
+  std::string effect;       ///< name()
+  std::string description;  ///< of the best variant
+  int parameters = 0;
+  int identifiable = 0;
+  double F = 0;
+  double p_value = 1;  ///< after the look-elsewhere correction
+  double trials = 1;   ///< effective number of variants tried
+  double delta_rss_um2 = 0;
+  Eigen::VectorXd relative_sv;  ///< identifiability: see check_identifiability
+};
+
+struct RefineStep {
+  int index = 0;                ///< 0 = base model
+  std::string effect = "base";  ///< name() of the added effect
+  std::string description;
+  std::vector<std::string> parameter_names;
+  Eigen::VectorXd parameters, u_parameters;  ///< of the added effect, after the joint re-solve
+  int identifiable = 0;  ///< directions determined (structurally and above direction_threshold)
+  /// k × identifiable orthonormal parameter directions the data determine (the estimate lies in
+  /// their span), and the relative singular values of the projected columns when scored.
+  Eigen::MatrixXd identifiable_directions;
+  Eigen::VectorXd relative_sv;
+  /// Covariance of the added effect's parameters (µ², k × k), rank `identifiable`.
+  Eigen::MatrixXd covariance;
+  double F = 0, p_value = 1;
+  double rss_before_um2 = 0, rss_after_um2 = 0;
+  double rms_before_um = 0, rms_after_um = 0;  ///< RMS of the 4P reading residuals
+  double sigma_after_um = 0;
+  int dof_after = 0;
+  int gauss_newton_iterations = 0;
+  WhitenessTest whiteness_after;
+  double dominant_period_mm = 0;  ///< of the residual after the step
+  std::optional<ProfileErrors> error_before, error_after;
+  std::vector<CandidateScore> candidates;  ///< the scores that chose this step (empty for base)
+};
+
+struct RefineResult {
+  std::vector<RefineStep> steps;            ///< steps[0] is the base model
+  std::vector<CandidateScore> final_round;  ///< scores when the loop stopped
+  std::string stop_reason;
+  std::string model_name;  ///< "zhao2019-eq1" plus "+effect" for each addition
+  std::vector<std::shared_ptr<const ModelEffect>> effects;  ///< added, in order
+  std::vector<Eigen::VectorXd> parameters, u_parameters;    ///< per added effect (final)
+  ResidualAnalysis residual;                                ///< of the final model
+  FourSensorResult before;  ///< separation of the raw readings (caller's options)
+  FourSensorResult after;   ///< separation of the corrected readings
+  Eigen::MatrixXd m_corrected_um;
+  Eigen::MatrixXd t_s;  ///< reading times used
+  double alpha_per_candidate = 0;
+  /// True when the final residual passes the whiteness test.  False means the model is still
+  /// missing something even if no candidate in the library was significant.
+  bool residual_white() const { return residual.whiteness.white; }
+  std::string brief_report() const;
+};
+
+/// Runs the loop on readings m (P × 4) with reading times t (P × 4, or empty for scan order).
+/// `truth` (optional) adds the errors against it to every step.  `library` defaults to
+/// default_effect_library().  Throws std::invalid_argument for bad shapes/options.
+RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
+                                const Eigen::MatrixXd& t_s = {}, const RefineOptions& opts = {},
+                                const RefineTruth* truth = nullptr,
+                                std::vector<std::unique_ptr<ModelEffect>> library = {});
+
+}  // namespace errsep::core
