@@ -29,14 +29,16 @@ LCurvePoint lcurve_point(TikhonovSolver& solver, const Eigen::VectorXd& b,
   const Eigen::VectorXd y = solver.solve_normal(x);
   const double deta = -4.0 * lambda * x.dot(y);
   // Curvature of (½ log ρ, ½ log η) = (log‖r‖, log‖x‖) as a function of λ, using ρ' = −λ²η':
-  //   κ = −2ηρ/η' · (λ²η'ρ + 2ληρ + λ⁴ηη') / (λ²η² + ρ²)^{3/2}.
-  // Hansen's closed form is usually printed without the leading minus; with it the signed curvature
-  // is positive where the curve turns from its vertical (noise) branch to its horizontal
-  // (regularisation) branch, the corner, as a finite-difference check in tests/core/lcurve.cpp
-  // confirms.  Without it the maximum lands on the opposite (concave) bend.
+  //   κ = −2ηρ/η' · (λ²η'ρ + 2ληρ + λ⁴ηη') / (λ⁴η² + ρ²)^{3/2}
+  // (derived from κ = (X'Y'' − X''Y')/(X'² + Y'²)^{3/2} with X = ½ln ρ, Y = ½ln η; η'' cancels).
+  // The form often quoted has λ²η² in the denominator and no leading minus: off by orders of
+  // magnitude, and its maximum lands on the opposite (concave) bend.  With this one the signed
+  // curvature is positive where the curve turns from its vertical (noise) branch to its horizontal
+  // (regularisation) branch, the corner; tests/core/tikhonov_lcurve.cpp checks it against finite
+  // differences.
   const double l2 = lambda * lambda;
   const double num = l2 * deta * rho + 2.0 * lambda * eta * rho + l2 * l2 * eta * deta;
-  const double den = std::pow(l2 * eta * eta + rho * rho, 1.5);
+  const double den = std::pow(l2 * l2 * eta * eta + rho * rho, 1.5);
   LCurvePoint p;
   p.lambda = lambda;
   p.residual_norm = std::sqrt(rho);

@@ -1,0 +1,88 @@
+// CHOLMOD Tikhonov solver against a dense reference, and the L-curve curvature against finite
+// differences.
+#include <Eigen/Dense>
+#include <catch2/catch.hpp>
+#include <cmath>
+
+#include "errsep/core/four_sensor_simulation.hpp"
+#include "errsep/core/four_sensor_system.hpp"
+#include "errsep/core/lcurve.hpp"
+#include "errsep/core/tikhonov_solver.hpp"
+
+using namespace errsep::core;
+
+namespace {
+AugmentedSystem example_system(double sigma) {
+  FourSensorConfig cfg;
+  FourSensorSimOptions so;
+  so.sigma_um = sigma;
+  so.seed = 7;
+  const auto sim = simulate_four_sensor(cfg, zhao2019_example1(cfg), so);
+  return assemble_four_sensor_system(cfg, sim.m_um, CurvatureGauge::sensor_stage_without_curvature);
+}
+}  // namespace
+
+TEST_CASE("CHOLMOD Tikhonov solution equals the dense one for every lambda") {
+  const auto sys = example_system(0.1);
+  TikhonovSolver solver(sys.A);
+  const Eigen::MatrixXd A = Eigen::MatrixXd(sys.A);
+  const Eigen::MatrixXd AtA = A.transpose() * A;
+  for (double lambda : {0.0, 1e-3, 0.05, 1.0, 10.0}) {
+    REQUIRE(solver.factorize(lambda) == SolverStatus::success);
+    const Eigen::VectorXd x = solver.solve(sys.b);
+    const Eigen::MatrixXd M = AtA + lambda * lambda * Eigen::MatrixXd::Identity(A.cols(), A.cols());
+    const Eigen::VectorXd ref = M.ldlt().solve(A.transpose() * sys.b);
+    INFO("lambda = " << lambda);
+    // Tolerance scaled by the condition number of M and machine epsilon.
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(M);
+    const double cond = svd.singularValues()(0) / svd.singularValues().tail(1)(0);
+    CHECK((x - ref).norm() <= 10 * cond * 2.2e-16 * ref.norm());
+  }
+  CHECK(solver.stats().factorizations == 5);
+}
+
+TEST_CASE("spacings with a common factor are refused: A would be rank-deficient") {
+  // Shown on the dense matrix: s = (2, 2, 2) makes the alternating profile invisible.
+  FourSensorConfig bad{5.0, 2, 2, 2, 40};
+  std::string why;
+  CHECK_FALSE(bad.is_valid(&why));
+  CHECK_THAT(why, Catch::Contains("share the factor 2"));
+  const Eigen::MatrixXd C = combination_matrix(bad);
+  Eigen::Vector4d alternating;
+  for (int j = 0; j < 4; ++j)
+    alternating(j) = (bad.offsets_samples()[static_cast<size_t>(j)] % 2) ? -1.0 : 1.0;
+  CHECK((C * alternating).norm() < 1e-12);  // every row blind to f(x_n) = (-1)^n
+}
+
+TEST_CASE("closed-form L-curve curvature matches finite differences and peaks at the corner") {
+  const auto sys = example_system(0.1);
+  TikhonovSolver solver(sys.A);
+  auto point = [&](double lambda) {
+    REQUIRE(solver.factorize(lambda) == SolverStatus::success);
+    return lcurve_point(solver, sys.b, solver.solve(sys.b));
+  };
+  for (double lambda : {1e-3, 5e-3, 3e-2, 0.3, 1.5}) {
+    const double h = 1e-3;  // step in ln λ
+    const auto pm = point(lambda * std::exp(-h)), p0 = point(lambda),
+               pp = point(lambda * std::exp(h));
+    auto X = [](const LCurvePoint& p) { return std::log(p.residual_norm); };
+    auto Y = [](const LCurvePoint& p) { return std::log(p.solution_norm); };
+    const double x1 = (X(pp) - X(pm)) / (2 * h), y1 = (Y(pp) - Y(pm)) / (2 * h);
+    const double x2 = (X(pp) - 2 * X(p0) + X(pm)) / (h * h);
+    const double y2 = (Y(pp) - 2 * Y(p0) + Y(pm)) / (h * h);
+    const double kappa_fd = (x1 * y2 - x2 * y1) / std::pow(x1 * x1 + y1 * y1, 1.5);
+    INFO("lambda " << lambda << " closed form " << p0.curvature << " finite difference "
+                   << kappa_fd);
+    CHECK(p0.curvature == Approx(kappa_fd).epsilon(0.05).margin(1e-3));
+  }
+  const auto lc = lcurve_corner(solver, sys.b, {});
+  CHECK_FALSE(lc.at_edge);
+  CHECK(lc.points.size() == 50);
+  for (const auto& p : lc.points)
+    CHECK(p.curvature <= lc.curvature_corner + 1e-12);
+  // The corner sits where the residual starts to grow: within 10 % of the smallest residual.
+  double rmin = lc.points.front().residual_norm;
+  REQUIRE(solver.factorize(lc.lambda_corner) == SolverStatus::success);
+  const double rc = (sys.A * solver.solve(sys.b) - sys.b).norm();
+  CHECK(rc < 1.1 * rmin);
+}
