@@ -598,8 +598,11 @@ FlatnessResult evaluate_flatness(const std::vector<double>& x_mm, const std::vec
     if (!(area > 1e-12))
       throw std::invalid_argument("flatness: all points lie on one line; a plane is not defined");
   }
-  FlatnessResult r = reference == ReferencePlane::least_squares ? flatness_least_squares(c, w_um)
-                                                                : flatness_minimum_zone(c, w_um);
+  // Three points: the plane through them is both the least-squares and the minimum-zone plane.
+  FlatnessResult r = reference == ReferencePlane::least_squares || n == 3
+                         ? flatness_least_squares(c, w_um)
+                         : flatness_minimum_zone(c, w_um);
+  r.reference = reference;
   r.uncertainty = propagate(r.sensitivity, u_um, opts);
   return r;
 }

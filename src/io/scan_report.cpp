@@ -8,6 +8,7 @@
 #include <optional>
 #include <sstream>
 #include <stdexcept>
+#include <tuple>
 
 #include "errsep/io/atomic_file.hpp"
 #include "errsep/io/csv.hpp"
@@ -199,19 +200,20 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     eval_csv.add_column(r.csv_name + "_" + r.unit, {r.value});
     eval_csv.add_column(r.csv_name + "_U_" + r.unit, {r.expanded > 0 ? r.expanded : 0.0});
   };
+  // Figures are drawn after every input has been read and evaluated, so a bad input file stops
+  // the run before anything is written.
+  std::vector<std::pair<LinePlot, std::string>> line_jobs;
+  std::vector<std::pair<HeatMap, std::string>> map_jobs;
+  std::vector<std::pair<bool, std::size_t>> figure_order;  // (is_map, index)
   auto plot_line = [&](const LinePlot& p, const std::string& caption) {
     if (!plots) return;
-    const PlotFiles f = render_line_plot(p, plot_dir, opts.plot);
-    for (const auto& q : {f.png, f.svg, f.script, f.data})
-      if (!q.empty()) res.written.push_back(q);
-    figures.push_back({caption, opts.plot.png ? f.png : f.svg});
+    figure_order.emplace_back(false, line_jobs.size());
+    line_jobs.emplace_back(p, caption);
   };
   auto plot_map = [&](const HeatMap& m, const std::string& caption) {
     if (!plots) return;
-    const PlotFiles f = render_heat_map(m, plot_dir, opts.plot);
-    for (const auto& q : {f.png, f.svg, f.script, f.data})
-      if (!q.empty()) res.written.push_back(q);
-    figures.push_back({caption, opts.plot.png ? f.png : f.svg});
+    figure_order.emplace_back(true, map_jobs.size());
+    map_jobs.emplace_back(m, caption);
   };
   // Files to write last, so that nothing is written when evaluation fails half-way.
   std::vector<std::pair<fs::path, std::string>> outputs;
@@ -515,6 +517,24 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     hm.y = g->y;
     hm.z = g->w;
     plot_map(hm, "Heat map of the separated surface w(x, y) (cf. Haramiishi et al. 2024, Fig. 13)");
+    // Motion errors of the two tables (Haramiishi 2024 Eq. 27): m2x along x (Fig. 18) and m4y
+    // along y (Fig. 19), both in the sensing direction z: ISO 230-1 EZX and EZY.
+    for (const auto& [col, sym, fig] :
+         {std::tuple{"m2x_um", "EZX", "Fig. 18"}, std::tuple{"m4y_um", "EZY", "Fig. 19"}}) {
+      if (!g->table.find_column(col)) continue;
+      const auto v = g->table.column(col, g->file);
+      const auto [mn, mx] = std::minmax_element(v.begin(), v.end());
+      const std::string name = std::string(col).substr(0, std::string(col).size() - 3);
+      add_eval({sym, "motion error " + name + "(x, y) (peak to valley)", "max - min",
+                std::string(sym) + "_pv", "um", *mx - *mn, 0});
+      HeatMap mm = hm;
+      mm.name = "motion_" + name;
+      mm.title = std::string(sym) + ": motion error " + name + "(x, y)";
+      mm.cblabel = name + " / \xC2\xB5m";
+      mm.z = v;
+      plot_map(mm, std::string(sym) + ": heat map of the motion error " + name +
+                       " (cf. Haramiishi et al. 2024, " + fig + ")");
+    }
     if (!g->m.empty()) {
       const auto [mn, mx] = std::minmax_element(g->m.begin(), g->m.end());
       add_eval({"-", "motion error " + g->m_column + " (peak to valley)", "max - min",
@@ -568,6 +588,14 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
            : "u_c = sqrt(sum c_i^2 u_i^2), points taken as uncorrelated") +
       ". Minimum zone: exact (hull-edge slopes for lines, simplex on the Chebyshev dual for "
       "planes).");
+  for (const auto& [is_map, i] : figure_order) {
+    const PlotFiles f = is_map ? render_heat_map(map_jobs[i].first, plot_dir, opts.plot)
+                               : render_line_plot(line_jobs[i].first, plot_dir, opts.plot);
+    for (const auto& q : {f.png, f.svg, f.script, f.data})
+      if (!q.empty()) res.written.push_back(q);
+    figures.push_back(
+        {is_map ? map_jobs[i].second : line_jobs[i].second, opts.plot.png ? f.png : f.svg});
+  }
   html.figures = figures;
   html.files.insert(html.files.begin(), {"evaluation.csv", "the evaluation, one row"});
   html.files.insert(html.files.begin() + 1, {"evaluation.txt", "the evaluation as text"});

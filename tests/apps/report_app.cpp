@@ -49,7 +49,9 @@ TEST_CASE("errsep-report evaluates a bow and a sine tilt exactly and writes ever
   errsep::test::write_grid_csv(
       dir / "surface.csv", 13, 9, 10.0,
       [](double x, double y) { return 0.5 * ((x - 60) / 60) * ((y - 40) / 40) + 0.01 * x; },
-      [](double x, double y) { return 0.001 * (x - 60) * (x - 60) + 0.0 * y; });
+      [](double x, double y) { return 0.001 * (x - 60) * (x - 60) + 0.0 * y; },
+      [](double x, double) { return 0.002 * (x - 60) * (x - 60); },  // m2x: P-V 7.2 um
+      [](double, double y) { return -0.01 * y; });                   // m4y: P-V 0.8 um
 
   std::string out;
   const int rc = run_command(
@@ -74,6 +76,11 @@ TEST_CASE("errsep-report evaluates a bow and a sine tilt exactly and writes ever
   // The saddle 0.5 x' y' on a symmetric 13 x 9 grid: flatness 2 * 0.5 for both planes.
   CHECK(ev.column("flatness_least_squares_um")[0] == Approx(1.0).epsilon(1e-9));
   CHECK(ev.column("flatness_minimum_zone_um")[0] == Approx(1.0).epsilon(1e-9));
+  // Motion errors of the two tables (Haramiishi 2024 Figs. 18-19) as EZX / EZY peak to valley.
+  CHECK(ev.column("EZX_pv_um")[0] == Approx(7.2).epsilon(1e-9));
+  CHECK(ev.column("EZY_pv_um")[0] == Approx(0.8).epsilon(1e-9));
+  CHECK(fs::exists(dir / "plots/motion_m2x.png"));
+  CHECK(fs::exists(dir / "plots/motion_m4y.png"));
   // Uncertainties are propagated (u_S = 0.15 um per point given) and positive.
   CHECK(ev.column("EYX_minimum_zone_U_um")[0] > 0);
   CHECK(ev.column("ECX_U_urad")[0] == Approx(2 * (2.0 + 2.0)));  // bound: k (u_a + u_b)

@@ -343,6 +343,14 @@ TEST_CASE("ISO 230-1 error symbols") {
   CHECK_THROWS_AS(angular_symbol('Q', 'X'), std::invalid_argument);
 }
 
+TEST_CASE("flatness of three points is zero for both planes") {
+  for (const auto ref : {ReferencePlane::least_squares, ReferencePlane::minimum_zone}) {
+    const auto r = evaluate_flatness({0, 10, 0}, {0, 0, 10}, {1, 2, 5}, {}, ref);
+    CHECK(r.flatness_um == Approx(0).margin(1e-12));
+    CHECK(r.plane.at(10, 10) == Approx(6));
+  }
+}
+
 TEST_CASE("bad input is rejected with a message") {
   CHECK_THROWS_WITH(evaluate_straightness({0, 1, 1}, {0, 0, 0}, {}, ReferenceLine::end_points),
                     Catch::Contains("strictly increasing"));

@@ -117,11 +117,15 @@ inline void write_four_sensor_result(const std::filesystem::path& dir, ResultDir
   }
 }
 
-/// Two-axis grid x_mm, y_mm, w_um, m_w_um (x fastest), nx * ny nodes with spacing d_mm.
+/// Two-axis grid x_mm, y_mm, w_um, m_w_um (x fastest), nx * ny nodes with spacing d_mm; with
+/// m2x / m4y also the motion errors of the two tables (m2x_um, m4y_um, as errsep's two-axis
+/// displacement result).
 inline void write_grid_csv(const std::filesystem::path& file, std::size_t nx, std::size_t ny,
                            double d_mm, const std::function<double(double, double)>& w,
-                           const std::function<double(double, double)>& m) {
-  std::vector<double> x, y, wv, mv;
+                           const std::function<double(double, double)>& m,
+                           const std::function<double(double, double)>& m2x = {},
+                           const std::function<double(double, double)>& m4y = {}) {
+  std::vector<double> x, y, wv, mv, m2, m4;
   for (std::size_t j = 0; j < ny; ++j)
     for (std::size_t i = 0; i < nx; ++i) {
       const double xi = d_mm * static_cast<double>(i), yj = d_mm * static_cast<double>(j);
@@ -129,6 +133,8 @@ inline void write_grid_csv(const std::filesystem::path& file, std::size_t nx, st
       y.push_back(yj);
       wv.push_back(w(xi, yj));
       mv.push_back(m(xi, yj));
+      if (m2x) m2.push_back(m2x(xi, yj));
+      if (m4y) m4.push_back(m4y(xi, yj));
     }
   io::CsvTable t;
   t.set_meta("source", "/data/scans/simulated-two-axis.csv");
@@ -136,6 +142,8 @@ inline void write_grid_csv(const std::filesystem::path& file, std::size_t nx, st
   t.add_column("y_mm", y);
   t.add_column("w_um", wv);
   t.add_column("m_w_um", mv);
+  if (m2x) t.add_column("m2x_um", m2);
+  if (m4y) t.add_column("m4y_um", m4);
   io::write_csv(file, t, 15);
 }
 
