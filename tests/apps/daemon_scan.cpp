@@ -1,0 +1,118 @@
+// errsep-daemon as the cell controller sees it: started against the device simulator with a
+// notify socket standing in for systemd (READY=1 expected), a scan triggered by writing the start
+// coil of its register map with mbpoll (a Modbus client not written here), a trigger during the
+// scan refused with a reason, a complete result on disk; then SIGTERM during a second scan: the
+// raw data of that scan is on disk marked incomplete and the daemon exits within the bound.
+#include <signal.h>
+#include <sys/wait.h>
+
+#include <catch2/catch.hpp>
+#include <chrono>
+#include <cmath>
+
+#include "errsep/io/csv.hpp"
+#include "errsep/io/raw_scan_csv.hpp"
+#include "support/daemon_rig.hpp"
+
+using namespace errsep;
+using namespace std::chrono_literals;
+using test::DaemonRig;
+
+TEST_CASE("scan through the register map, then SIGTERM during a second scan") {
+  DaemonRig rig;
+  rig.devsim.start(rig.config, rig.tmp / "devsim.log");
+  rig.start_daemon({"--stop-timeout-ms", "3000"});
+  REQUIRE(rig.notify->wait_for("READY=1", 15s));
+
+  auto r = rig.registers();
+  REQUIRE(r.size() == 13);
+  CHECK(r[test::reg_state] == 1);  // idle
+  CHECK(r[12] == 1);               // register map version
+
+  // Scan 1, started by the cell controller.
+  std::string out;
+  REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1, &out) == 0);
+  // A second trigger while it runs is refused: an exception reply, the reason in register 1.
+  const int rc2 = test::mbpoll_write_coil(rig.modbus_port, 0, 1, &out);
+  INFO("second trigger: " << out);
+  CHECK(rc2 != 0);
+  r = rig.registers();
+  REQUIRE(r.size() == 13);
+  const long refused = r[test::reg_trigger];
+  CHECK((refused == 2 || refused == 6));  // refused: scanning, or scan about to start
+
+  r = rig.wait_regs(
+      [](const std::vector<long>& x) { return x[test::reg_last_scan_id] == 1 && x[0] == 1; }, 20s);
+  REQUIRE(r.size() == 13);
+  REQUIRE(r[test::reg_last_scan_id] == 1);
+  CHECK(r[test::reg_last_outcome] == 1);  // complete
+  CHECK(r[test::reg_scans_completed] == 1);
+
+  const auto raw1 = rig.find_file(1, "raw");
+  REQUIRE(raw1);
+  const io::RawFourSensorScan scan1 = io::read_raw_four_sensor_csv(*raw1);  // requires complete
+  CHECK(scan1.complete);
+  REQUIRE(scan1.geometry);
+  CHECK(scan1.positions() == static_cast<std::size_t>(scan1.geometry->positions()));
+  for (const auto& col : scan1.m_um)
+    for (double v : col)
+      CHECK(std::isfinite(v));
+  const auto res1 = rig.find_file(1, "result");
+  REQUIRE(res1);
+  const io::CsvTable t = io::read_csv(*res1);
+  CHECK(t.rows.size() == scan1.positions());
+  const auto s_um = t.column("S_um");
+  double lo = s_um[0], hi = s_um[0];
+  for (double v : s_um) {
+    lo = std::min(lo, v);
+    hi = std::max(hi, v);
+  }
+  // The register map's straightness (nm, int32 high word first) is the result file's S range.
+  const auto nm =
+      static_cast<std::int32_t>((static_cast<std::uint32_t>(r[test::reg_straightness_hi]) << 16) |
+                                static_cast<std::uint32_t>(r[test::reg_straightness_lo]));
+  CHECK(std::abs(nm / 1000.0 - (hi - lo)) < 0.002);
+
+  // Scan 2: SIGTERM once it is well under way.
+  REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1, &out) == 0);
+  r = rig.wait_regs(
+      [](const std::vector<long>& x) {
+        return x[test::reg_state] == 2 && x[test::reg_scan_id] == 2 &&
+               x[test::reg_points_done] >= 5;
+      },
+      20s);
+  REQUIRE(r.size() == 13);
+  REQUIRE(r[test::reg_state] == 2);
+  const long done_before = r[test::reg_points_done];
+  const long total = r[test::reg_points_total];
+  REQUIRE(done_before < total);
+  const auto t0 = std::chrono::steady_clock::now();
+  rig.daemon->signal(SIGTERM);
+  const auto st = rig.daemon->wait(10s);
+  const double exit_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  REQUIRE(st);
+  CHECK(WIFEXITED(*st));
+  CHECK(WEXITSTATUS(*st) == 0);
+  WARN("SIGTERM -> exit in " << exit_s << " s (bound 3 s + margin)");
+  CHECK(exit_s < 4.0);
+  CHECK(rig.notify->wait_for("STOPPING=1", 1s));
+
+  CHECK_FALSE(rig.find_file(2, "raw"));
+  CHECK_FALSE(rig.find_file(2, "result"));
+  const auto raw2 = rig.find_file(2, "raw-incomplete");
+  REQUIRE(raw2);
+  CHECK_THROWS_AS(io::read_raw_four_sensor_csv(*raw2), io::CsvError);  // refused as a result
+  io::RawReadOptions ro;
+  ro.require_complete = false;
+  const io::RawFourSensorScan scan2 = io::read_raw_four_sensor_csv(*raw2, ro);
+  CHECK_FALSE(scan2.complete);
+  CHECK(scan2.meta("outcome") == std::optional<std::string>("stopped"));
+  std::size_t measured = 0, missing = 0;
+  for (const auto& col : scan2.m_um)
+    for (double v : col)
+      (std::isfinite(v) ? measured : missing) += 1;
+  CHECK(measured >= static_cast<std::size_t>(done_before));
+  CHECK(missing > 0);
+  CHECK(measured + missing == static_cast<std::size_t>(total));
+}
