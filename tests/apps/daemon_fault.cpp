@@ -1,0 +1,92 @@
+// The device simulator stops mid-life and comes back: the daemon reports the fault (register map,
+// STATUS= on the notify socket), refuses triggers while in fault, keeps the raw data of the scan
+// the fault interrupted (marked incomplete), leaves the fault by itself once the devices answer
+// again (no restart), and runs the next scan to completion.  It does not spin while waiting.
+#include <signal.h>
+
+#include <catch2/catch.hpp>
+#include <chrono>
+#include <cmath>
+#include <thread>
+
+#include "errsep/io/raw_scan_csv.hpp"
+#include "support/daemon_rig.hpp"
+
+using namespace errsep;
+using namespace std::chrono_literals;
+using test::DaemonRig;
+
+namespace {
+// CPU seconds the daemon uses over `wall`: idle and fault states must sleep, not poll hot.
+double cpu_share(test::Child& c, std::chrono::milliseconds wall) {
+  const double c0 = c.cpu_seconds();
+  std::this_thread::sleep_for(wall);
+  return (c.cpu_seconds() - c0) / std::chrono::duration<double>(wall).count();
+}
+}  // namespace
+
+TEST_CASE("device simulator stopped and restarted: fault reported, recovery, next scan runs") {
+  DaemonRig rig;
+  rig.devsim.start(rig.config, rig.tmp / "devsim.log");
+  const int port = rig.devsim.port;
+  rig.start_daemon();
+  REQUIRE(rig.notify->wait_for("READY=1", 15s));
+
+  const double idle_share = cpu_share(*rig.daemon, 1500ms);
+  WARN("daemon CPU while idle: " << 100 * idle_share << " %");
+  CHECK(idle_share < 0.25);
+
+  // Scan 1, then the simulator dies under it.
+  REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1) == 0);
+  auto r =
+      rig.wait_regs([](const std::vector<long>& x) { return x[test::reg_points_done] >= 4; }, 20s);
+  REQUIRE(r.size() == 13);
+  rig.devsim.kill();
+
+  r = rig.wait_regs([](const std::vector<long>& x) { return x[test::reg_state] == 3; }, 20s);
+  REQUIRE(r.size() == 13);
+  REQUIRE(r[test::reg_state] == 3);  // fault
+  CHECK(r[test::reg_faults] >= 1);
+  CHECK(r[test::reg_last_scan_id] == 1);
+  CHECK(r[test::reg_last_outcome] == 3);  // device fault
+  CHECK(rig.notify->wait_for("STATUS=fault", 2s));
+  const auto raw1 = rig.find_file(1, "raw-incomplete");
+  REQUIRE(raw1);
+  io::RawReadOptions ro;
+  ro.require_complete = false;
+  const auto scan1 = io::read_raw_four_sensor_csv(*raw1, ro);
+  CHECK_FALSE(scan1.complete);
+  CHECK(scan1.meta("outcome") == std::optional<std::string>("device_fault"));
+  CHECK_FALSE(rig.find_file(1, "result"));
+
+  // In fault: a trigger is refused with the reason "fault"; the daemon waits without spinning.
+  std::string out;
+  CHECK(test::mbpoll_write_coil(rig.modbus_port, 0, 1, &out) != 0);
+  r = rig.registers();
+  REQUIRE(r.size() == 13);
+  CHECK(r[test::reg_trigger] == 3);
+  const double fault_share = cpu_share(*rig.daemon, 1500ms);
+  WARN("daemon CPU in fault: " << 100 * fault_share << " %");
+  CHECK(fault_share < 0.25);
+
+  // The simulator comes back on the same port: the daemon leaves the fault by itself.
+  rig.devsim.start(rig.config, rig.tmp / "devsim.log", port);
+  r = rig.wait_regs([](const std::vector<long>& x) { return x[test::reg_state] == 1; }, 20s);
+  REQUIRE(r.size() == 13);
+  REQUIRE(r[test::reg_state] == 1);
+  CHECK(rig.notify->wait_for("devices answer again", 2s));
+  CHECK(rig.daemon->running());
+
+  // The next scan runs to completion.
+  REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1) == 0);
+  r = rig.wait_regs(
+      [](const std::vector<long>& x) { return x[test::reg_last_scan_id] == 2 && x[0] != 2; }, 30s);
+  REQUIRE(r.size() == 13);
+  CHECK(r[test::reg_last_outcome] == 1);
+  CHECK(r[test::reg_state] == 1);
+  const auto raw2 = rig.find_file(2, "raw");
+  REQUIRE(raw2);
+  const auto scan2 = io::read_raw_four_sensor_csv(*raw2);
+  CHECK(scan2.complete);
+  CHECK(rig.find_file(2, "result"));
+}
