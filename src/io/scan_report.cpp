@@ -119,6 +119,40 @@ double round_up_2sig(double u) {
   return std::ceil(u * scale - 1e-9) / scale;
 }
 
+// One-axis displacement result (Haramiishi 2024 Eqs. 1-9): x_mm, m_um, w_um [, r_um], no y_mm.
+struct ProfileData {
+  fs::path file;
+  CsvTable table;
+  std::vector<double> x, m, w, u_m, u_w;
+};
+
+std::optional<ProfileData> find_one_axis(const fs::path& dir) {
+  std::vector<fs::path> candidates;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.is_regular_file() && e.path().extension() == ".csv") candidates.push_back(e.path());
+  std::sort(candidates.begin(), candidates.end());
+  for (const auto& p : candidates) {
+    const std::string stem = p.stem().string();
+    if (stem == "motion" || stem == "reference" || stem == "lcurve" || stem == "residuals" ||
+        stem == "refine" || stem == "evaluation")
+      continue;
+    CsvTable t = read_csv(p);
+    if (!t.find_column("x_mm") || t.find_column("y_mm") || !t.find_column("m_um") ||
+        !t.find_column("w_um"))
+      continue;
+    ProfileData d;
+    d.file = p;
+    d.x = t.column("x_mm", p);
+    d.m = t.column("m_um", p);
+    d.w = t.column("w_um", p);
+    d.u_m = optional_column(t, "u_m_um");
+    d.u_w = optional_column(t, "u_w_um");
+    d.table = std::move(t);
+    return d;
+  }
+  return std::nullopt;
+}
+
 std::string text_table(const std::vector<Row>& rows, double k) {
   std::ostringstream o;
   char buf[256];
@@ -548,9 +582,58 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     }
   }
 
+  // ---- one-axis displacement result ----------------------------------------------------------
+  if (!res.four_sensor && !res.grid) {
+    if (auto d = find_one_axis(dir)) {
+      res.grid = true;
+      for (const auto& [key, v] : d->table.metadata)
+        html.configuration.emplace_back(key, v);
+      if (auto src = d->table.meta("source")) html.raw_data_file = *src;
+      html.configuration.emplace_back("profile file", d->file.filename().string());
+      const char axis = upper_axis(
+          opts.axis ? opts.axis : d->table.meta("axis").value_or("X").c_str()[0], "axis");
+      const char dirn = upper_axis(
+          opts.direction ? opts.direction
+                         : d->table.meta("straightness_direction").value_or("Z").c_str()[0],
+          "straightness direction");
+      const std::string es = core::straightness_symbol(axis, dirn);
+      html.title = "errsep scan report: " + es + " (displacement method, one axis)";
+      std::vector<double> uw = d->u_w;
+      if (uw.empty() && opts.u_w_um > 0) uw.assign(d->w.size(), opts.u_w_um);
+      if (d->u_m.empty() && uw.empty())
+        res.warnings.push_back(
+            "no uncertainty columns (u_m_um, u_w_um) or --u-w: "
+            "uncertainties are not available.");
+      for (const auto ref :
+           {ReferenceLine::end_points, ReferenceLine::least_squares, ReferenceLine::minimum_zone}) {
+        const auto r = core::evaluate_straightness(d->x, d->m, d->u_m, ref, opts.evaluation);
+        add_eval({es, "table motion error m(x)", core::label(ref), es + "_" + core::to_string(ref),
+                  "um", r.straightness_um, r.uncertainty.expanded});
+      }
+      for (const auto ref : {ReferenceLine::least_squares, ReferenceLine::minimum_zone}) {
+        const auto r = core::evaluate_straightness(d->x, d->w, uw, ref, opts.evaluation);
+        add_eval({"-", "workpiece profile w(x)", core::label(ref),
+                  std::string("w_") + core::to_string(ref), "um", r.straightness_um,
+                  r.uncertainty.expanded});
+      }
+      LinePlot p;
+      p.name = "displacement_profiles";
+      p.title = "Displacement method: w(x) and m(x)";
+      p.xlabel = "x / mm";
+      p.ylabel = "\xC2\xB5m";
+      p.series.push_back({"w(x) workpiece", d->x, d->w, uw.empty() ? uw : scaled(uw, k)});
+      p.series.push_back({"m(x) motion error (" + es + ")", d->x, d->m,
+                          d->u_m.empty() ? d->u_m : scaled(d->u_m, k)});
+      plot_line(p,
+                "Workpiece profile w(x) and table motion error m(x) (cf. Haramiishi et al. "
+                "2024, Figs. 8-9)");
+    }
+  }
+
   if (!res.four_sensor && !res.grid)
     throw std::runtime_error(dir.string() +
-                             ": no motion.csv and no grid CSV (x_mm, y_mm, w_um) found");
+                             ": no motion.csv, no grid CSV (x_mm, y_mm, w_um) and no one-axis "
+                             "profile (x_mm, m_um, w_um) found");
 
   // ---- tables, text, html --------------------------------------------------------------------
   HtmlTable ev;

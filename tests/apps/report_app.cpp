@@ -123,7 +123,7 @@ TEST_CASE("errsep-report fails with a message and writes nothing for an empty di
   std::string out;
   const int rc = run_command(quote(app_path("report")) + " " + quote(tmp / "empty"), &out);
   CHECK(rc != 0);
-  CHECK_THAT(out, Catch::Contains("no motion.csv and no grid CSV"));
+  CHECK_THAT(out, Catch::Contains("no motion.csv, no grid CSV"));
   CHECK_FALSE(fs::exists(tmp / "empty" / "report.html"));
   CHECK_FALSE(fs::exists(tmp / "empty" / "evaluation.csv"));
   // A malformed motion.csv names the file and line.
@@ -132,6 +132,36 @@ TEST_CASE("errsep-report fails with a message and writes nothing for an empty di
   CHECK(rc2 != 0);
   CHECK_THAT(out, Catch::Contains("motion.csv:3"));
   CHECK_FALSE(fs::exists(tmp / "empty" / "report.html"));
+}
+
+TEST_CASE("errsep-report evaluates a one-axis displacement result (x_mm, m_um, w_um)") {
+  TempDir tmp;
+  const fs::path dir = tmp / "disp";
+  fs::create_directories(dir);
+  errsep::io::CsvTable t;
+  t.set_meta("source", "/data/scans/one-axis.csv");
+  std::vector<double> x, m, w, r;
+  for (int i = 0; i <= 40; ++i) {  // x = 0..200 mm, midpoint 100 mm sampled
+    const double xi = 5.0 * i;
+    x.push_back(xi);
+    m.push_back(4 * 3.0 * (xi / 200) * (1 - xi / 200) + 0.02 * xi);  // bow of 3 um + tilt
+    w.push_back(0.01 * xi - 2);                                      // a tilted flat workpiece
+    r.push_back(0);
+  }
+  t.add_column("x_mm", x);
+  t.add_column("r_um", r);
+  t.add_column("m_um", m);
+  t.add_column("w_um", w);
+  errsep::io::write_csv(dir / "displacement.csv", t, 15);
+  std::string out;
+  REQUIRE(run_command(quote(app_path("report")) + " " + quote(dir), &out) == 0);
+  INFO(out);
+  const auto ev = errsep::io::read_csv(dir / "evaluation.csv");
+  for (const char* c : {"EZX_end_points_um", "EZX_least_squares_um", "EZX_minimum_zone_um"})
+    CHECK(ev.column(c)[0] == Approx(3.0).epsilon(1e-9));
+  CHECK(ev.column("w_minimum_zone_um")[0] == Approx(0).margin(1e-9));
+  CHECK(fs::exists(dir / "plots/displacement_profiles.png"));
+  CHECK_THAT(slurp(dir / "report.html"), Catch::Contains("/data/scans/one-axis.csv"));
 }
 
 // Registered separately (tests/apps/report_app.cmake) with SKIP_RETURN_CODE 77: exits with 77

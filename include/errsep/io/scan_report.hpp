@@ -12,7 +12,9 @@
 //   numeric columns, rendered as a table                 (optional) a grid CSV     x_mm, y_mm, w_um
 //   [, m_um | m_w_um] [, u_w_um]  (displacement method; found
 //                  by its columns, or given as ScanReportOptions::grid_csv)
-// At least motion.csv or a grid CSV must be present.
+//   or, without motion.csv and grid, a one-axis displacement result
+//                  x_mm, m_um, w_um [, r_um, u_m_um, u_w_um] (m: table motion error, EZX default)
+// At least one of them must be present.
 //
 // Outputs in DIR: evaluation.csv (one row, ISO 230-1 symbols in the column names),
 // evaluation.txt, plots/*.png|svg|gp|dat, report.html, compensation/* — each written atomically.
