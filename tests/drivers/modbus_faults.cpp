@@ -13,6 +13,7 @@
 #include <functional>
 #include <memory>
 #include <thread>
+#include <vector>
 
 #include "errsep/core/four_sensor_model.hpp"
 #include "errsep/core/four_sensor_simulation.hpp"
@@ -363,4 +364,111 @@ TEST_CASE("errsep-devsim prints its port, serves, applies command-line faults, s
   CHECK(exited);  // within 2 s of SIGTERM
   CHECK(WIFEXITED(status));
   CHECK(WEXITSTATUS(status) == 0);
+}
+
+TEST_CASE("displacement method: the reference sensor sees r(x + d) + m(x) after displacing d") {
+  SimServer srv;
+  auto dev = configured_devices(srv.cfg);
+  auto* slide = dev.stage("slide");
+  auto* piece = dev.stage("reference_piece");
+  auto* ws = dev.sensor("workpiece");
+  auto* rs = dev.sensor("reference");
+  const auto& sim = srv.cfg.simulator;
+  REQUIRE(slide->move_to(20.0) == IoStatus::ok);
+  REQUIRE(slide->wait_in_position(3000ms) == IoStatus::ok);
+  acq::Sample w, r1, r2;
+  REQUIRE(ws->read(w) == IoStatus::ok);
+  REQUIRE(rs->read(r1) == IoStatus::ok);
+  CHECK(w.value == Approx(sim.w_um.eval(20.0) + sim.m_um.eval(20.0)).margin(1e-4));
+  CHECK(r1.value == Approx(sim.r_um.eval(20.0) + sim.m_um.eval(20.0)).margin(1e-3));  // int32 nm
+  const double d = srv.cfg.scan.d_mm;
+  REQUIRE(piece->move_to(d) == IoStatus::ok);
+  REQUIRE(piece->wait_in_position(3000ms) == IoStatus::ok);
+  REQUIRE(rs->read(r2) == IoStatus::ok);
+  // Haramiishi 2024 Eq. (3): S2_2(x) = r(x + d) + m(x).
+  CHECK(r2.value == Approx(sim.r_um.eval(20.0 + d) + sim.m_um.eval(20.0)).margin(1e-3));
+  CHECK(std::abs(r2.value - r1.value) > 0.01);  // the displacement is visible
+}
+
+TEST_CASE("noise has the configured sigma and drift grows linearly in time") {
+  SimServer srv([](io::MachineConfig& c) {
+    c.simulator.noise_sigma_um = 0.5;
+    c.simulator.drift_um_per_s = 20.0;
+  });
+  auto dev = configured_devices(srv.cfg);
+  auto* s = dev.sensor("sensor1");
+  // Mean and spread of 400 readings at a standstill; the drift over the ~0.1 s this takes is
+  // removed by a linear fit against the sample times.
+  const int n = 400;
+  std::vector<double> t(n), v(n);
+  for (int i = 0; i < n; ++i) {
+    acq::Sample x;
+    REQUIRE(s->read(x) == IoStatus::ok);
+    t[static_cast<std::size_t>(i)] = x.t_ns * 1e-9;
+    v[static_cast<std::size_t>(i)] = x.value;
+  }
+  double tm = 0, vm = 0;
+  for (int i = 0; i < n; ++i) {
+    tm += t[static_cast<std::size_t>(i)] / n;
+    vm += v[static_cast<std::size_t>(i)] / n;
+  }
+  double stt = 0, stv = 0;
+  for (int i = 0; i < n; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    stt += (t[k] - tm) * (t[k] - tm);
+    stv += (t[k] - tm) * (v[k] - vm);
+  }
+  const double slope = stv / stt;
+  double ss = 0;
+  for (int i = 0; i < n; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    const double e = v[k] - vm - slope * (t[k] - tm);
+    ss += e * e;
+  }
+  const double sigma = std::sqrt(ss / (n - 2));
+  CHECK(sigma == Approx(0.5).epsilon(0.15));  // 400 samples: relative s.e. of σ ≈ 3.5 %
+  // Drift: two readings 300 ms apart differ by about 6 µm (noise 0.5 µm each).
+  acq::Sample a, b;
+  REQUIRE(s->read(a) == IoStatus::ok);
+  std::this_thread::sleep_for(300ms);
+  REQUIRE(s->read(b) == IoStatus::ok);
+  const double dt = (b.t_ns - a.t_ns) * 1e-9;
+  CHECK((b.value - a.value) == Approx(20.0 * dt).margin(2.5));
+}
+
+TEST_CASE("a bus that cannot be opened says which bus, where, and what to check") {
+  io::BusConfig tcp;
+  tcp.name = "drive";
+  tcp.kind = io::BusKind::tcp;
+  tcp.host = "127.0.0.1";
+  tcp.port = 1;  // nothing listens on port 1
+  tcp.response_timeout_ms = 200;
+  drivers::ModbusBus b1(tcp);
+  try {
+    b1.configure();
+    FAIL("connected to port 1");
+  } catch (const std::runtime_error& e) {
+    const std::string m = e.what();
+    CHECK(m.find("bus 'drive' (tcp 127.0.0.1:1): cannot connect") == 0);
+  }
+  acq::Sample s;
+  io::SensorConfig sc;
+  sc.name = "s";
+  drivers::ModbusSensor sensor(sc, b1, 0);
+  CHECK(sensor.read(s) == IoStatus::not_configured);  // never a value from an unopened bus
+
+  io::BusConfig rtu;
+  rtu.name = "rs485";
+  rtu.kind = io::BusKind::rtu;
+  rtu.device = "/dev/errsep-no-such-tty";
+  rtu.parity = io::Parity::even;
+  drivers::ModbusBus b2(rtu);
+  try {
+    b2.configure();
+    FAIL("opened a device that does not exist");
+  } catch (const std::runtime_error& e) {
+    const std::string m = e.what();
+    CHECK(m.find("bus 'rs485' (rtu /dev/errsep-no-such-tty 115200 8E1): cannot connect") == 0);
+    CHECK(m.find("check the device path") != std::string::npos);
+  }
 }
