@@ -1,5 +1,7 @@
 #include "errsep/drivers/device_factory.hpp"
 
+#include "errsep/drivers/gpiod_io.hpp"
+
 #include <stdexcept>
 
 namespace errsep::drivers {
@@ -27,8 +29,8 @@ Devices make_devices(const io::MachineConfig& cfg, SupervisorOptions supervisor)
     const std::size_t bi = bus_index(s.bus, "stage '" + s.name + "'");
     d.stages.push_back(std::make_unique<ModbusStage>(s, *d.buses[bi]));
   }
-  // ---- GPIO HOOK (helper 4b) -------------------------------------------------------------
-  // if (cfg.gpio) d.gpio = std::make_unique<GpiodIo>(*cfg.gpio);   // drivers/gpiod_io.hpp
+  // ---- GPIO (helper 4b): the libgpiod driver of [gpio]; opened by configure() ---------------
+  if (cfg.gpio) d.gpio = std::make_unique<GpiodIo>(*cfg.gpio);  // drivers/gpiod_io.hpp
   // ------------------------------------------------------------------------------------------
   std::vector<ModbusBus*> raw;
   for (auto& b : d.buses)
