@@ -3,6 +3,8 @@
 // Parse, call the library, report; every result is computed before anything is written, and
 // written atomically.
 #include <CLI/CLI.hpp>
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <exception>
 #include <iostream>
@@ -17,13 +19,15 @@
 namespace {
 
 constexpr const char* kColumns =
-    R"(Input CSV (errsep convention: "# key: value" metadata lines, one header, numeric rows):
-  one-axis     x_mm, s1_1_um, s2_1_um, s2_2_um
-               s1_1 = workpiece sensor, scan 1; s2_1 / s2_2 = reference sensor, scan 1 / scan 2
-               after the reference piece is traversed by d.  x uniform and increasing.
-  two-axis     x_mm, y_mm, s0_1_um, s1_1_um, s1_2_um, s2_1_um, s2_2_um, s3_1_um, s3_2_um,
-               s4_1_um, s4_2_um   (sN_n = sensor N, scan n; one row per grid point, any order,
-               every point of a uniform x-y grid exactly once)
+    R"(Input CSV (errsep convention: "# key: value" metadata lines, one header, numeric rows;
+sN_scanK_um = sensor N, scan K, as in the raw-scan CSV that errsep-scan records):
+  one-axis     a raw displacement scan ("# format: errsep raw displacement scan", "# d_mm: d"),
+               or any CSV with x_mm, s1_scan1_um, s2_scan1_um, s2_scan2_um [+ "# d_mm: d"]
+               s1 = workpiece sensor, s2 = reference sensor; scan 2 after the reference piece is
+               traversed by d.  x uniform and increasing.  d: --d-mm, else d_mm, else dx.
+  two-axis     x_mm, y_mm, s0_scan1_um, s1_scan1_um, s1_scan2_um, s2_scan1_um, s2_scan2_um,
+               s3_scan1_um, s3_scan2_um, s4_scan1_um, s4_scan2_um   (one row per grid point,
+               any order, every point of a uniform x-y grid exactly once)
   three-point  x_mm, m1_um, m2_um, m3_um   (sensors at 0, s1*dx, (s1+s2)*dx on the carriage)
 Output CSV:
   one-axis     x_mm, r_um, m_um, w_um
@@ -68,7 +72,9 @@ int main(int argc, char** argv) {
     sc->add_option("--chain-join", chain,
                    "d > dx: join the d/dx chains by least-roughness or take given initial values")
         ->check(CLI::IsMember({"least-roughness", "given"}));
-  one->add_option("--d-mm", d_mm, "traverse d of the reference piece (default: sampling interval)");
+  one->add_option(
+      "--d-mm", d_mm,
+      "traverse d of the reference piece (default: the file's d_mm, else the sampling interval)");
   one->add_option("--r0-um", r0_um, "initial value r(x_1) of Eq. (9) (default 0)");
   two->add_option("--d-x-mm", d_x_mm, "traverse of reference piece X (default: x interval)");
   two->add_option("--d-y-mm", d_y_mm, "traverse of reference piece Y (default: y interval)");
@@ -99,7 +105,10 @@ int main(int argc, char** argv) {
       const auto in = errsep::io::read_one_axis_csv(input);
       errsep::core::DisplacementOptions o;
       o.sample_interval_mm = in.dx_mm;
-      o.displacement_mm = d_mm.value_or(in.dx_mm);
+      if (d_mm && in.d_mm && std::abs(*d_mm - *in.d_mm) > 1e-9 * std::max(1.0, *d_mm))
+        throw std::invalid_argument(input + ": --d-mm " + std::to_string(*d_mm) +
+                                    " contradicts the file's d_mm " + std::to_string(*in.d_mm));
+      o.displacement_mm = d_mm ? *d_mm : in.d_mm.value_or(in.dx_mm);
       o.initial_um = r0_um;
       o.chain_join = chain_join_from(chain);
       std::string why;

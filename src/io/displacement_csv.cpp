@@ -1,9 +1,12 @@
 #include "errsep/io/displacement_csv.hpp"
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <map>
 #include <sstream>
+
+#include "errsep/io/raw_scan_csv.hpp"
 
 namespace errsep::io {
 namespace {
@@ -85,12 +88,34 @@ std::size_t index_of(const std::vector<double>& axis, double v) {
 }  // namespace
 
 OneAxisInput read_one_axis_csv(const std::filesystem::path& file) {
-  const CsvTable t = read_csv(file, CsvReadOptions{false, 2});
+  CsvReadOptions lenient;
+  lenient.allow_non_finite = true;  // the raw-scan reader decides about nan (incomplete scans)
+  lenient.min_rows = 2;
+  const CsvTable t = read_csv(file, lenient);
   OneAxisInput in;
-  const auto x = t.column("x_mm", file);
-  in.s1_1_um = to_vec(t.column("s1_1_um", file));
-  in.s2_1_um = to_vec(t.column("s2_1_um", file));
-  in.s2_2_um = to_vec(t.column("s2_2_um", file));
+  std::vector<double> x;
+  if (t.meta("format")) {
+    // Written by a scan: the raw-scan reader checks format, completeness and d_mm.
+    const RawDisplacementScan raw = read_raw_displacement_csv(file);
+    x = raw.x_mm;
+    in.s1_1_um = to_vec(raw.s1_scan1_um);
+    in.s2_1_um = to_vec(raw.s2_scan1_um);
+    in.s2_2_um = to_vec(raw.s2_scan2_um);
+    in.d_mm = raw.d_mm;
+  } else {
+    const CsvTable strict = read_csv(file, CsvReadOptions{false, 2});  // nan -> file:line
+    x = strict.column("x_mm", file);
+    in.s1_1_um = to_vec(strict.column("s1_scan1_um", file));
+    in.s2_1_um = to_vec(strict.column("s2_scan1_um", file));
+    in.s2_2_um = to_vec(strict.column("s2_scan2_um", file));
+    if (const auto d = strict.meta("d_mm")) {
+      double v = 0;
+      const auto [p, ec] = std::from_chars(d->data(), d->data() + d->size(), v);
+      if (ec != std::errc() || p != d->data() + d->size() || !std::isfinite(v))
+        throw CsvError(file, 0, "metadata 'd_mm: " + *d + "': not a number");
+      in.d_mm = v;
+    }
+  }
   in.dx_mm = uniform_interval(t, x, file, "x_mm");
   in.x_mm = to_vec(x);
   return in;
@@ -112,8 +137,8 @@ ThreePointInput read_three_point_csv(const std::filesystem::path& file) {
 TwoAxisInput read_two_axis_csv(const std::filesystem::path& file) {
   const CsvTable t = read_csv(file, CsvReadOptions{false, 4});
   const auto x = t.column("x_mm", file), y = t.column("y_mm", file);
-  const char* names[9] = {"s0_1_um", "s1_1_um", "s1_2_um", "s2_1_um", "s2_2_um",
-                          "s3_1_um", "s3_2_um", "s4_1_um", "s4_2_um"};
+  const char* names[9] = {"s0_scan1_um", "s1_scan1_um", "s1_scan2_um", "s2_scan1_um", "s2_scan2_um",
+                          "s3_scan1_um", "s3_scan2_um", "s4_scan1_um", "s4_scan2_um"};
   std::vector<std::vector<double>> cols;
   for (const char* n : names)
     cols.push_back(t.column(n, file));

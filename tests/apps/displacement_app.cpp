@@ -8,6 +8,7 @@
 
 #include "errsep/core/displacement_simulation.hpp"
 #include "errsep/io/csv.hpp"
+#include "errsep/io/raw_scan_csv.hpp"
 #include "support/support.hpp"
 
 using namespace errsep;
@@ -33,9 +34,9 @@ std::vector<double> vec(const Eigen::VectorXd& v) {
 void write_one_axis(const std::filesystem::path& p, const core::OneAxisSimData& s) {
   io::CsvTable t;
   t.add_column("x_mm", vec(s.x_mm));
-  t.add_column("s1_1_um", vec(s.s1_1_um));
-  t.add_column("s2_1_um", vec(s.s2_1_um));
-  t.add_column("s2_2_um", vec(s.s2_2_um));
+  t.add_column("s1_scan1_um", vec(s.s1_1_um));
+  t.add_column("s2_scan1_um", vec(s.s2_1_um));
+  t.add_column("s2_scan2_um", vec(s.s2_2_um));
   io::write_csv(p, t);
 }
 
@@ -45,9 +46,9 @@ void write_two_axis(const std::filesystem::path& p, const core::TwoAxisScan& s, 
                     const std::string& drop_column = "") {
   const Eigen::Index nx = s.x_mm.size(), ny = s.y_mm.size();
   const std::pair<const char*, const Eigen::MatrixXd*> m[] = {
-      {"s0_1_um", &s.s0_1_um}, {"s1_1_um", &s.s1_1_um}, {"s1_2_um", &s.s1_2_um},
-      {"s2_1_um", &s.s2_1_um}, {"s2_2_um", &s.s2_2_um}, {"s3_1_um", &s.s3_1_um},
-      {"s3_2_um", &s.s3_2_um}, {"s4_1_um", &s.s4_1_um}, {"s4_2_um", &s.s4_2_um}};
+      {"s0_scan1_um", &s.s0_1_um}, {"s1_scan1_um", &s.s1_1_um}, {"s1_scan2_um", &s.s1_2_um},
+      {"s2_scan1_um", &s.s2_1_um}, {"s2_scan2_um", &s.s2_2_um}, {"s3_scan1_um", &s.s3_1_um},
+      {"s3_scan2_um", &s.s3_2_um}, {"s4_scan1_um", &s.s4_1_um}, {"s4_scan2_um", &s.s4_2_um}};
   std::vector<std::vector<double>> cols(11);
   int row = 0;
   for (Eigen::Index j = ny - 1; j >= 0; --j)
@@ -88,6 +89,45 @@ TEST_CASE("one-axis: the app recovers r, m, w from a simulated scan") {
     CHECK(w[k] == Approx(sim.w_um(static_cast<Eigen::Index>(k))).margin(1e-6));
     CHECK(m[k] == Approx(sim.m_um(static_cast<Eigen::Index>(k))).margin(1e-6));
   }
+}
+
+TEST_CASE("one-axis: the app reads a raw displacement scan as errsep-scan records it (d = 2 dx)") {
+  TempDir dir;
+  core::OneAxisTruth truth = core::haramiishi2024_fig5_truth();
+  core::OneAxisSimOptions so;
+  so.displacement_mm = 10.0;
+  const auto sim = core::simulate_one_axis(truth, so);
+  io::RawDisplacementScan raw;
+  raw.x_mm = vec(sim.x_mm);
+  raw.s1_scan1_um = vec(sim.s1_1_um);
+  raw.s2_scan1_um = vec(sim.s2_1_um);
+  raw.s1_scan2_um = vec(sim.s1_1_um);
+  raw.s2_scan2_um = vec(sim.s2_2_um);
+  raw.d_mm = 10.0;
+  raw.complete = true;
+  io::write_raw_displacement_csv(dir / "raw.csv", raw);
+  std::string out;
+  REQUIRE(run("one-axis -i " + (dir / "raw.csv").string() + " -o " + (dir / "res.csv").string(),
+              &out) == 0);
+  CHECK_THAT(out, Catch::Contains("d/dx = 2"));
+  const auto t = io::read_csv(dir / "res.csv");
+  CHECK(t.meta("step_ratio").value() == "2");
+  const auto w = t.column("w_um");
+  for (std::size_t k = 0; k < w.size(); ++k)  // r linear: least roughness joins the chains exactly
+    CHECK(w[k] == Approx(sim.w_um(static_cast<Eigen::Index>(k))).margin(1e-6));
+  // --d-mm contradicting the recorded d is an error, not a silent override
+  CHECK(
+      run("one-axis --d-mm 5 -i " + (dir / "raw.csv").string() + " -o " + (dir / "r2.csv").string(),
+          &out) == 1);
+  CHECK_THAT(out, Catch::Contains("contradicts the file's d_mm"));
+  CHECK_FALSE(std::filesystem::exists(dir / "r2.csv"));
+  // an incomplete (aborted) scan is refused
+  raw.complete = false;
+  io::write_raw_displacement_csv(dir / "part.csv", raw);
+  CHECK(run("one-axis -i " + (dir / "part.csv").string() + " -o " + (dir / "r3.csv").string(),
+            &out) == 1);
+  CHECK_THAT(out, Catch::Contains("incomplete"));
+  CHECK_FALSE(std::filesystem::exists(dir / "r3.csv"));
 }
 
 TEST_CASE("two-axis: the app recovers w(x, y) on a grid, with and without rotation correction") {
@@ -159,14 +199,16 @@ TEST_CASE("bad input: clear error, non-zero exit, nothing written") {
   expect_fail("one-axis --d-mm 7.5 -i " + (dir / "scan.csv").string(),
               {"scan.csv", "not an integer multiple", "7.5"});
   // non-finite number
-  std::ofstream(dir / "nan.csv") << "x_mm,s1_1_um,s2_1_um,s2_2_um\n0,1,2,3\n5,1,nan,3\n10,1,2,3\n";
+  std::ofstream(dir / "nan.csv")
+      << "x_mm,s1_scan1_um,s2_scan1_um,s2_scan2_um\n0,1,2,3\n5,1,nan,3\n10,1,2,3\n";
   expect_fail("one-axis -i " + (dir / "nan.csv").string(), {"nan.csv:3", "non-finite"});
   // missing sensor column
-  std::ofstream(dir / "miss.csv") << "x_mm,s1_1_um,s2_1_um\n0,1,2\n5,1,2\n";
+  std::ofstream(dir / "miss.csv") << "x_mm,s1_scan1_um,s2_scan1_um\n0,1,2\n5,1,2\n";
   expect_fail("one-axis -i " + (dir / "miss.csv").string(),
-              {"miss.csv", "missing column 's2_2_um'"});
+              {"miss.csv", "missing column 's2_scan2_um'"});
   // non-uniform sampling
-  std::ofstream(dir / "gap.csv") << "x_mm,s1_1_um,s2_1_um,s2_2_um\n0,1,2,3\n5,1,2,3\n15,1,2,3\n";
+  std::ofstream(dir / "gap.csv")
+      << "x_mm,s1_scan1_um,s2_scan1_um,s2_scan2_um\n0,1,2,3\n5,1,2,3\n15,1,2,3\n";
   expect_fail("one-axis -i " + (dir / "gap.csv").string(), {"gap.csv:4", "sampling interval"});
 
   // two axes: ragged grid, duplicate point, missing sensor column
@@ -178,8 +220,8 @@ TEST_CASE("bad input: clear error, non-zero exit, nothing written") {
   expect_fail(
       "two-axis -i " + (dir / "ragged.csv").string(),
       {"ragged.csv", "ragged grid", "need 12 points", "has 11", "missing (x_mm = 10, y_mm = 5)"});
-  write_two_axis(dir / "nos3.csv", grid.scan, -1, "s3_2_um");
-  expect_fail("two-axis -i " + (dir / "nos3.csv").string(), {"missing column 's3_2_um'"});
+  write_two_axis(dir / "nos3.csv", grid.scan, -1, "s3_scan2_um");
+  expect_fail("two-axis -i " + (dir / "nos3.csv").string(), {"missing column 's3_scan2_um'"});
   {
     std::string text = slurp(dir / "ragged.csv");
     const auto last = text.rfind('\n', text.size() - 2);

@@ -1,14 +1,20 @@
 #pragma once
 // CSV layouts of the displacement and three-point methods (errsep-separate-displacement).
 //
-// One axis (Haramiishi 2024 Eqs. 1-3), one row per position, uniform x:
-//   x_mm, s1_1_um (workpiece, scan 1), s2_1_um (reference, scan 1), s2_2_um (reference, scan 2)
+// Column names follow the raw-scan CSV (io/raw_scan_csv.hpp): sN_scanK_um = sensor N, scan K.
+// One axis (Haramiishi 2024 Eqs. 1-3), one row per position, uniform x: either a raw scan written
+// by errsep-scan ("# format: errsep raw displacement scan", read by read_raw_displacement_csv,
+// "# d_mm:" required, incomplete scans refused), or any CSV with
+//   x_mm, s1_scan1_um (workpiece), s2_scan1_um (reference), s2_scan2_um (reference after the
+//   traverse d)        and an optional "# d_mm: <d>" line
 // Two axes (Eqs. 10-19), one row per grid point, any order, every (x, y) exactly once:
-//   x_mm, y_mm, s0_1_um, s1_1_um, s1_2_um, s2_1_um, s2_2_um, s3_1_um, s3_2_um, s4_1_um, s4_2_um
+//   x_mm, y_mm, s0_scan1_um, s1_scan1_um, s1_scan2_um, s2_scan1_um, s2_scan2_um, s3_scan1_um,
+//   s3_scan2_um, s4_scan1_um, s4_scan2_um
 // Three-point (Zhao 2019 Eq. 1), one row per slide position, uniform x:
 //   x_mm, m1_um, m2_um, m3_um   (sensors at 0, s1·Δx, (s1 + s2)·Δx)
 // Extra columns are ignored.  Problems are reported as CsvError "file:line: what is wrong".
 #include <filesystem>
+#include <optional>
 
 #include "errsep/core/displacement_method.hpp"
 #include "errsep/core/three_point_method.hpp"
@@ -19,7 +25,8 @@ namespace errsep::io {
 
 struct OneAxisInput {
   Eigen::VectorXd x_mm, s1_1_um, s2_1_um, s2_2_um;
-  double dx_mm = 0;  ///< sampling interval found in the file
+  double dx_mm = 0;            ///< sampling interval found in the file
+  std::optional<double> d_mm;  ///< the traverse d, when the file records it (# d_mm:)
 };
 
 struct TwoAxisInput {
