@@ -1,6 +1,6 @@
 #pragma once
 // Builds the drivers a machine config describes: one ModbusBus per [[bus]], one ModbusSensor per
-// [[sensor]], one ModbusStage per [[stage]], the bus supervisor, and (hook) the GPIO device.
+// [[sensor]], one ModbusStage per [[stage]], the bus supervisor, and the GPIO device of [gpio].
 //
 //   auto dev = drivers::make_devices(cfg);   // constructs only: no I/O, nothing opened
 //   dev.configure();                         // opens buses, probes devices, starts supervisor
@@ -25,9 +25,8 @@ struct Devices {
   std::vector<std::unique_ptr<ModbusSensor>> sensors;  ///< same order as cfg.sensors
   std::vector<std::size_t> sensor_bus;                 ///< index into buses, per sensor
   std::vector<std::unique_ptr<ModbusStage>> stages;    ///< same order as cfg.stages
-  /// The [gpio] device, or null.  HOOK (helper 4b): make_devices() is to create the libgpiod
-  /// driver of drivers/gpiod_io.hpp here when cfg.gpio is set; until that is wired in (see the
-  /// marked place in device_factory.cpp) it stays null even with [gpio]: check before use.
+  /// The [gpio] device (libgpiod driver of drivers/gpiod_io.hpp), or null when the config has
+  /// no [gpio] section: check before use.
   std::unique_ptr<acq::DigitalIo> gpio;
   std::unique_ptr<BusSupervisor> supervisor;  ///< reconnects buses; started by configure()
 
