@@ -3,9 +3,11 @@
 // simulator, read from a TOML file (config/simulator.toml is the embedded default,
 // config/machine-example.toml a commented example for a real machine).
 //
-// Every error is a ConfigError whose message is "file:line: key: what is wrong" (line omitted
-// when the key is missing), so a user can fix the file without reading code.  Cross references
-// (a sensor's bus, the scan's sensors and stages) are checked when loading.
+// Every error is a ConfigError whose message is "file:line: key: what is wrong" (for a missing
+// key, the line of the table that lacks it), so a user can fix the file without reading code.
+// Unknown keys are errors (a misspelt key must not fall back to a default silently).  Cross
+// references (a sensor's bus, the scan's sensors and stages and their roles) are checked when
+// loading.
 #include <array>
 #include <cstddef>
 #include <cstdint>
