@@ -30,6 +30,12 @@
 //    with one shared steel coefficient 1.01).  σ_htb = RSS of the tolerances of A-E.
 //  - The aluminium parts (A-E and both jigs) share one coefficient α_Al (Eq. 34's l_dJx² σ_αAl²;
 //    independent coefficients would give σ_tx = 0.21 µm).
+//
+// Not implemented: the model predictions of Eqs. (42)-(46) (σ_m2x = 0.57, σ_m4y = 3.00,
+// σ_mwxe = 1.07, σ_mwye = 9.37 µm from σ_se, σ_rx, σ_ry, σ_tx, σ_ty).  The printed Eq. (46) scales
+// the variances by l_xw/l_xs instead of (l_xw/l_xs)²; only that reading gives 1.07 and 9.37
+// (GUM gives 2.51 and 21.97 µm), and no reading found gives 0.57 and 3.00 (√(σ_se² + σ_rx² +
+// σ_tx²) = 0.33, √(σ_se² + σ_ry² + σ_ty²) = 2.83).  Eq. (41) uses Table 2's measured values.
 #include <optional>
 #include <string>
 #include <utility>
