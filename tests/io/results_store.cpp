@@ -1,0 +1,124 @@
+// The results store: names from UTC time + scan id, atomic writes, scan ids continued from the
+// files on disk, a disk-full error that writes nothing, retention only when configured.
+#include <catch2/catch.hpp>
+#include <chrono>
+#include <fstream>
+
+#include "errsep/io/results_store.hpp"
+#include "support/support.hpp"
+
+using namespace errsep;
+using namespace std::chrono_literals;
+
+namespace {
+std::chrono::system_clock::time_point utc(int y, int mo, int d, int h, int mi, int s) {
+  std::tm tm{};
+  tm.tm_year = y - 1900;
+  tm.tm_mon = mo - 1;
+  tm.tm_mday = d;
+  tm.tm_hour = h;
+  tm.tm_min = mi;
+  tm.tm_sec = s;
+  return std::chrono::system_clock::from_time_t(::timegm(&tm));
+}
+std::size_t count_files(const std::filesystem::path& dir) {
+  std::size_t n = 0;
+  for ([[maybe_unused]] const auto& e : std::filesystem::directory_iterator(dir))
+    ++n;
+  return n;
+}
+}  // namespace
+
+TEST_CASE("store names: UTC time and scan id, parsed back") {
+  const auto t = utc(2026, 11, 23, 8, 43, 7);
+  CHECK(io::ResultsStore::stem(t, 42) == "20261123T084307Z_scan000042");
+  CHECK(io::ResultsStore::stem(t, 1234567) == "20261123T084307Z_scan1234567");
+  const auto f = io::parse_store_name("/x/20261123T084307Z_scan000042.raw-incomplete.csv");
+  REQUIRE(f);
+  CHECK(f->scan_id == 42);
+  CHECK(f->kind == "raw-incomplete");
+  CHECK(f->stem == "20261123T084307Z_scan000042");
+  CHECK(f->time == t);
+  CHECK_FALSE(io::parse_store_name("notes.csv"));
+  CHECK_FALSE(io::parse_store_name(".20261123T084307Z_scan000042.raw.csv.tmp.abc123"));
+  CHECK_FALSE(io::parse_store_name("20261123T084307Z_scan.raw.csv"));
+  CHECK_FALSE(io::parse_store_name("20261123T084307Z_scan000042.csv"));
+}
+
+TEST_CASE("writes, next scan id, stale temporaries") {
+  test::TempDir tmp;
+  io::ResultsStoreOptions o;
+  o.dir = tmp / "results";
+  o.min_free_bytes = 0;
+  io::ResultsStore store(o);
+  CHECK(store.next_scan_id() == 1);
+  const auto p =
+      store.write(io::ResultsStore::stem(utc(2026, 1, 2, 3, 4, 5), 7), "raw", "a,b\n1,2\n");
+  CHECK(p == o.dir / "20260102T030405Z_scan000007.raw.csv");
+  std::ifstream in(p);
+  std::string content((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  CHECK(content == "a,b\n1,2\n");
+  CHECK(store.next_scan_id() == 8);
+  std::ofstream(o.dir / ".20260102T030405Z_scan000008.raw.csv.tmp.XyZ123") << "partial";
+  std::ofstream(o.dir / "operator-notes.txt") << "keep me";
+  CHECK(store.list().size() == 1);
+  CHECK(store.clean_stale_temporaries() == 1);
+  CHECK(std::filesystem::exists(o.dir / "operator-notes.txt"));  // not ours: left alone
+  CHECK(count_files(o.dir) == 2);
+}
+
+TEST_CASE("disk full: a clear error and nothing written") {
+  test::TempDir tmp;
+  io::ResultsStoreOptions o;
+  o.dir = tmp / "results";
+  io::ResultsStore probe(o);
+  // A reserve larger than the free space stands in for a full disk.
+  o.min_free_bytes = probe.free_bytes() + (1ull << 30);
+  io::ResultsStore store(o);
+  try {
+    store.write("20260102T030405Z_scan000001", "raw", "x_mm\n1\n");
+    FAIL("no DiskFullError");
+  } catch (const io::DiskFullError& e) {
+    const std::string m = e.what();
+    CHECK(m.find("disk full") != std::string::npos);
+    CHECK(m.find("20260102T030405Z_scan000001.raw.csv") != std::string::npos);
+  }
+  CHECK(count_files(o.dir) == 0);
+}
+
+TEST_CASE("retention: nothing deleted unless configured") {
+  test::TempDir tmp;
+  io::ResultsStoreOptions o;
+  o.dir = tmp / "results";
+  o.min_free_bytes = 0;
+  const auto now = utc(2026, 11, 23, 12, 0, 0);
+  {
+    io::ResultsStore store(o);
+    for (int id = 1; id <= 5; ++id) {
+      const auto stem = io::ResultsStore::stem(now - std::chrono::hours(24 * (6 - id)), id);
+      store.write(stem, "raw", "x\n1\n");
+      store.write(stem, "result", "x\n1\n");
+    }
+    CHECK(store.prune(now) == 0);  // retention off by default
+    CHECK(store.list().size() == 10);
+  }
+  SECTION("keep the newest 2 scans") {
+    o.retention.keep_scans = 2;
+    io::ResultsStore store(o);
+    CHECK(store.prune(now) == 6);
+    const auto left = store.list();
+    REQUIRE(left.size() == 4);
+    CHECK(left.front().scan_id == 4);
+    CHECK(left.back().scan_id == 5);
+  }
+  SECTION("delete scans older than 2.5 days") {
+    o.retention.max_age_days = 2.5;
+    io::ResultsStore store(o);
+    CHECK(store.prune(now) == 6);  // scans 1-3 are 5, 4 and 3 days old
+    CHECK(store.list().front().scan_id == 4);
+  }
+  SECTION("invalid retention is refused") {
+    o.retention.keep_scans = -1;
+    CHECK_THROWS_AS(io::ResultsStore(o), std::invalid_argument);
+  }
+}
