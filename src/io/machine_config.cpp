@@ -2,6 +2,7 @@
 
 #include <toml++/toml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <initializer_list>
@@ -43,6 +44,37 @@ const StageConfig* MachineConfig::find_stage(const std::string& name) const {
 }
 double MachineConfig::sample_rate_hz(const BusConfig& bus) const {
   return bus.sample_rate_hz > 0.0 ? bus.sample_rate_hz : sampler.rate_hz;
+}
+
+std::vector<std::string> config_warnings(const MachineConfig& cfg) {
+  std::vector<std::string> w;
+  for (const auto& b : cfg.buses) {
+    const double rate = cfg.sample_rate_hz(b);
+    const double period_ms = 1000.0 / rate;
+    const double worst_ms = (1.0 + b.retries) * b.response_timeout_ms;
+    std::size_t n_sensors = 0;
+    for (const auto& s : cfg.sensors)
+      n_sensors += s.bus == b.name ? 1 : 0;
+    if (n_sensors > 0 && worst_ms > period_ms) {
+      w.push_back("bus '" + b.name + "': (1 + retries) x response_timeout_ms = " +
+                  std::to_string(static_cast<int>(worst_ms)) + " ms exceeds the sample period " +
+                  std::to_string(period_ms) + " ms at " + std::to_string(rate) +
+                  " Hz: a device that stops answering costs about " +
+                  std::to_string(static_cast<long>(worst_ms / period_ms)) +
+                  " missed periods per read (they are counted)");
+    }
+    if (b.kind == BusKind::rtu && n_sensors > 0) {
+      // Roughly 100-250 transactions/s per RTU line at 115200 baud (NOTES.md), fewer slower.
+      const double capacity = 250.0 * std::min(1.0, b.baud / 115200.0);
+      if (rate * static_cast<double>(n_sensors) > capacity)
+        w.push_back("bus '" + b.name + "': " + std::to_string(n_sensors) + " sensors at " +
+                    std::to_string(rate) + " Hz need " +
+                    std::to_string(static_cast<long>(rate * static_cast<double>(n_sensors))) +
+                    " transactions/s; an RTU line at " + std::to_string(b.baud) +
+                    " baud carries about " + std::to_string(static_cast<long>(capacity)));
+    }
+  }
+  return w;
 }
 
 int apply_simulator_port(MachineConfig& cfg, int port) {

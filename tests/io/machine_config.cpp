@@ -202,3 +202,24 @@ TEST_CASE("file errors carry the path") {
     CHECK(e.key() == "bus[0].kind");
   }
 }
+
+TEST_CASE("warnings for settings that are allowed but probably not meant") {
+  MachineConfig c = parse_machine_config(kMinimal, "t.toml");
+  c.buses[0].response_timeout_ms = 50;
+  c.buses[0].retries = 1;
+  c.sampler.rate_hz = 1000.0;
+  auto w = config_warnings(c);
+  REQUIRE(w.size() == 1);
+  CHECK(w[0].find("bus 'b': (1 + retries) x response_timeout_ms = 100 ms exceeds the sample "
+                  "period") == 0);
+  c.sampler.rate_hz = 5.0;  // 200 ms period: fine
+  CHECK(config_warnings(c).empty());
+  const MachineConfig ex =
+      load_machine_config(errsep::test::source_dir() / "config" / "machine-example.toml");
+  for (const auto& m : config_warnings(ex))
+    INFO(m);
+  // 4 sensors × 50 Hz = 200/s fits the RTU line; (1 + 1) × 20 ms = 40 ms > 20 ms period.
+  const auto wex = config_warnings(ex);
+  REQUIRE(wex.size() == 1);
+  CHECK(wex[0].find("bus 'rs485'") == 0);
+}

@@ -203,6 +203,12 @@ MachineConfig load_machine_config(const std::filesystem::path& file);
 /// The same from a string; `name` is used as the file name in messages.
 MachineConfig parse_machine_config(const std::string& toml_text, const std::string& name);
 
+/// Things that are allowed but probably not meant, one sentence each (for the scan app to print):
+/// a bus whose worst-case request time (1 + retries)·response_timeout_ms exceeds its sample
+/// period (a silent device then costs that many periods), RTU sampling faster than a serial line
+/// carries, a scan that averages fewer readings than the sampler can give in settle time, ...
+std::vector<std::string> config_warnings(const MachineConfig& cfg);
+
 /// For the embedded simulator: every TCP bus whose port is 0 gets `port` (the port the simulator
 /// printed as "listening 127.0.0.1:<port>").  Returns how many buses were changed.
 int apply_simulator_port(MachineConfig& cfg, int port);
