@@ -48,7 +48,7 @@ TEST_CASE("single thread: FIFO order, full ring refuses and counts, empty ring p
 TEST_CASE("two threads: every item arrives once, in order, with its content intact") {
   // A small ring forces the producer to hit "full" often and the consumer to hit "empty" often,
   // exercising both cached-index refresh paths under contention.
-  constexpr std::uint64_t kItems = 2'000'000;
+  constexpr std::uint64_t kItems = 500'000;
   SpscRing<Sample> ring(64);
   std::uint64_t refused = 0;
   std::thread producer([&] {
@@ -60,14 +60,18 @@ TEST_CASE("two threads: every item arrives once, in order, with its content inta
       s.channel = static_cast<std::uint16_t>(i % 7);
       if (ring.try_push(s))
         ++i;
-      else
-        ++refused;  // retry the same item: this test checks delivery, not overrun policy
+      else if (++refused % 64 == 0)  // retry the same item: this test checks delivery
+        std::this_thread::yield();   // (yield now and then: the machine may be shared)
     }
   });
   std::uint64_t expected = 0, bad_order = 0, bad_content = 0;
   Sample got;
+  std::uint64_t empty = 0;
   while (expected < kItems) {
-    if (!ring.try_pop(got)) continue;
+    if (!ring.try_pop(got)) {
+      if (++empty % 64 == 0) std::this_thread::yield();
+      continue;
+    }
     if (got.seq != expected) ++bad_order;
     if (got.t_ns != static_cast<std::int64_t>(got.seq * 3) ||
         got.value != static_cast<double>(got.seq) * 0.5 || got.channel != got.seq % 7)
@@ -86,7 +90,7 @@ TEST_CASE("two threads: every item arrives once, in order, with its content inta
 TEST_CASE("two threads, producer never waits: accepted + rejected == offered, accepted in order") {
   // The sampler's policy: a full ring drops the new item and counts it.  What the consumer sees
   // must then be a strictly increasing subsequence, and the counts must add up exactly.
-  constexpr std::uint64_t kOffered = 1'000'000;
+  constexpr std::uint64_t kOffered = 500'000;
   SpscRing<std::uint64_t> ring(128);
   std::thread producer([&] {
     for (std::uint64_t i = 0; i < kOffered; ++i)
