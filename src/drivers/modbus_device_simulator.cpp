@@ -335,11 +335,11 @@ struct ModbusDeviceSimulator::Impl {
   }
 
   void drop_all() {
+    drops.fetch_add(1);  // before the close: a client that sees the drop also sees the count
     for (int fd : clients)
       ::close(fd);
     clients.clear();
     nclients.store(0);
-    drops.fetch_add(1);
   }
 
   // One request from one client.  Returns false when that client was closed.
