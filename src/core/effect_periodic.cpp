@@ -45,8 +45,9 @@ Eigen::MatrixXd PeriodicEffect::correction_um(const Eigen::VectorXd& p,
   return slide_positioning_correction_um(basis(ctx.cfg) * p, ctx);
 }
 
-Eigen::MatrixXd PeriodicEffect::jacobian(const Eigen::VectorXd&, const EffectContext& ctx) const {
-  return slide_positioning_jacobian(basis(ctx.cfg), ctx);
+Eigen::MatrixXd PeriodicEffect::jacobian(const Eigen::VectorXd& p, const EffectContext& ctx) const {
+  const Eigen::MatrixXd phi = basis(ctx.cfg);
+  return slide_positioning_jacobian(phi, ctx, phi * p);
 }
 
 std::vector<std::unique_ptr<ModelEffect>> PeriodicEffect::variants(const EffectContext& ctx) const {

@@ -1,5 +1,7 @@
 #include "errsep/core/effect_sensor_offset.hpp"
 
+#include <array>
+
 namespace errsep::core {
 
 std::string SensorOffsetEffect::description() const {
@@ -7,33 +9,41 @@ std::string SensorOffsetEffect::description() const {
 }
 
 namespace {
-// ∂m_i(x_n)/∂δO_i in µm/mm: the slope of f at the sensor and the tilt term of Eq. (1).
-double slope_um_per_mm(const EffectContext& ctx, Eigen::Index n, int i) {
-  const auto k = ctx.cfg.offsets_samples();
-  return ctx.f_slope(static_cast<int>(n) + k[static_cast<std::size_t>(i)]) +
-         1000.0 * ctx.gamma_rad(n);
+std::array<double, 4> offsets_error(const Eigen::VectorXd& p) {
+  return {0.0, p(0), p(0) + p(1), p(0) + p(1) + p(2)};
+}
+// ∂m_i(x_n)/∂δO_i in µm/mm at the actual position: slope of f there and the tilt term of Eq. (1).
+double slope_um_per_mm(const EffectContext& ctx, Eigen::Index n, int i, double dO) {
+  const double y = n * ctx.cfg.dx_mm + ctx.cfg.offsets_mm()[static_cast<std::size_t>(i)] + dO;
+  return ctx.f_slope_at(y) + 1000.0 * ctx.gamma_rad(n);
 }
 }  // namespace
 
 Eigen::MatrixXd SensorOffsetEffect::correction_um(const Eigen::VectorXd& p,
                                                   const EffectContext& ctx) const {
   const Eigen::Index P = ctx.m_um.rows();
-  const double dO[4] = {0.0, p(0), p(0) + p(1), p(0) + p(1) + p(2)};
+  const auto dO = offsets_error(p);
+  const auto O = ctx.cfg.offsets_mm();
   Eigen::MatrixXd c = Eigen::MatrixXd::Zero(P, 4);
+  // Not linearised: the reading of Eq. (1) at the actual offset minus the one at the nominal.
   for (Eigen::Index n = 0; n < P; ++n)
-    for (int i = 1; i < 4; ++i)
-      c(n, i) = dO[i] * slope_um_per_mm(ctx, n, i);
+    for (std::size_t i = 1; i < 4; ++i) {
+      const double y = n * ctx.cfg.dx_mm + O[i];
+      c(n, static_cast<Eigen::Index>(i)) =
+          ctx.f_at(y + dO[i]) - ctx.f_at(y) + 1000.0 * dO[i] * ctx.gamma_rad(n);
+    }
   return c;
 }
 
-Eigen::MatrixXd SensorOffsetEffect::jacobian(const Eigen::VectorXd&,
+Eigen::MatrixXd SensorOffsetEffect::jacobian(const Eigen::VectorXd& p,
                                              const EffectContext& ctx) const {
   const Eigen::Index P = ctx.m_um.rows();
+  const auto dO = offsets_error(p);
   Eigen::MatrixXd J = Eigen::MatrixXd::Zero(4 * P, 3);
   // δO_i = Σ_{j<=i} δD_j: configuration i depends on δD_2..δD_i.
   for (Eigen::Index n = 0; n < P; ++n)
     for (int i = 1; i < 4; ++i) {
-      const double s = slope_um_per_mm(ctx, n, i);
+      const double s = slope_um_per_mm(ctx, n, i, dO[static_cast<std::size_t>(i)]);
       for (int j = 1; j <= i; ++j)
         J(4 * n + i, j - 1) = s;
     }

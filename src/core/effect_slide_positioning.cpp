@@ -5,23 +5,27 @@
 namespace errsep::core {
 
 namespace {
-// ∂m_i(x_n)/∂x in µm/mm (Eq. 1 differentiated along the slide).
-double reading_slope(const EffectContext& ctx, Eigen::Index n, int i) {
-  const auto k = ctx.cfg.offsets_samples();
-  const auto O = ctx.cfg.offsets_mm();
-  const int ni = static_cast<int>(n);
-  return ctx.f_slope(ni + k[static_cast<std::size_t>(i)]) + ctx.S_slope(ni) +
-         1000.0 * O[static_cast<std::size_t>(i)] * ctx.gamma_slope(ni);
+// Eq. (1) with the slide at x (mm), from the current estimate.
+double reading(const EffectContext& ctx, double x, std::size_t i) {
+  const double O = ctx.cfg.offsets_mm()[i];
+  return ctx.f_at(x + O) + ctx.S_at(x) + 1000.0 * O * ctx.gamma_at(x);
+}
+// ∂m_i/∂x in µm/mm at slide position x.
+double reading_slope(const EffectContext& ctx, double x, std::size_t i) {
+  const double O = ctx.cfg.offsets_mm()[i];
+  return ctx.f_slope_at(x + O) + ctx.S_slope_at(x) + 1000.0 * O * ctx.gamma_slope_at(x);
 }
 }  // namespace
 
-Eigen::MatrixXd slide_positioning_jacobian(const Eigen::MatrixXd& phi, const EffectContext& ctx) {
+Eigen::MatrixXd slide_positioning_jacobian(const Eigen::MatrixXd& phi, const EffectContext& ctx,
+                                           const Eigen::VectorXd& dx_um) {
   const Eigen::Index P = phi.rows();
   Eigen::MatrixXd J(4 * P, phi.cols());
   for (Eigen::Index n = 0; n < P; ++n)
-    for (int i = 0; i < 4; ++i) {
-      const double s = 1e-3 * reading_slope(ctx, n, i);  // δx in µm
-      J.row(4 * n + i) = phi.row(n) * s;
+    for (std::size_t i = 0; i < 4; ++i) {
+      const double x = n * ctx.cfg.dx_mm + (dx_um.size() ? 1e-3 * dx_um(n) : 0.0);
+      const double s = 1e-3 * reading_slope(ctx, x, i);  // δx in µm
+      J.row(4 * n + static_cast<Eigen::Index>(i)) = phi.row(n) * s;
     }
   return J;
 }
@@ -30,9 +34,13 @@ Eigen::MatrixXd slide_positioning_correction_um(const Eigen::VectorXd& dx_um,
                                                 const EffectContext& ctx) {
   const Eigen::Index P = dx_um.size();
   Eigen::MatrixXd c(P, 4);
+  // Not linearised: Eq. (1) at the actual slide position minus at the commanded one.
   for (Eigen::Index n = 0; n < P; ++n)
-    for (int i = 0; i < 4; ++i)
-      c(n, i) = 1e-3 * dx_um(n) * reading_slope(ctx, n, i);
+    for (std::size_t i = 0; i < 4; ++i) {
+      const double x = n * ctx.cfg.dx_mm;
+      c(n, static_cast<Eigen::Index>(i)) =
+          reading(ctx, x + 1e-3 * dx_um(n), i) - reading(ctx, x, i);
+    }
   return c;
 }
 
@@ -70,9 +78,10 @@ Eigen::MatrixXd SlidePositioningEffect::correction_um(const Eigen::VectorXd& p,
   return slide_positioning_correction_um(basis(ctx.cfg) * p, ctx);
 }
 
-Eigen::MatrixXd SlidePositioningEffect::jacobian(const Eigen::VectorXd&,
+Eigen::MatrixXd SlidePositioningEffect::jacobian(const Eigen::VectorXd& p,
                                                  const EffectContext& ctx) const {
-  return slide_positioning_jacobian(basis(ctx.cfg), ctx);
+  const Eigen::MatrixXd phi = basis(ctx.cfg);
+  return slide_positioning_jacobian(phi, ctx, phi * p);
 }
 
 std::unique_ptr<ModelEffect> SlidePositioningEffect::clone() const {

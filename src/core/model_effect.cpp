@@ -1,5 +1,7 @@
 #include "errsep/core/model_effect.hpp"
 
+#include <algorithm>
+
 #include "errsep/core/effect_drift.hpp"
 #include "errsep/core/effect_gain.hpp"
 #include "errsep/core/effect_periodic.hpp"
@@ -16,14 +18,66 @@ double grid_derivative(const Eigen::VectorXd& v, double h, Eigen::Index j) {
   return (v(j + 1) - v(j - 1)) / (2.0 * h);
 }
 
-double EffectContext::f_slope(int j) const {
-  return grid_derivative(f_um, cfg.dx_mm, j);
+Eigen::VectorXd spline_second_derivatives(const Eigen::VectorXd& v, double h) {
+  const Eigen::Index n = v.size();
+  Eigen::VectorXd m2 = Eigen::VectorXd::Zero(n);
+  if (n < 3) return m2;
+  // Uniform knots: m_{j-1} + 4 m_j + m_{j+1} = 6 (v_{j-1} − 2 v_j + v_{j+1}) / h², natural ends
+  // (m_0 = m_{n-1} = 0); Thomas algorithm.
+  const Eigen::Index k = n - 2;
+  Eigen::VectorXd c(k), d(k);
+  for (Eigen::Index j = 0; j < k; ++j) {
+    const double rhs = 6.0 * (v(j) - 2.0 * v(j + 1) + v(j + 2)) / (h * h);
+    const double denom = 4.0 - (j > 0 ? c(j - 1) : 0.0);
+    c(j) = 1.0 / denom;
+    d(j) = (rhs - (j > 0 ? d(j - 1) : 0.0)) / denom;
+  }
+  for (Eigen::Index j = k - 1; j >= 0; --j)
+    m2(j + 1) = d(j) - (j + 1 < k ? c(j) * m2(j + 2) : 0.0);
+  return m2;
 }
-double EffectContext::S_slope(int n) const {
-  return grid_derivative(S_um, cfg.dx_mm, n);
+
+double spline_eval(const Eigen::VectorXd& v, const Eigen::VectorXd& m2, double h, double x,
+                   bool deriv) {
+  const Eigen::Index n = v.size();
+  if (n == 0) return 0.0;
+  if (n == 1) return deriv ? 0.0 : v(0);
+  const double xmax = static_cast<double>(n - 1) * h;
+  const double s0 = (v(1) - v(0)) / h - h * (2.0 * m2(0) + m2(1)) / 6.0;
+  const double s1 = (v(n - 1) - v(n - 2)) / h + h * (m2(n - 2) + 2.0 * m2(n - 1)) / 6.0;
+  if (x <= 0) return deriv ? s0 : v(0) + x * s0;
+  if (x >= xmax) return deriv ? s1 : v(n - 1) + (x - xmax) * s1;
+  const Eigen::Index j = std::min<Eigen::Index>(static_cast<Eigen::Index>(x / h), n - 2);
+  const double a = (static_cast<double>(j + 1) * h - x) / h, b = 1.0 - a;
+  if (!deriv)
+    return a * v(j) + b * v(j + 1) +
+           ((a * a * a - a) * m2(j) + (b * b * b - b) * m2(j + 1)) * h * h / 6.0;
+  return (v(j + 1) - v(j)) / h - (3.0 * a * a - 1.0) / 6.0 * h * m2(j) +
+         (3.0 * b * b - 1.0) / 6.0 * h * m2(j + 1);
 }
-double EffectContext::gamma_slope(int n) const {
-  return grid_derivative(gamma_rad, cfg.dx_mm, n);
+
+void EffectContext::prepare() {
+  f_m2_ = spline_second_derivatives(f_um, cfg.dx_mm);
+  S_m2_ = spline_second_derivatives(S_um, cfg.dx_mm);
+  g_m2_ = spline_second_derivatives(gamma_rad, cfg.dx_mm);
+}
+double EffectContext::f_at(double y) const {
+  return spline_eval(f_um, f_m2_, cfg.dx_mm, y, false);
+}
+double EffectContext::f_slope_at(double y) const {
+  return spline_eval(f_um, f_m2_, cfg.dx_mm, y, true);
+}
+double EffectContext::S_at(double x) const {
+  return spline_eval(S_um, S_m2_, cfg.dx_mm, x, false);
+}
+double EffectContext::S_slope_at(double x) const {
+  return spline_eval(S_um, S_m2_, cfg.dx_mm, x, true);
+}
+double EffectContext::gamma_at(double x) const {
+  return spline_eval(gamma_rad, g_m2_, cfg.dx_mm, x, false);
+}
+double EffectContext::gamma_slope_at(double x) const {
+  return spline_eval(gamma_rad, g_m2_, cfg.dx_mm, x, true);
 }
 
 std::vector<std::unique_ptr<ModelEffect>> ModelEffect::variants(const EffectContext&) const {

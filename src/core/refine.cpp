@@ -49,10 +49,13 @@ double p_value_F(double F, int k, int dof) {
 
 // The least-squares (λ = 0) fit of the base model to corrected readings.
 EffectContext ls_context(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
-                         const Eigen::MatrixXd& m_c, const Eigen::MatrixXd& t_s) {
-  FourSensorOptions o;
-  o.rule = LambdaRule::least_squares;
-  o.weighting = RowWeighting::whitened;
+                         const Eigen::MatrixXd& m_c, const Eigen::MatrixXd& t_s,
+                         const FourSensorOptions& solve) {
+  // f̂, Ŝ, γ̂ for the corrections and Jacobians come from the caller's solver (its λ rule fixes
+  // the non-identifiable curvature as the reported result does; the least-squares gauge row
+  // would put a bow into f̂ and, through f̂(x+O+δ) − f̂(x+O), into the corrected readings).  The
+  // residuals and tests never use them: they are projections of the readings.
+  FourSensorOptions o = solve;
   o.compute_uncertainty = false;
   const FourSensorResult r = separate_four_sensor(cfg, m_c, o);
   EffectContext ctx;
@@ -64,6 +67,7 @@ EffectContext ls_context(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_r
   ctx.gamma_rad = r.gamma_rad;
   ctx.e_um = r.e_um;
   ctx.residual_um = r.sensor_residual_um;
+  ctx.prepare();
   return ctx;
 }
 
@@ -157,22 +161,33 @@ ProjectedFit projected_fit(const ResidualSpace& base, const Eigen::MatrixXd& Jr,
   Eigen::VectorXd dps = Eigen::VectorXd::Zero(k);  // scaled step
   Eigen::VectorXd ps = Eigen::VectorXd::Zero(k);
   if (p_current) ps = p_current->cwiseProduct(D);
-  std::vector<int> kept;
+  std::vector<int> kept, free_dirs;
   for (int j = 0; j < kid; ++j) {
     const Eigen::VectorXd v = svd.matrixV().col(j);
     const double total = c(j) + sv(j) * v.dot(ps);  // signal of the whole parameter along v
     if (p_current && std::abs(total) <= kappa * sigma) {
-      dps -= v * v.dot(ps);  // not determined: take its component out of the parameters
+      free_dirs.push_back(j);
       continue;
     }
     kept.push_back(j);
     dps += v * (c(j) / sv(j));
     out.delta_rss += c(j) * c(j);
   }
-  // Directions never identifiable are removed from the parameters too (minimum norm).
-  if (p_current)
-    for (Eigen::Index j = kid; j < svd.matrixV().cols(); ++j)
-      dps -= svd.matrixV().col(j) * svd.matrixV().col(j).dot(ps);
+  // Directions the significance rule dropped are taken out of the parameters (scaled metric).
+  for (int j : free_dirs)
+    dps -= svd.matrixV().col(j) * svd.matrixV().col(j).dot(ps + dps);
+  // Directions no data can determine (absorbed by f, S, γ, e, e.g. a drift common to all
+  // configurations): the estimate is the part of p orthogonal to them in parameter units, so a
+  // true p orthogonal to them is recovered and the report's "identifiable part" is well defined.
+  if (p_current && kid < svd.matrixV().cols()) {
+    const Eigen::Index k0 = svd.matrixV().cols() - kid;
+    Eigen::MatrixXd Z = D.cwiseInverse().asDiagonal() * svd.matrixV().rightCols(k0);
+    Eigen::HouseholderQR<Eigen::MatrixXd> zq(Z);
+    Z = zq.householderQ() * Eigen::MatrixXd::Identity(k, k0);
+    Eigen::VectorXd p_new = (ps + dps).cwiseQuotient(D);
+    p_new -= Z * (Z.transpose() * p_new);
+    dps = p_new.cwiseProduct(D) - ps;
+  }
   out.kept = static_cast<int>(kept.size());
   out.dp = dps.cwiseQuotient(D);
   Eigen::MatrixXd B(k, out.kept);  // D⁻¹·v_j / s_j
@@ -210,28 +225,45 @@ Solved solve_model(const FourSensorConfig& cfg, Model& M, EffectContext ctx,
                    const RefineOptions& opts) {
   const ResidualSpace base(cfg);
   const int k = M.total();
-  int it = 0;
+  int it = 0, halvings = 0;
+  double rss_prev = std::numeric_limits<double>::infinity();
+  Eigen::VectorXd step = Eigen::VectorXd::Zero(k);
+  auto add_to_params = [&M](const Eigen::VectorXd& d) {
+    Eigen::Index c = 0;
+    for (auto& p : M.p) {
+      p += d.segment(c, p.size());
+      c += p.size();
+    }
+  };
   for (; it < (k > 0 ? opts.max_gauss_newton : 0); ++it) {
     const Eigen::MatrixXd m_c = corrected(M, ctx);
-    ctx = ls_context(cfg, ctx.m_um, m_c, ctx.t_s);
+    const EffectContext trial = ls_context(cfg, ctx.m_um, m_c, ctx.t_s, opts.solve);
     const Eigen::VectorXd r = base.project_out(reduce_readings(cfg, m_c));
+    const double rss = r.squaredNorm();
+    // Step control: a step that increases the residual is halved (at most 8 times).
+    if (rss > rss_prev * (1.0 + 1e-9) && halvings < 8) {
+      step *= 0.5;
+      add_to_params(-step);
+      ++halvings;
+      continue;
+    }
+    halvings = 0;
+    rss_prev = rss;
+    ctx = trial;
     const Eigen::MatrixXd Jr = reduce_columns(cfg, model_jacobian(M, ctx));
     const Eigen::VectorXd p_now = concat(M);
     const ProjectedFit fit =
         projected_fit(base, Jr, r, opts.identifiability_tol, &p_now, opts.direction_threshold);
     const int dof = base.dof() - fit.kept;
-    const double s2 = dof > 0 ? (r.squaredNorm() - fit.delta_rss) / dof : 0.0;
-    Eigen::Index c = 0;
+    const double s2 = dof > 0 ? (rss - fit.delta_rss) / dof : 0.0;
     bool converged = true;
-    for (auto& p : M.p) {
-      p += fit.dp.segment(c, p.size());
-      for (Eigen::Index j = 0; j < p.size(); ++j) {
-        const double u = std::sqrt(std::max(0.0, s2 * fit.cov_unit(c + j, c + j)));
-        if (std::abs(fit.dp(c + j)) > opts.gauss_newton_tolerance * std::max(u, 1e-300))
-          converged = false;
-      }
-      c += p.size();
+    for (Eigen::Index j = 0; j < k; ++j) {
+      const double u = std::sqrt(std::max(0.0, s2 * fit.cov_unit(j, j)));
+      const double scale = std::max({u, 1e-9 * std::abs(p_now(j)), 1e-300});
+      if (std::abs(fit.dp(j)) > opts.gauss_newton_tolerance * scale) converged = false;
     }
+    step = fit.dp;
+    add_to_params(step);
     if (converged) {
       ++it;
       break;
@@ -239,7 +271,7 @@ Solved solve_model(const FourSensorConfig& cfg, Model& M, EffectContext ctx,
   }
   Solved out{ctx, {}, ResidualSpace(cfg), 0.0, it, {}, {}, 0.0};
   out.m_c = corrected(M, ctx);
-  out.ctx = ls_context(cfg, ctx.m_um, out.m_c, ctx.t_s);
+  out.ctx = ls_context(cfg, ctx.m_um, out.m_c, ctx.t_s, opts.solve);
   const Eigen::MatrixXd Jr = reduce_columns(cfg, model_jacobian(M, out.ctx));
   const Eigen::VectorXd r = base.project_out(reduce_readings(cfg, out.m_c));
   const Eigen::VectorXd p_now = concat(M);
@@ -360,7 +392,7 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
   res.alpha_per_candidate = opts.alpha / static_cast<double>(library.size());
 
   Model M;
-  Solved cur = solve_model(cfg, M, ls_context(cfg, m_um, m_um, t_s), opts);
+  Solved cur = solve_model(cfg, M, ls_context(cfg, m_um, m_um, t_s, opts.solve), opts);
   res.before = separate_four_sensor(cfg, m_um, opts.solve);
   FourSensorResult current_sep = res.before;
   auto analyse = [&](const Solved& s) {
@@ -416,7 +448,16 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
     st.candidates = std::move(table);
     M.effects.push_back(best->variant);
     M.p.push_back(best->p0);
-    cur = solve_model(cfg, M, cur.ctx, opts);
+    Solved next = solve_model(cfg, M, cur.ctx, opts);
+    if (!(next.rss < cur.rss)) {
+      // The linearised score promised a reduction the non-linear re-solve did not deliver.
+      M.effects.pop_back();
+      M.p.pop_back();
+      res.final_round = std::move(st.candidates);
+      res.stop_reason = "Gauss-Newton for '" + st.effect + "' did not reduce the residual";
+      break;
+    }
+    cur = std::move(next);
     st.gauss_newton_iterations = cur.iterations;
     st.parameters = M.p.back();
     st.u_parameters = cur.u.back();

@@ -13,8 +13,9 @@
 
 namespace errsep::core {
 
-/// Columns of J for δx = Σ_k p_k·φ_k(x_n) (φ: P × k, δx in µm).
-Eigen::MatrixXd slide_positioning_jacobian(const Eigen::MatrixXd& phi, const EffectContext& ctx);
+/// Columns of J for δx = Σ_k p_k·φ_k(x_n) (φ: P × k, δx in µm), at the current δx (µm, P).
+Eigen::MatrixXd slide_positioning_jacobian(const Eigen::MatrixXd& phi, const EffectContext& ctx,
+                                           const Eigen::VectorXd& dx_um);
 /// The correction for δx(x_n) given per position (µm).
 Eigen::MatrixXd slide_positioning_correction_um(const Eigen::VectorXd& dx_um,
                                                 const EffectContext& ctx);

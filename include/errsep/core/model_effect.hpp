@@ -28,12 +28,29 @@ struct EffectContext {
   Eigen::Vector4d e_um = Eigen::Vector4d::Zero();
   Eigen::MatrixXd residual_um;  ///< P × 4 reading residual of the current model (for searches)
 
-  /// f̂′ at reference sample j, µm/mm (central differences, one-sided at the ends).
-  double f_slope(int j) const;
-  /// Ŝ′(x_n) in µm/mm and γ̂′(x_n) in rad/mm.
-  double S_slope(int n) const;
-  double gamma_slope(int n) const;
+  /// Natural cubic splines through f̂ (over the reference grid), Ŝ and γ̂ (over the slide
+  /// positions): the shifted samples PE1 and PE2 need.  Call prepare() after setting the
+  /// profiles; linear extrapolation outside the grid.
+  void prepare();
+  double f_at(double y_mm) const;
+  double f_slope_at(double y_mm) const;  ///< µm/mm
+  double S_at(double x_mm) const;
+  double S_slope_at(double x_mm) const;  ///< µm/mm
+  double gamma_at(double x_mm) const;
+  double gamma_slope_at(double x_mm) const;  ///< rad/mm
+
+  /// f̂′ at reference sample j, µm/mm (from the spline).
+  double f_slope(int j) const { return f_slope_at(j * cfg.dx_mm); }
+
+ private:
+  Eigen::VectorXd f_m2_, S_m2_, g_m2_;  // spline second derivatives
 };
+
+/// Natural cubic spline through v sampled every h from 0: second derivatives at the knots.
+Eigen::VectorXd spline_second_derivatives(const Eigen::VectorXd& v, double h);
+/// Value (deriv = false) or first derivative (deriv = true) of that spline at x.
+double spline_eval(const Eigen::VectorXd& v, const Eigen::VectorXd& m2, double h, double x,
+                   bool deriv);
 
 /// First derivative of samples v spaced h apart (central inside, one-sided at the ends).
 double grid_derivative(const Eigen::VectorXd& v, double h, Eigen::Index j);

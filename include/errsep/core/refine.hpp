@@ -47,7 +47,7 @@ struct RefineOptions {
   double identifiability_tol = 1e-6;  ///< relative singular value below which a direction is lost
   /// A parameter direction stays in the corrected model only when its signal exceeds this many σ̂
   /// (a barely determined direction would carry its large uncertainty into S, γ and f).
-  double direction_threshold = 3.0;
+  double direction_threshold = 0.0;
   double speed_mm_per_s = 10.0;  ///< for scan-order times when none were recorded
   bool is_valid(std::string* why = nullptr) const;
 };
