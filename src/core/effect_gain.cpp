@@ -15,12 +15,20 @@ Eigen::MatrixXd GainEffect::correction_um(const Eigen::VectorXd& p,
 }
 
 Eigen::MatrixXd GainEffect::jacobian(const Eigen::VectorXd& p, const EffectContext& ctx) const {
+  // ∂(m − m/(1+g))/∂g = m/(1+g)², with m replaced by the fitted (noise-free) reading (1+g)·m̂:
+  // a regressor built from the noisy readings would correlate with the residual and make the
+  // F-test find gains in clean data.
   const Eigen::Index P = ctx.m_um.rows();
+  const auto O = ctx.cfg.offsets_mm();
   Eigen::MatrixXd J = Eigen::MatrixXd::Zero(4 * P, 3);
   for (int i = 1; i < 4; ++i) {
-    const double s = 1.0 / ((1.0 + p(i - 1)) * (1.0 + p(i - 1)));  // ∂(m − m/(1+g))/∂g
-    for (Eigen::Index n = 0; n < P; ++n)
-      J(4 * n + i, i - 1) = ctx.m_um(n, i) * s;
+    const std::size_t si = static_cast<std::size_t>(i);
+    for (Eigen::Index n = 0; n < P; ++n) {
+      const double x = static_cast<double>(n) * ctx.cfg.dx_mm;
+      const double fitted =
+          ctx.f_at(x + O[si]) + ctx.S_um(n) + 1000.0 * O[si] * ctx.gamma_rad(n) + ctx.e_um(i);
+      J(4 * n + i, i - 1) = fitted / (1.0 + p(i - 1));
+    }
   }
   return J;
 }
