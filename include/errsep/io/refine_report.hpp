@@ -1,0 +1,20 @@
+#pragma once
+// The refinement loop's step table (core/refine.hpp) as CSV (one row per parameter of each step,
+// step-level figures repeated; effect names and the model in metadata) and as readable text.
+#include <string>
+
+#include "errsep/core/refine.hpp"
+#include "errsep/io/csv.hpp"
+
+namespace errsep::io {
+
+/// Columns: step, parameter_index, value, u_value, F, p_value, rms_before_um, rms_after_um,
+/// whiteness_p, S_err_before_um, S_err_after_um, gamma_err_before_urad, gamma_err_after_urad,
+/// f_err_before_um, f_err_after_um (nan where not applicable).  Metadata: model, stop reason,
+/// "step<k>_effect" and "step<k>_parameter<j>" names.
+CsvTable refine_csv(const core::RefineResult& r);
+
+/// The step table, the final candidate scores and the whiteness verdict as text.
+std::string format_refine_text(const core::RefineResult& r);
+
+}  // namespace errsep::io

@@ -1,0 +1,96 @@
+#include "errsep/io/refine_report.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+namespace errsep::io {
+
+CsvTable refine_csv(const core::RefineResult& r) {
+  CsvTable t;
+  t.set_meta("format", "errsep refine steps");
+  t.set_meta("model", r.model_name);
+  t.set_meta("stop_reason", r.stop_reason);
+  t.set_meta("residual_white", r.residual_white() ? "true" : "false");
+  t.columns = {"step",
+               "parameter_index",
+               "value",
+               "u_value",
+               "F",
+               "p_value",
+               "rms_before_um",
+               "rms_after_um",
+               "whiteness_p",
+               "S_err_before_um",
+               "S_err_after_um",
+               "gamma_err_before_urad",
+               "gamma_err_after_urad",
+               "f_err_before_um",
+               "f_err_after_um"};
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (const auto& s : r.steps) {
+    t.set_meta("step" + std::to_string(s.index) + "_effect", s.effect);
+    const Eigen::Index k = std::max<Eigen::Index>(1, s.parameters.size());
+    for (Eigen::Index j = 0; j < k; ++j) {
+      const bool has = j < s.parameters.size();
+      if (has)
+        t.set_meta("step" + std::to_string(s.index) + "_parameter" + std::to_string(j),
+                   s.parameter_names[static_cast<std::size_t>(j)]);
+      const auto& eb = s.error_before;
+      const auto& ea = s.error_after;
+      t.rows.push_back({static_cast<double>(s.index), has ? static_cast<double>(j) : nan,
+                        has ? s.parameters(j) : nan, has ? s.u_parameters(j) : nan, s.F, s.p_value,
+                        s.rms_before_um, s.rms_after_um, s.whiteness_after.p_value,
+                        eb ? eb->S_um : nan, ea ? ea->S_um : nan, eb ? eb->gamma_urad : nan,
+                        ea ? ea->gamma_urad : nan, eb ? eb->f_um : nan, ea ? ea->f_um : nan});
+    }
+  }
+  return t;
+}
+
+std::string format_refine_text(const core::RefineResult& r) {
+  std::string out = "errsep refine: " + r.brief_report() + "\n\n";
+  char buf[512];
+  for (const auto& s : r.steps) {
+    std::snprintf(buf, sizeof buf,
+                  "step %d: %s  (F = %.4g, p = %.3g)\n  residual RMS %.4g -> %.4g um, sigma_hat "
+                  "%.3g um (dof %d), whiteness p = %.3g%s\n",
+                  s.index, s.effect.c_str(), s.F, s.p_value, s.rms_before_um, s.rms_after_um,
+                  s.sigma_after_um, s.dof_after, s.whiteness_after.p_value,
+                  s.whiteness_after.white ? "" : "  NOT WHITE");
+    out += buf;
+    if (!s.description.empty()) out += "  " + s.description + "\n";
+    for (Eigen::Index j = 0; j < s.parameters.size(); ++j) {
+      std::snprintf(buf, sizeof buf, "    %-14s = %.6g  (u = %.3g, k = 1)\n",
+                    s.parameter_names[static_cast<std::size_t>(j)].c_str(), s.parameters(j),
+                    s.u_parameters(j));
+      out += buf;
+    }
+    if (s.index > 0) {
+      std::snprintf(buf, sizeof buf, "    determined parameter combinations: %d of %zd\n",
+                    s.identifiable, static_cast<std::ptrdiff_t>(s.parameters.size()));
+      out += buf;
+    }
+    if (s.error_before && s.error_after) {
+      std::snprintf(buf, sizeof buf,
+                    "  error vs truth: S %.4g -> %.4g um, gamma %.4g -> %.4g urad, f %.4g -> "
+                    "%.4g um\n",
+                    s.error_before->S_um, s.error_after->S_um, s.error_before->gamma_urad,
+                    s.error_after->gamma_urad, s.error_before->f_um, s.error_after->f_um);
+      out += buf;
+    }
+  }
+  out += "\ncandidates when the loop stopped (" + r.stop_reason + "):\n";
+  for (const auto& c : r.final_round) {
+    std::snprintf(buf, sizeof buf, "  %-9s F = %-9.4g p = %-9.3g identifiable %d of %d\n",
+                  c.effect.c_str(), c.F, c.p_value, c.identifiable, c.parameters);
+    out += buf;
+  }
+  out += r.residual_white()
+             ? "\nThe final residual passes the whiteness test.\n"
+             : "\nThe final residual is NOT white: the model still lacks something the library "
+               "does not describe.\n";
+  return out;
+}
+
+}  // namespace errsep::io
