@@ -56,7 +56,7 @@ bool SdNotifier::notify(std::string_view state) const noexcept {
   if (fd_ < 0) return false;
   ssize_t n;
   do {
-    n = ::sendto(fd_, state.data(), state.size(), MSG_NOSIGNAL,
+    n = ::sendto(fd_, state.data(), state.size(), MSG_NOSIGNAL | MSG_DONTWAIT,
                  reinterpret_cast<const sockaddr*>(addr_.data()),
                  static_cast<socklen_t>(addr_.size()));
   } while (n < 0 && errno == EINTR);

@@ -6,6 +6,7 @@
 #include <signal.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
@@ -21,6 +22,7 @@ using test::DaemonRig;
 TEST_CASE("scan through the register map, then SIGTERM during a second scan") {
   DaemonRig rig;
   rig.devsim.start(rig.config, rig.tmp / "devsim.log");
+  rig.env = {"WATCHDOG_USEC=600000"};  // as systemd sets it for WatchdogSec=0.6
   rig.start_daemon({"--stop-timeout-ms", "3000"});
   REQUIRE(rig.notify->wait_for("READY=1", 15s));
 
@@ -72,6 +74,12 @@ TEST_CASE("scan through the register map, then SIGTERM during a second scan") {
       static_cast<std::int32_t>((static_cast<std::uint32_t>(r[test::reg_straightness_hi]) << 16) |
                                 static_cast<std::uint32_t>(r[test::reg_straightness_lo]));
   CHECK(std::abs(nm / 1000.0 - (hi - lo)) < 0.002);
+
+  // The main loop kept pinging the watchdog through the scan (every <= 0.3 s).
+  const auto msgs = rig.notify->messages();
+  const auto pings = std::count(msgs.begin(), msgs.end(), std::string("WATCHDOG=1"));
+  WARN(pings << " watchdog pings so far");
+  CHECK(pings >= 2);
 
   // Scan 2: SIGTERM once it is well under way.
   REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1, &out) == 0);

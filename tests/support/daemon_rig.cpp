@@ -132,14 +132,33 @@ NotifyListener::NotifyListener(std::filesystem::path path) : path_(std::move(pat
   std::strcpy(sa.sun_path, path_.c_str());
   if (::bind(fd_, reinterpret_cast<sockaddr*>(&sa), sizeof sa) != 0)
     throw std::runtime_error("notify socket: cannot bind " + path_.string());
+  thread_ = std::thread([this] {
+    char b[4096];
+    while (!stop_.load()) {
+      pollfd pfd{fd_, POLLIN, 0};
+      if (::poll(&pfd, 1, 20) <= 0) continue;
+      const ssize_t n = ::recv(fd_, b, sizeof b, MSG_DONTWAIT);
+      if (n <= 0) continue;
+      std::lock_guard<std::mutex> lock(mu_);
+      messages_.emplace_back(b, static_cast<std::size_t>(n));
+    }
+  });
 }
 
 NotifyListener::~NotifyListener() {
+  stop_.store(true);
+  if (thread_.joinable()) thread_.join();
   if (fd_ >= 0) ::close(fd_);
   ::unlink(path_.c_str());
 }
 
+std::vector<std::string> NotifyListener::messages() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return messages_;
+}
+
 bool NotifyListener::seen(const std::string& needle) const {
+  std::lock_guard<std::mutex> lock(mu_);
   for (const auto& m : messages_)
     if (m.find(needle) != std::string::npos) return true;
   return false;
@@ -147,22 +166,11 @@ bool NotifyListener::seen(const std::string& needle) const {
 
 bool NotifyListener::wait_for(const std::string& needle, std::chrono::milliseconds timeout) {
   const auto until = std::chrono::steady_clock::now() + timeout;
-  drain();
   while (!seen(needle)) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
-        until - std::chrono::steady_clock::now());
-    if (left.count() <= 0) return false;
-    pollfd pfd{fd_, POLLIN, 0};
-    if (::poll(&pfd, 1, static_cast<int>(left.count())) > 0) drain();
+    if (std::chrono::steady_clock::now() >= until) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   return true;
-}
-
-void NotifyListener::drain() {
-  char b[4096];
-  ssize_t n;
-  while ((n = ::recv(fd_, b, sizeof b, MSG_DONTWAIT)) > 0)
-    messages_.emplace_back(b, static_cast<std::size_t>(n));
 }
 
 int mbpoll_write_coil(int port, int coil, int value, std::string* out) {
@@ -234,9 +242,9 @@ void DaemonRig::start_daemon(const std::vector<std::string>& extra) {
                                    "--check-ms",
                                    "200"};
   argv.insert(argv.end(), extra.begin(), extra.end());
-  daemon = std::make_unique<Child>(
-      argv, std::vector<std::string>{"NOTIFY_SOCKET=" + notify->path().string()},
-      tmp / "daemon.log");
+  std::vector<std::string> e = env;
+  e.push_back("NOTIFY_SOCKET=" + notify->path().string());
+  daemon = std::make_unique<Child>(argv, e, tmp / "daemon.log");
   const auto rest =
       daemon->read_line("register map listening 127.0.0.1:", std::chrono::milliseconds(10000));
   if (!rest)

@@ -5,9 +5,11 @@
 // ephemeral loopback ports.
 #include <sys/types.h>
 
+#include <atomic>
 #include <chrono>
 #include <filesystem>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <thread>
@@ -46,23 +48,25 @@ class Child {
   std::optional<int> status_;
 };
 
-/// An AF_UNIX datagram socket bound to a path: what $NOTIFY_SOCKET names under systemd.
+/// An AF_UNIX datagram socket bound to a path: what $NOTIFY_SOCKET names under systemd.  A thread
+/// receives continuously (as systemd does), so the sender never meets a full queue.
 class NotifyListener {
  public:
   explicit NotifyListener(std::filesystem::path path);
   ~NotifyListener();
   const std::filesystem::path& path() const { return path_; }
-  /// Receives until a message contains `needle` or the timeout passes.  All messages are kept.
+  /// Waits until a message received so far contains `needle`, or the timeout passes.
   bool wait_for(const std::string& needle, std::chrono::milliseconds timeout);
-  /// Receives whatever is queued now.
-  void drain();
-  const std::vector<std::string>& messages() const { return messages_; }
+  std::vector<std::string> messages() const;
   bool seen(const std::string& needle) const;
 
  private:
   std::filesystem::path path_;
   int fd_ = -1;
+  mutable std::mutex mu_;
   std::vector<std::string> messages_;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
 };
 
 /// mbpoll -t 0: writes coil `coil` (0-based) = value.  Returns mbpoll's exit status; its output
@@ -89,6 +93,7 @@ struct DaemonRig {
   std::unique_ptr<NotifyListener> notify;
   std::unique_ptr<Child> daemon;
   int modbus_port = 0;
+  std::vector<std::string> env;  ///< extra environment of the daemon ("KEY=value")
 
   DaemonRig();
   /// Starts the daemon (devsim must run, or `device_port` be given); reads its register-map

@@ -32,7 +32,8 @@ class SdNotifier {
   std::chrono::microseconds watchdog_interval() const noexcept { return watchdog_; }
 
   /// Sends `state` (one or more "KEY=value" lines) as one datagram.  Returns false when disabled
-  /// or the send failed (systemd gone: the daemon carries on).  Thread-safe (one sendto()).
+  /// or the send failed (systemd gone: the daemon carries on).  Never blocks: a full receive
+  /// queue drops the message rather than stalling the main loop.  Thread-safe (one sendto()).
   bool notify(std::string_view state) const noexcept;
   bool ready() const noexcept { return notify("READY=1"); }
   bool stopping() const noexcept { return notify("STOPPING=1"); }
