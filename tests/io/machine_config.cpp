@@ -82,7 +82,7 @@ TEST_CASE("config/simulator.toml parses and is self-consistent") {
   CHECK(c.scan.geometry.N == 69);
   CHECK(c.scan.geometry.positions() == 62);
   CHECK(c.scan.averages == 100);
-  CHECK(c.simulator.e_um[3] == 4.0);
+  CHECK(c.simulator.e_um[3] == 0.07);
   REQUIRE(c.find_stage("reference_piece"));
   CHECK(c.find_stage("reference_piece")->target_position.type == RegisterType::int32);
   CHECK(c.find_stage("reference_piece")->target_position.word_order == WordOrder::little);
