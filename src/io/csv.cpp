@@ -19,8 +19,10 @@ std::string where(const std::filesystem::path& file, std::size_t line) {
 
 std::string trim(std::string_view s) {
   std::size_t b = 0, e = s.size();
-  while (b < e && (s[b] == ' ' || s[b] == '\t' || s[b] == '\r')) ++b;
-  while (e > b && (s[e - 1] == ' ' || s[e - 1] == '\t' || s[e - 1] == '\r')) --e;
+  while (b < e && (s[b] == ' ' || s[b] == '\t' || s[b] == '\r'))
+    ++b;
+  while (e > b && (s[e - 1] == ' ' || s[e - 1] == '\t' || s[e - 1] == '\r'))
+    --e;
   return std::string(s.substr(b, e - b));
 }
 
@@ -52,13 +54,15 @@ std::vector<double> CsvTable::column(const std::string& name,
   const auto idx = find_column(name);
   if (!idx) {
     std::string have;
-    for (const auto& c : columns) have += (have.empty() ? "" : ", ") + c;
+    for (const auto& c : columns)
+      have += (have.empty() ? "" : ", ") + c;
     throw CsvError(file, columns.empty() ? 0 : 1,
                    "missing column '" + name + "' (header has: " + have + ")");
   }
   std::vector<double> v;
   v.reserve(rows.size());
-  for (const auto& r : rows) v.push_back(r[*idx]);
+  for (const auto& r : rows)
+    v.push_back(r[*idx]);
   return v;
 }
 
@@ -83,7 +87,8 @@ void CsvTable::add_column(const std::string& name, const std::vector<double>& va
                                 " values for " + std::to_string(rows.size()) + " rows");
   if (rows.empty()) rows.resize(values.size());
   columns.push_back(name);
-  for (std::size_t i = 0; i < values.size(); ++i) rows[i].push_back(values[i]);
+  for (std::size_t i = 0; i < values.size(); ++i)
+    rows[i].push_back(values[i]);
 }
 
 CsvTable read_csv(const std::filesystem::path& file, const CsvReadOptions& opts) {
@@ -111,8 +116,8 @@ CsvTable read_csv(const std::filesystem::path& file, const CsvReadOptions& opts)
     if (!have_header) {
       for (std::size_t i = 0; i < cells.size(); ++i) {
         if (cells[i].empty())
-          throw CsvError(file, lineno, "empty column name in header (column " +
-                                           std::to_string(i + 1) + ")");
+          throw CsvError(file, lineno,
+                         "empty column name in header (column " + std::to_string(i + 1) + ")");
         for (std::size_t j = 0; j < i; ++j)
           if (cells[j] == cells[i])
             throw CsvError(file, lineno, "duplicate column '" + cells[i] + "' in header");
@@ -135,8 +140,7 @@ CsvTable read_csv(const std::filesystem::path& file, const CsvReadOptions& opts)
       if (!c.empty() && *b == '+') ++b;
       const auto [ptr, ec] = std::from_chars(b, e, v);
       if (c.empty() || ec != std::errc() || ptr != e)
-        throw CsvError(file, lineno,
-                       "column '" + t.columns[i] + "': '" + c + "' is not a number");
+        throw CsvError(file, lineno, "column '" + t.columns[i] + "': '" + c + "' is not a number");
       if (!std::isfinite(v) && !opts.allow_non_finite)
         throw CsvError(file, lineno, "column '" + t.columns[i] + "': non-finite value '" + c + "'");
       row[i] = v;
@@ -165,7 +169,8 @@ std::string format_csv(const CsvTable& table, int significant_digits) {
     os << (i ? "," : "") << table.columns[i];
   os << '\n';
   for (const auto& r : table.rows) {
-    for (std::size_t i = 0; i < r.size(); ++i) os << (i ? "," : "") << r[i];
+    for (std::size_t i = 0; i < r.size(); ++i)
+      os << (i ? "," : "") << r[i];
     os << '\n';
   }
   return os.str();

@@ -110,8 +110,8 @@ TEST_CASE("scan on the device simulator, separated: S and gamma match the simula
       max_dS, range_S, max_dg, range_g);
   // Tolerance: the simulator's noise σ = 0.05 µm averaged over K = 5 readings (σ/√5 ≈ 0.022 µm)
   // propagates into S with the gain the paper reports (ΔS_max ≈ 11·σ at σ = 0.1 µm, Sec. 3.2),
-  // ≈ 0.25 µm; 0.5 µm is 3 % of the 15 µm range of S here.  γ: the paper's Δγ_max ≈ 1.8e-3° = 31 µrad
-  // at σ = 0.1 µm scales to ≈ 7 µrad here; 15 µrad is 4 % of γ's range.
+  // ≈ 0.25 µm; 0.5 µm is 3 % of the 15 µm range of S here.  γ: the paper's Δγ_max ≈ 1.8e-3° = 31
+  // µrad at σ = 0.1 µm scales to ≈ 7 µrad here; 15 µrad is 4 % of γ's range.
   CHECK(max_dS < 0.5);
   CHECK(max_dg < 15.0);
 }

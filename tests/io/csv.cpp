@@ -10,7 +10,9 @@ using errsep::io::CsvError;
 using errsep::io::CsvTable;
 
 namespace {
-void write(const std::filesystem::path& p, const std::string& s) { std::ofstream(p) << s; }
+void write(const std::filesystem::path& p, const std::string& s) {
+  std::ofstream(p) << s;
+}
 }  // namespace
 
 TEST_CASE("CSV round trip keeps metadata, header and values") {
@@ -31,14 +33,14 @@ TEST_CASE("CSV errors name the file and the line") {
   errsep::test::TempDir dir;
   const auto p = dir / "bad.csv";
   write(p, "x_mm,m1_um\n0,1\n5\n");
-  REQUIRE_THROWS_WITH(errsep::io::read_csv(p), Catch::Contains("bad.csv:3") &&
-                                                   Catch::Contains("expected 2 values"));
+  REQUIRE_THROWS_WITH(errsep::io::read_csv(p),
+                      Catch::Contains("bad.csv:3") && Catch::Contains("expected 2 values"));
   write(p, "x_mm,m1_um\n0,1\n5,nan\n");
-  REQUIRE_THROWS_WITH(errsep::io::read_csv(p), Catch::Contains("bad.csv:3") &&
-                                                   Catch::Contains("non-finite"));
+  REQUIRE_THROWS_WITH(errsep::io::read_csv(p),
+                      Catch::Contains("bad.csv:3") && Catch::Contains("non-finite"));
   write(p, "x_mm,m1_um\n0,abc\n");
-  REQUIRE_THROWS_WITH(errsep::io::read_csv(p), Catch::Contains("bad.csv:2") &&
-                                                   Catch::Contains("not a number"));
+  REQUIRE_THROWS_WITH(errsep::io::read_csv(p),
+                      Catch::Contains("bad.csv:2") && Catch::Contains("not a number"));
   write(p, "# only comments\n");
   REQUIRE_THROWS_WITH(errsep::io::read_csv(p), Catch::Contains("no header"));
   REQUIRE_THROWS_WITH(errsep::io::read_csv(dir / "missing.csv"), Catch::Contains("cannot open"));
@@ -56,7 +58,8 @@ TEST_CASE("atomic write replaces a file whole and leaves no temporary behind") {
   std::string s((std::istreambuf_iterator<char>(in)), {});
   REQUIRE(s == "new content");
   std::size_t n = 0;
-  for ([[maybe_unused]] const auto& e : std::filesystem::directory_iterator(dir.path())) ++n;
+  for ([[maybe_unused]] const auto& e : std::filesystem::directory_iterator(dir.path()))
+    ++n;
   REQUIRE(n == 1);
   REQUIRE_THROWS_WITH(errsep::io::write_file_atomic(dir / "no-such-dir" / "x.csv", "x"),
                       Catch::Contains("no-such-dir"));

@@ -27,7 +27,8 @@ RawFourSensorScan sample_scan(bool complete) {
   }
   s.t_s.emplace();
   for (std::size_t i = 0; i < 4; ++i)
-    for (int n = 0; n < 9; ++n) (*s.t_s)[i].push_back(0.1 * n + static_cast<double>(i));
+    for (int n = 0; n < 9; ++n)
+      (*s.t_s)[i].push_back(0.1 * n + static_cast<double>(i));
   s.complete = complete;
   s.metadata = {{"samples", "1600"}, {"stop_reason", complete ? "" : "aborted by user"}};
   return s;

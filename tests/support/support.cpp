@@ -27,7 +27,8 @@ int run_command(const std::string& cmd, std::string* output) {
   if (!p) return -1;
   std::array<char, 4096> buf{};
   std::string out;
-  while (std::fgets(buf.data(), static_cast<int>(buf.size()), p)) out += buf.data();
+  while (std::fgets(buf.data(), static_cast<int>(buf.size()), p))
+    out += buf.data();
   const int status = ::pclose(p);
   if (output) *output = std::move(out);
   if (status == -1 || !WIFEXITED(status)) return -1;

@@ -6,9 +6,15 @@
 
 namespace errsep::test {
 
-inline std::filesystem::path source_dir() { return ERRSEP_SOURCE_DIR; }
-inline std::filesystem::path binary_dir() { return ERRSEP_BINARY_DIR; }
-inline std::filesystem::path shared_dir() { return ERRSEP_SHARED_DIR; }
+inline std::filesystem::path source_dir() {
+  return ERRSEP_SOURCE_DIR;
+}
+inline std::filesystem::path binary_dir() {
+  return ERRSEP_BINARY_DIR;
+}
+inline std::filesystem::path shared_dir() {
+  return ERRSEP_SHARED_DIR;
+}
 /// Path of an errsep app in the build tree, e.g. app_path("separate").
 inline std::filesystem::path app_path(const std::string& name) {
   return binary_dir() / "apps" / ("errsep-" + name);

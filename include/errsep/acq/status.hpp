@@ -17,13 +17,20 @@ enum class IoStatus : std::uint8_t {
 /// Short lower-case name ("ok", "timeout", ...), for logs and CSV metadata.  Real-time safe.
 constexpr const char* to_string(IoStatus s) noexcept {
   switch (s) {
-    case IoStatus::ok: return "ok";
-    case IoStatus::timeout: return "timeout";
-    case IoStatus::disconnected: return "disconnected";
-    case IoStatus::device_exception: return "device_exception";
-    case IoStatus::out_of_range: return "out_of_range";
-    case IoStatus::fault: return "fault";
-    case IoStatus::not_configured: return "not_configured";
+    case IoStatus::ok:
+      return "ok";
+    case IoStatus::timeout:
+      return "timeout";
+    case IoStatus::disconnected:
+      return "disconnected";
+    case IoStatus::device_exception:
+      return "device_exception";
+    case IoStatus::out_of_range:
+      return "out_of_range";
+    case IoStatus::fault:
+      return "fault";
+    case IoStatus::not_configured:
+      return "not_configured";
   }
   return "unknown";
 }

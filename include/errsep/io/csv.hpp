@@ -36,8 +36,7 @@ struct CsvTable {
   /// Index of a column, or nullopt.
   std::optional<std::size_t> find_column(const std::string& name) const;
   /// All values of a named column; throws CsvError(file, 0, "missing column 'x'") when absent.
-  std::vector<double> column(const std::string& name,
-                             const std::filesystem::path& file = {}) const;
+  std::vector<double> column(const std::string& name, const std::filesystem::path& file = {}) const;
   /// Value of a metadata key, or nullopt.
   std::optional<std::string> meta(const std::string& key) const;
   void set_meta(const std::string& key, const std::string& value);
