@@ -7,6 +7,8 @@
 #include "errsep/core/effect_periodic.hpp"
 #include "errsep/core/effect_sensor_offset.hpp"
 #include "errsep/core/effect_slide_positioning.hpp"
+#include "errsep/core/effect_thermal_drift.hpp"
+#include "errsep/core/effect_traverse.hpp"
 
 namespace errsep::core {
 
@@ -97,6 +99,8 @@ std::vector<std::unique_ptr<ModelEffect>> default_effect_library() {
   lib.push_back(std::make_unique<DriftEffect>());
   lib.push_back(std::make_unique<SlidePositioningEffect>());
   lib.push_back(std::make_unique<PeriodicEffect>());
+  lib.push_back(std::make_unique<ThermalDriftEffect>());
+  lib.push_back(std::make_unique<TraverseEffect>(1, 4));
   return lib;
 }
 

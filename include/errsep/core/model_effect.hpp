@@ -79,7 +79,7 @@ class ModelEffect {
   virtual std::unique_ptr<ModelEffect> clone() const = 0;
 };
 
-/// The library: pe1, gain, drift, pe2, periodic (one file each).
+/// The library: pe1, gain, drift, pe2, periodic, thermal, traverse (one file each).
 std::vector<std::unique_ptr<ModelEffect>> default_effect_library();
 
 }  // namespace errsep::core
