@@ -10,8 +10,10 @@
 #include <limits>
 #include <sstream>
 
+#include "errsep/acq/digital_trigger.hpp"
 #include "errsep/acq/sampler.hpp"  // monotonic_ns
 #include "errsep/core/four_sensor.hpp"
+#include "errsep/core/iso230.hpp"
 #include "errsep/io/csv.hpp"
 
 namespace errsep::acq {
@@ -166,6 +168,9 @@ bool DaemonOptions::is_valid(std::string* why) const {
                " ms: must be >= 1000");
   if (!(schedule_interval_s >= 0) || (schedule_interval_s > 0 && schedule_interval_s < 1))
     return bad("schedule_interval_s = " + fmt(schedule_interval_s) + ": must be 0 or >= 1");
+  if (gpio_debounce.count() < 0 || gpio_debounce.count() > 10000)
+    return bad("gpio_debounce = " + std::to_string(gpio_debounce.count()) +
+               " ms: must be in [0, 10000]");
   return true;
 }
 
@@ -183,9 +188,12 @@ Daemon::Daemon(DaemonOptions opts, BackendFactory factory, const SdNotifier& not
   if (::pipe2(wake_pipe_, O_CLOEXEC | O_NONBLOCK) != 0)
     throw std::runtime_error("daemon: cannot create the wake-up pipe");
   status_.last_straightness_um = std::numeric_limits<double>::quiet_NaN();
+  status_.last_straightness_U_um = std::numeric_limits<double>::quiet_NaN();
+  status_.last_straightness_lsq_um = std::numeric_limits<double>::quiet_NaN();
 }
 
 Daemon::~Daemon() {
+  stop_gpio_watch();
   if (worker_.joinable()) {
     abort_.store(true);
     worker_.join();
@@ -260,6 +268,7 @@ TriggerReply Daemon::trigger(TriggerSource source, std::string* reason) {
       }
     }
     status_.last_trigger = r;
+    status_.last_trigger_source = source;
     if (r == TriggerReply::accepted) {
       pending_.store(true);
       pending_source_ = source;
@@ -269,7 +278,7 @@ TriggerReply Daemon::trigger(TriggerSource source, std::string* reason) {
         why += " (scan " + std::to_string(status_.scan_id) + ")";
       else if (status_.state == DaemonState::fault)
         why += " (" + status_.message + ")";
-      status_.last_refusal = why;
+      status_.last_refusal = std::string(to_string(source)) + ": " + why;
     }
   }
   if (r == TriggerReply::accepted) {
@@ -311,9 +320,11 @@ bool Daemon::try_open() {
     }
     backend_->open();
     backend_open_ = true;
+    start_gpio_watch();
     return true;
   } catch (const std::exception& e) {
     // A config error stays an error until SIGHUP; a device that does not answer is retried.
+    stop_gpio_watch();
     if (backend_) {
       backend_.reset();  // rebuilt (and re-opened from scratch) on the next attempt
     }
@@ -339,9 +350,67 @@ void Daemon::ping_watchdog(std::int64_t now_ns) {
   last_ping_ns_ = now_ns;
 }
 
+void Daemon::start_gpio_watch() {
+  stop_gpio_watch();
+  gpio_ = backend_ ? backend_->start_input() : StartInput{};
+  if (!gpio_.io) return;
+  log(kInfo, "GPIO start input " + gpio_.name + ": a rising edge starts a scan" +
+                 (gpio_.lamp_line >= 0
+                      ? "; line " + std::to_string(gpio_.lamp_line) + " is on while a scan runs"
+                      : std::string()));
+  gpio_stop_.store(false);
+  gpio_thread_ = std::thread([this, in = gpio_] {
+    const std::int64_t debounce_ns = opts_.gpio_debounce.count() * kMsNs;
+    bool have_last = false, reported = false;
+    std::int64_t last_ns = 0;
+    while (!gpio_stop_.load()) {
+      EdgeEvent ev;
+      const IoStatus st =
+          wait_for_rising_edge(*in.io, in.line, std::chrono::seconds(1), ev, &gpio_stop_);
+      if (st == IoStatus::timeout) continue;
+      if (st != IoStatus::ok) {
+        // A failing chip must not make this thread spin: report once, retry every 200 ms.
+        if (!reported)
+          log(kWarning, "GPIO start input " + in.name + ": " + to_string(st) + " (retrying)");
+        reported = true;
+        for (int i = 0; i < 10 && !gpio_stop_.load(); ++i)
+          std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        continue;
+      }
+      if (reported) log(kInfo, "GPIO start input " + in.name + ": answers again");
+      reported = false;
+      // Contact bounce: edges within the debounce time of the last accepted one are the same
+      // press.  Kernel timestamps, so a late wake-up of this thread does not matter.
+      if (have_last && ev.t_ns - last_ns < debounce_ns) continue;
+      have_last = true;
+      last_ns = ev.t_ns;
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        ++status_.gpio_edges;
+      }
+      trigger(TriggerSource::gpio);  // refused with a reason while a scan runs, like the coil
+    }
+  });
+}
+
+void Daemon::stop_gpio_watch() noexcept {
+  gpio_stop_.store(true);
+  if (gpio_thread_.joinable()) gpio_thread_.join();
+  gpio_ = {};
+}
+
+void Daemon::set_lamp(bool on) noexcept {
+  if (gpio_.io && gpio_.lamp_line >= 0) {
+    const IoStatus st = gpio_.io->set_output(static_cast<unsigned>(gpio_.lamp_line), on);
+    if (st != IoStatus::ok)
+      log(kWarning, "GPIO lamp line " + std::to_string(gpio_.lamp_line) + ": " + to_string(st));
+  }
+}
+
 void Daemon::start_scan(TriggerSource src) {
   const std::uint64_t id = next_scan_id_++;
   scan_start_ = std::chrono::system_clock::now();
+  scan_source_ = src;
   scan_stem_ = io::ResultsStore::stem(scan_start_, id);
   abort_.store(false);
   scan_done_.store(false);
@@ -353,6 +422,7 @@ void Daemon::start_scan(TriggerSource src) {
   pending_.store(false);
   set_state(DaemonState::scanning,
             "scan " + std::to_string(id) + " (" + to_string(src) + ") " + scan_stem_);
+  set_lamp(true);
   ScanContext* ctx = ctx_.get();
   ScanBackend* be = backend_.get();
   worker_ = std::thread([this, ctx, be] {
@@ -374,6 +444,7 @@ void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd
   const std::uint64_t id = ctx_->scan_id();
   std::vector<std::pair<std::string, std::string>> meta = {
       {"scan_id", std::to_string(id)},
+      {"trigger", to_string(scan_source_)},
       {"started_utc", utc_iso(scan_start_)},
       {"ended_utc", utc_iso(std::chrono::system_clock::now())},
       {"outcome", to_string(end.outcome)}};
@@ -384,7 +455,8 @@ void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd
 
   ScanOutcome outcome = end.outcome;
   std::string last_file;
-  double straightness = std::numeric_limits<double>::quiet_NaN();
+  constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  double straightness = kNaN, straightness_U = kNaN, straightness_lsq = kNaN;
   try {
     const std::string kind = raw.complete ? "raw" : "raw-incomplete";
     last_file = store_.write(scan_stem_, kind, io::format_csv(io::to_csv_table(raw), 12)).string();
@@ -405,8 +477,6 @@ void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd
           t.set_meta(k, v);
         t.set_meta("raw_file", std::filesystem::path(last_file).filename().string());
         t.set_meta("solver", r.brief_report());
-        straightness = r.S_um.maxCoeff() - r.S_um.minCoeff();
-        t.set_meta("straightness_um", fmt(straightness, 6));
         const auto n = static_cast<std::size_t>(r.x_mm.size());
         std::vector<double> x(n), s(n), g(n), us(n);
         for (std::size_t k = 0; k < n; ++k) {
@@ -416,13 +486,33 @@ void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd
           g[k] = r.gamma_rad(e) * 1e6;
           us[k] = r.u_S_um.size() == r.x_mm.size() ? r.u_S_um(e) : 0.0;
         }
+        // ISO 230-1 straightness deviation: S(x) carries a line the separation cannot fix (and
+        // the slide's alignment to the reference adds one), so the figure is taken about a
+        // reference line, never as max - min of S.  Both references; the register map shows
+        // the minimum zone (the smallest zone enclosing S, ISO 12780-1).
+        const std::vector<double> u_pts =
+            r.u_S_um.size() == r.x_mm.size() ? us : std::vector<double>{};
+        const core::StraightnessResult mz =
+            core::evaluate_straightness(x, s, u_pts, core::ReferenceLine::minimum_zone);
+        const core::StraightnessResult ls =
+            core::evaluate_straightness(x, s, u_pts, core::ReferenceLine::least_squares);
+        straightness = mz.straightness_um;
+        straightness_U = mz.uncertainty.expanded;
+        straightness_lsq = ls.straightness_um;
+        t.set_meta("straightness_minimum_zone_um", fmt(mz.straightness_um, 6));
+        t.set_meta("straightness_minimum_zone_U_um", fmt(mz.uncertainty.expanded, 6));
+        t.set_meta("straightness_least_squares_um", fmt(ls.straightness_um, 6));
+        t.set_meta("straightness_least_squares_U_um", fmt(ls.uncertainty.expanded, 6));
+        t.set_meta("straightness_U_note",
+                   "k = 2, bound over any correlation of the per-point u_S (core/iso230.hpp)");
         t.add_column("x_mm", x);
         t.add_column("S_um", s);
         t.add_column("gamma_urad", g);
         t.add_column("u_S_um", us);
         last_file = store_.write(scan_stem_, "result", io::format_csv(t, 10)).string();
         log(kInfo, "scan " + std::to_string(id) + ": straightness " + fmt(straightness) +
-                       " um; wrote " + last_file);
+                       " um (minimum zone), " + fmt(straightness_lsq) +
+                       " um (least squares); wrote " + last_file);
       } catch (const io::DiskFullError&) {
         throw;
       } catch (const std::exception& e) {
@@ -441,12 +531,15 @@ void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd
   status_.last_scan_id = id;
   status_.last_outcome = outcome;
   status_.last_straightness_um = straightness;
+  status_.last_straightness_U_um = straightness_U;
+  status_.last_straightness_lsq_um = straightness_lsq;
   if (!last_file.empty()) status_.last_file = last_file;
   if (outcome == ScanOutcome::complete) ++status_.scans_completed;
 }
 
 void Daemon::finish_scan(bool stopping) {
   worker_.join();
+  set_lamp(false);
   ScanEnd end = worker_end_;
   if (stopping && end.outcome == ScanOutcome::aborted) end.outcome = ScanOutcome::stopped;
   if (stopping && end.outcome == ScanOutcome::complete &&
@@ -488,14 +581,17 @@ void Daemon::do_reload() {
     return;
   }
   log(kInfo, fresh->describe());
+  stop_gpio_watch();
   backend_.reset();  // closes the old devices before the new ones open the same endpoints
   backend_ = std::move(fresh);
   backend_open_ = false;
   try {
     backend_->open();
     backend_open_ = true;
+    start_gpio_watch();
     set_state(DaemonState::idle, "configuration reloaded");
   } catch (const std::exception& e) {
+    stop_gpio_watch();
     backend_.reset();
     set_state(DaemonState::fault, std::string("cannot open devices: ") + e.what());
   }
@@ -532,6 +628,14 @@ int Daemon::run() {
     }
     if (reload_.load() && !worker_.joinable()) do_reload();
 
+    // Schedule tick: an ordinary trigger, so while a scan runs (or in fault) it is refused with
+    // its reason and skipped; ticks missed meanwhile are not made up (no back-to-back scans).
+    if (sched.count() > 0 && now >= next_schedule) {
+      while (next_schedule <= now)
+        next_schedule += sched;
+      trigger(TriggerSource::schedule);
+    }
+
     DaemonState st;
     {
       std::lock_guard<std::mutex> lock(mu_);
@@ -567,9 +671,6 @@ int Daemon::run() {
           src = pending_source_;
         }
         start_scan(src);
-      } else if (sched.count() > 0 && now >= next_schedule) {
-        next_schedule = now + sched;
-        start_scan(TriggerSource::schedule);
       } else if (now >= next_check) {
         next_check = now + interval;
         std::string why;
@@ -610,6 +711,8 @@ int Daemon::run() {
   const auto deadline = clock::now() + opts_.stop_timeout;
   set_state(DaemonState::stopping, "SIGTERM");
   notify_.stopping();
+  // No more edges: the watcher notices within its 100 ms wait slice.
+  gpio_stop_.store(true);
   int rc = 0;
   if (worker_.joinable()) {
     abort_.store(true);
@@ -628,6 +731,7 @@ int Daemon::run() {
       log(kErr, "scan worker did not stop within " + std::to_string(opts_.stop_timeout.count()) +
                     " ms; writing the raw data measured so far");
       worker_end_ = {ScanOutcome::stopped, "SIGTERM; worker did not stop in time"};
+      set_lamp(false);
       write_scan_files(ctx_->snapshot(), worker_end_);
       worker_.detach();
       (void)ctx_.release();      // still used by the detached worker: leaked on purpose
@@ -637,6 +741,7 @@ int Daemon::run() {
   } else if (backend_) {
     backend_->stop_motion();
   }
+  stop_gpio_watch();  // before its backend (which owns the DigitalIo) goes
   backend_.reset();
   log(kInfo, "stopped");
   return rc;

@@ -83,6 +83,16 @@ void DeviceScanBackend::stop_motion() noexcept {
   if (dev_) dev_->stop_all_stages();
 }
 
+acq::StartInput DeviceScanBackend::start_input() {
+  acq::StartInput in;
+  if (!dev_ || !dev_->gpio || !cfg_.gpio || cfg_.gpio->start_line < 0) return in;
+  in.io = dev_->gpio.get();
+  in.line = static_cast<unsigned>(cfg_.gpio->start_line);
+  in.lamp_line = cfg_.gpio->output_line;
+  in.name = cfg_.gpio->chip + " line " + std::to_string(cfg_.gpio->start_line);
+  return in;
+}
+
 std::string DeviceScanBackend::describe() const {
   std::ostringstream os;
   os << "machine config " << cfg_.source.string() << ": " << cfg_.buses.size() << " buses, "
@@ -90,6 +100,8 @@ std::string DeviceScanBackend::describe() const {
      << (cfg_.scan.single_sensor ? "one sensor on the sensor stage" : "four fixed probes")
      << ", N = " << cfg_.scan.geometry.N << ", " << cfg_.scan.geometry.positions()
      << " positions, K = " << cfg_.scan.averages;
+  if (cfg_.gpio && cfg_.gpio->start_line >= 0)
+    os << "; GPIO start input " << cfg_.gpio->chip << " line " << cfg_.gpio->start_line;
   return os.str();
 }
 

@@ -92,6 +92,16 @@ void DaemonRegisterServer::stop() noexcept {
 
 namespace {
 
+// um as int32 nm, high word first; INT32_MIN when there is no value.
+void put_nm(std::uint16_t* r, double um) {
+  std::int32_t nm = std::numeric_limits<std::int32_t>::min();
+  if (std::isfinite(um) && std::abs(um) < 2.0e6)
+    nm = static_cast<std::int32_t>(std::lround(um * 1000.0));
+  const auto u = static_cast<std::uint32_t>(nm);
+  r[0] = static_cast<std::uint16_t>(u >> 16);
+  r[1] = static_cast<std::uint16_t>(u & 0xFFFF);
+}
+
 void fill(modbus_mapping_t* map, const acq::DaemonStatus& s, std::uint16_t alive) {
   std::uint16_t* r = map->tab_input_registers;
   r[0] = static_cast<std::uint16_t>(s.state);
@@ -102,15 +112,13 @@ void fill(modbus_mapping_t* map, const acq::DaemonStatus& s, std::uint16_t alive
   r[5] = static_cast<std::uint16_t>(s.scans_completed & 0xFFFF);
   r[6] = static_cast<std::uint16_t>(s.last_scan_id & 0xFFFF);
   r[7] = static_cast<std::uint16_t>(s.last_outcome);
-  std::int32_t nm = std::numeric_limits<std::int32_t>::min();
-  if (std::isfinite(s.last_straightness_um) && std::abs(s.last_straightness_um) < 2.0e6)
-    nm = static_cast<std::int32_t>(std::lround(s.last_straightness_um * 1000.0));
-  const auto u = static_cast<std::uint32_t>(nm);
-  r[8] = static_cast<std::uint16_t>(u >> 16);
-  r[9] = static_cast<std::uint16_t>(u & 0xFFFF);
+  put_nm(r + 8, s.last_straightness_um);
   r[10] = static_cast<std::uint16_t>(s.faults & 0xFFFF);
   r[11] = alive;
   r[12] = kRegisterMapVersion;
+  r[13] = static_cast<std::uint16_t>(s.last_trigger_source);
+  put_nm(r + 14, s.last_straightness_lsq_um);
+  put_nm(r + 16, s.last_straightness_U_um);
   map->tab_bits[0] = map->tab_bits[1] = 0;
 }
 

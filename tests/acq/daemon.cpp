@@ -85,7 +85,7 @@ bool is(const acq::DaemonStatus& s, acq::DaemonState st) {
 
 }  // namespace
 
-TEST_CASE("one scan at a time; SIGHUP during a scan is applied after it, nothing dropped") {
+TEST_CASE("one scan at a time, SIGHUP during a scan is applied after it, nothing dropped") {
   test::TempDir tmp;
   Script s;
   const acq::SdNotifier quiet("", 0us);

@@ -40,11 +40,11 @@ TEST_CASE("device simulator stopped and restarted: fault reported, recovery, nex
   REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1) == 0);
   auto r =
       rig.wait_regs([](const std::vector<long>& x) { return x[test::reg_points_done] >= 4; }, 20s);
-  REQUIRE(r.size() == 13);
+  REQUIRE(r.size() == test::kRegisterCount);
   rig.devsim.kill();
 
   r = rig.wait_regs([](const std::vector<long>& x) { return x[test::reg_state] == 3; }, 20s);
-  REQUIRE(r.size() == 13);
+  REQUIRE(r.size() == test::kRegisterCount);
   REQUIRE(r[test::reg_state] == 3);  // fault
   CHECK(r[test::reg_faults] >= 1);
   CHECK(r[test::reg_last_scan_id] == 1);
@@ -63,7 +63,7 @@ TEST_CASE("device simulator stopped and restarted: fault reported, recovery, nex
   std::string out;
   CHECK(test::mbpoll_write_coil(rig.modbus_port, 0, 1, &out) != 0);
   r = rig.registers();
-  REQUIRE(r.size() == 13);
+  REQUIRE(r.size() == test::kRegisterCount);
   CHECK(r[test::reg_trigger] == 3);
   const double fault_share = cpu_share(*rig.daemon, 1500ms);
   WARN("daemon CPU in fault: " << 100 * fault_share << " %");
@@ -72,7 +72,7 @@ TEST_CASE("device simulator stopped and restarted: fault reported, recovery, nex
   // The simulator comes back on the same port: the daemon leaves the fault by itself.
   rig.devsim.start(rig.config, rig.tmp / "devsim.log", port);
   r = rig.wait_regs([](const std::vector<long>& x) { return x[test::reg_state] == 1; }, 20s);
-  REQUIRE(r.size() == 13);
+  REQUIRE(r.size() == test::kRegisterCount);
   REQUIRE(r[test::reg_state] == 1);
   CHECK(rig.notify->wait_for("devices answer again", 2s));
   CHECK(rig.daemon->running());
@@ -81,7 +81,7 @@ TEST_CASE("device simulator stopped and restarted: fault reported, recovery, nex
   REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1) == 0);
   r = rig.wait_regs(
       [](const std::vector<long>& x) { return x[test::reg_last_scan_id] == 2 && x[0] != 2; }, 30s);
-  REQUIRE(r.size() == 13);
+  REQUIRE(r.size() == test::kRegisterCount);
   CHECK(r[test::reg_last_outcome] == 1);
   CHECK(r[test::reg_state] == 1);
   const auto raw2 = rig.find_file(2, "raw");

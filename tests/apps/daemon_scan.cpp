@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "errsep/core/iso230.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "support/daemon_rig.hpp"
@@ -27,9 +28,9 @@ TEST_CASE("scan through the register map, then SIGTERM during a second scan") {
   REQUIRE(rig.notify->wait_for("READY=1", 15s));
 
   auto r = rig.registers();
-  REQUIRE(r.size() == 13);
+  REQUIRE(r.size() == test::kRegisterCount);
   CHECK(r[test::reg_state] == 1);  // idle
-  CHECK(r[12] == 1);               // register map version
+  CHECK(r[test::reg_version] == 2);
 
   // Scan 1, started by the cell controller.
   std::string out;
@@ -39,13 +40,13 @@ TEST_CASE("scan through the register map, then SIGTERM during a second scan") {
   INFO("second trigger: " << out);
   CHECK(rc2 != 0);
   r = rig.registers();
-  REQUIRE(r.size() == 13);
+  REQUIRE(r.size() == test::kRegisterCount);
   const long refused = r[test::reg_trigger];
   CHECK((refused == 2 || refused == 6));  // refused: scanning, or scan about to start
 
   r = rig.wait_regs(
       [](const std::vector<long>& x) { return x[test::reg_last_scan_id] == 1 && x[0] == 1; }, 20s);
-  REQUIRE(r.size() == 13);
+  REQUIRE(r.size() == test::kRegisterCount);
   REQUIRE(r[test::reg_last_scan_id] == 1);
   CHECK(r[test::reg_last_outcome] == 1);  // complete
   CHECK(r[test::reg_scans_completed] == 1);
@@ -63,17 +64,23 @@ TEST_CASE("scan through the register map, then SIGTERM during a second scan") {
   REQUIRE(res1);
   const io::CsvTable t = io::read_csv(*res1);
   CHECK(t.rows.size() == scan1.positions());
+  CHECK(t.meta("trigger") == std::optional<std::string>("modbus"));
+  CHECK(scan1.meta("trigger") == std::optional<std::string>("modbus"));
+  // The register map's straightness (nm, int32 high word first) is the ISO 230-1 figure of the
+  // result file's S: minimum zone in 8-9, least squares in 14-15, U (k = 2) of 8-9 in 16-17.
+  const auto x_mm = t.column("x_mm");
   const auto s_um = t.column("S_um");
-  double lo = s_um[0], hi = s_um[0];
-  for (double v : s_um) {
-    lo = std::min(lo, v);
-    hi = std::max(hi, v);
-  }
-  // The register map's straightness (nm, int32 high word first) is the result file's S range.
-  const auto nm =
-      static_cast<std::int32_t>((static_cast<std::uint32_t>(r[test::reg_straightness_hi]) << 16) |
-                                static_cast<std::uint32_t>(r[test::reg_straightness_lo]));
-  CHECK(std::abs(nm / 1000.0 - (hi - lo)) < 0.002);
+  const auto u_um = t.column("u_S_um");
+  const auto mz = core::evaluate_straightness(x_mm, s_um, u_um, core::ReferenceLine::minimum_zone);
+  const auto ls = core::evaluate_straightness(x_mm, s_um, u_um, core::ReferenceLine::least_squares);
+  CHECK(std::abs(test::nm_registers_um(r, test::reg_straightness_hi) - mz.straightness_um) < 0.002);
+  CHECK(std::abs(test::nm_registers_um(r, test::reg_straightness_lsq_hi) - ls.straightness_um) <
+        0.002);
+  CHECK(std::abs(test::nm_registers_um(r, test::reg_straightness_U_hi) - mz.uncertainty.expanded) <
+        0.002);
+  CHECK(std::abs(std::stod(*t.meta("straightness_minimum_zone_um")) - mz.straightness_um) <
+        1e-4 * std::max(1.0, mz.straightness_um));
+  CHECK(r[test::reg_trigger_source] == 0);  // modbus
 
   // The main loop kept pinging the watchdog through the scan (every <= 0.3 s).
   const auto msgs = rig.notify->messages();
@@ -89,7 +96,7 @@ TEST_CASE("scan through the register map, then SIGTERM during a second scan") {
                x[test::reg_points_done] >= 5;
       },
       20s);
-  REQUIRE(r.size() == 13);
+  REQUIRE(r.size() == test::kRegisterCount);
   REQUIRE(r[test::reg_state] == 2);
   const long done_before = r[test::reg_points_done];
   const long total = r[test::reg_points_total];

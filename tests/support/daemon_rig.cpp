@@ -12,10 +12,12 @@
 #include <cstring>
 #include <exception>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
 
+#include "errsep/drivers/daemon_register_server.hpp"
 #include "errsep/io/results_store.hpp"
 
 extern char** environ;
@@ -253,7 +255,20 @@ void DaemonRig::start_daemon(const std::vector<std::string>& extra) {
 }
 
 std::vector<long> DaemonRig::registers() {
-  return mbpoll_read_inputs(modbus_port, 0, 13);
+  return mbpoll_read_inputs(modbus_port, 0, static_cast<int>(kRegisterCount));
+}
+
+static_assert(kRegisterCount == static_cast<std::size_t>(drivers::kInputRegisterCount),
+              "the rig reads the whole register map");
+
+double nm_registers_um(const std::vector<long>& r, int hi) {
+  const auto i = static_cast<std::size_t>(hi);
+  if (r.size() < i + 2) return std::numeric_limits<double>::quiet_NaN();
+  const auto nm = static_cast<std::int32_t>((static_cast<std::uint32_t>(r[i]) << 16) |
+                                            static_cast<std::uint32_t>(r[i + 1]));
+  if (nm == std::numeric_limits<std::int32_t>::min())
+    return std::numeric_limits<double>::quiet_NaN();
+  return nm / 1000.0;
 }
 
 std::optional<std::filesystem::path> DaemonRig::find_file(std::uint64_t id,

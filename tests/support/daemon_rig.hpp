@@ -99,7 +99,7 @@ struct DaemonRig {
   /// Starts the daemon (devsim must run, or `device_port` be given); reads its register-map
   /// port.  Does not wait for READY=1.
   void start_daemon(const std::vector<std::string>& extra_args = {});
-  /// Input registers 0..12, or empty if the daemon does not answer.
+  /// Input registers 0..kRegisterCount-1, or empty if the daemon does not answer.
   std::vector<long> registers();
   /// Polls the register map until pred(registers) or the timeout; returns the last registers.
   template <class Pred>
@@ -118,11 +118,14 @@ std::vector<long> DaemonRig::wait_regs(Pred pred, std::chrono::milliseconds time
   std::vector<long> r;
   while (std::chrono::steady_clock::now() < until) {
     r = registers();
-    if (r.size() >= 13 && pred(r)) return r;
+    if (r.size() >= 18 && pred(r)) return r;
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   return r;
 }
+
+/// Input registers of the daemon's map, version 2 (drivers/daemon_register_server.hpp).
+inline constexpr std::size_t kRegisterCount = 18;
 
 /// Register indices of the daemon's map (drivers/daemon_register_server.hpp).
 enum Reg : int {
@@ -137,6 +140,13 @@ enum Reg : int {
   reg_straightness_hi = 8,
   reg_straightness_lo = 9,
   reg_faults = 10,
+  reg_version = 12,
+  reg_trigger_source = 13,
+  reg_straightness_lsq_hi = 14,
+  reg_straightness_U_hi = 16,
 };
+
+/// An int32 nm pair of registers (high word first) in um; NaN for INT32_MIN (no value).
+double nm_registers_um(const std::vector<long>& r, int hi);
 
 }  // namespace errsep::test

@@ -10,9 +10,13 @@
 //
 // One scan at a time: a trigger (Modbus coil, GPIO edge, schedule) while a scan runs, while in
 // fault or while stopping is refused with a reason (TriggerReply + text) that the register map
-// exposes to the cell controller.  SIGHUP reloads the machine config between scans: during a scan
-// the reload waits for the scan to end, so no scan is dropped; a config with errors is reported
-// and the old one kept.
+// exposes to the cell controller, together with the source of that trigger.  GPIO: the backend's
+// StartInput (a DigitalIo line) is watched by a thread of the daemon, a debounced rising edge is
+// a trigger like the start coil.  Schedule: every tick is a trigger too, so a tick during a scan
+// is refused and skipped, never queued into a second scan right after the first.  Each file
+// records its trigger source (metadata "trigger").  SIGHUP reloads the machine config between
+// scans: during a scan the reload waits for the scan to end, so no scan is dropped; a config with
+// errors is reported and the old one kept.
 //
 // The main loop sleeps in poll() on a wake-up pipe (signals, triggers and the end of a scan write
 // to it) with a timeout of at most the health-check / watchdog period: it never spins.  The scan
@@ -28,6 +32,7 @@
 #include <string>
 #include <thread>
 
+#include "errsep/acq/digital_io.hpp"
 #include "errsep/acq/sd_notify.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/results_store.hpp"
@@ -106,6 +111,15 @@ struct ScanEnd {
   std::string message;  ///< empty when complete
 };
 
+/// The start input of a backend: a rising edge on `line` of `io` asks for a scan (a start button
+/// or a PLC output), like the start coil.  `lamp_line` >= 0: an output set while a scan runs.
+struct StartInput {
+  DigitalIo* io = nullptr;  ///< null: no GPIO start input; owned by the backend, configured
+  unsigned line = 0;
+  int lamp_line = -1;
+  std::string name;  ///< for the journal, e.g. "gpiochip0 line 17"
+};
+
 /// The devices side of the daemon.  Not thread-safe except where stated: the main loop calls
 /// open()/check() only while no scan runs; run_scan() runs on the worker thread.
 class ScanBackend {
@@ -125,6 +139,10 @@ class ScanBackend {
   virtual void stop_motion() noexcept = 0;
   /// One line for the journal ("machine config X: 5 sensors, 3 stages on 2 buses").
   virtual std::string describe() const = 0;
+  /// The GPIO start input, valid from a successful open() until the backend is destroyed.  The
+  /// daemon waits for edges on it from its own thread (wait_edge() only; set_output() from the
+  /// main loop).  Default: none.
+  virtual StartInput start_input() { return {}; }
 };
 
 /// Builds a backend from the current config (called at start and on SIGHUP).  Throws on config
@@ -138,8 +156,13 @@ struct DaemonOptions {
   /// Longest a scan may go without progress before the watchdog is no longer pinged (systemd
   /// then restarts a hung daemon).
   std::chrono::milliseconds scan_stall_limit{60000};
-  double schedule_interval_s = 0.0;  ///< start a scan this often; 0 = no schedule
-  bool separate = true;              ///< compute and write the four-sensor result after a scan
+  /// Start a scan this often; 0 = no schedule.  A tick while a scan runs (or in fault) is
+  /// refused and skipped, not queued: the schedule never produces two scans back to back.
+  double schedule_interval_s = 0.0;
+  /// GPIO start input: rising edges closer than this (kernel timestamps) to the previous one are
+  /// contact bounce and ignored.
+  std::chrono::milliseconds gpio_debounce{20};
+  bool separate = true;  ///< compute and write the four-sensor result after a scan
 
   bool is_valid(std::string* why = nullptr) const;
 };
@@ -154,11 +177,17 @@ struct DaemonStatus {
   std::uint64_t scans_completed = 0;  ///< since start
   std::uint64_t last_scan_id = 0;
   ScanOutcome last_outcome = ScanOutcome::none;
-  double last_straightness_um = 0.0;  ///< max − min of S(x) of the last result (NaN: none)
-  std::string last_file;              ///< the last file written
+  /// Straightness of S(x) of the last result (ISO 230-1 straightness deviation, NaN: none):
+  /// minimum-zone reference line (two parallel lines of smallest separation enclosing S)...
+  double last_straightness_um = 0.0;
+  double last_straightness_U_um = 0.0;    ///< ...its expanded uncertainty (k = 2, bound model)
+  double last_straightness_lsq_um = 0.0;  ///< about the least-squares reference line
+  std::string last_file;                  ///< the last file written
   TriggerReply last_trigger = TriggerReply::none;
-  std::string last_refusal;  ///< reason of the last refused trigger
-  std::uint32_t faults = 0;  ///< times the fault state was entered
+  TriggerSource last_trigger_source = TriggerSource::command;  ///< of last_trigger
+  std::uint64_t gpio_edges = 0;  ///< rising edges seen on the GPIO start input (debounced)
+  std::string last_refusal;      ///< reason of the last refused trigger
+  std::uint32_t faults = 0;      ///< times the fault state was entered
 };
 
 class Daemon {
@@ -193,6 +222,10 @@ class Daemon {
   void write_scan_files(const io::RawFourSensorScan& raw, const ScanEnd& end);
   void do_reload();
   void ping_watchdog(std::int64_t now_ns);
+  /// GPIO start input of the open backend: a thread waiting for its edges.
+  void start_gpio_watch();
+  void stop_gpio_watch() noexcept;
+  void set_lamp(bool on) noexcept;
 
   DaemonOptions opts_;
   BackendFactory factory_;
@@ -213,8 +246,13 @@ class Daemon {
   ScanEnd worker_end_;
   std::uint64_t next_scan_id_ = 1;
   std::chrono::system_clock::time_point scan_start_{};
+  TriggerSource scan_source_ = TriggerSource::command;
   std::string scan_stem_;
   bool stop_during_scan_ = false;
+
+  StartInput gpio_;
+  std::thread gpio_thread_;
+  std::atomic<bool> gpio_stop_{false};
 
   mutable std::mutex mu_;  // guards status_ and pending_source_
   DaemonStatus status_;

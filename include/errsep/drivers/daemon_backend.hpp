@@ -8,6 +8,10 @@
 // sensor stage moves to sensor_stage_origin_mm + offset_i, then the slide visits x_0..x_p; with
 // four fixed probes (single_sensor = false) the slide visits each x_n once and all four are
 // averaged together.  Only scan.method = "four_sensor" is run by the daemon.
+//
+// GPIO: when the config has [gpio] with start_line >= 0, that line (opened with the other devices
+// by Devices::configure) is the daemon's start input: a rising edge starts a scan; output_line,
+// if set, is on while a scan runs.
 #include <memory>
 #include <string>
 
@@ -32,6 +36,8 @@ class DeviceScanBackend final : public acq::ScanBackend {
   acq::ScanEnd run_scan(acq::ScanContext& ctx) override;
   void stop_motion() noexcept override;
   std::string describe() const override;
+  /// [gpio] start_line / output_line of the config, once open() succeeded; none otherwise.
+  acq::StartInput start_input() override;
 
  private:
   io::MachineConfig cfg_;

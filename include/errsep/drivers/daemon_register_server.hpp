@@ -17,10 +17,19 @@
 //   6  last scan id     low 16 bits
 //   7  last outcome     ScanOutcome: 1 complete, 2 aborted, 3 device fault, 4 stopped, 5 write
 //                       failed
-//   8,9 straightness    of the last result, nm, int32, high word first; INT32_MIN = none
+//   8,9 straightness    of the last result, nm, int32, high word first; INT32_MIN = none:
+//                       ISO 230-1 straightness deviation of S(x) about the MINIMUM-ZONE
+//                       reference line (result file key straightness_minimum_zone_um)
 //   10 faults           times the fault state was entered, low 16 bits
 //   11 alive            seconds since the server started, low 16 bits
-//   12 map version      1
+//   12 map version      2
+//   13 trigger source   of register 1: 0 modbus (start coil), 1 GPIO start input, 2 schedule,
+//                       3 command (TriggerSource)
+//   14,15 straightness  of the last result about the LEAST-SQUARES reference line, nm, int32 as
+//                       8,9 (key straightness_least_squares_um)
+//   16,17 U             expanded uncertainty (k = 2) of registers 8,9, nm, int32 as 8,9
+//                       (key straightness_minimum_zone_U_um)
+// Version 1 had registers 0..12, with 8,9 = max - min of S(x) (no reference line removed).
 #include <atomic>
 #include <memory>
 #include <string>
@@ -36,8 +45,8 @@ struct RegisterServerOptions {
   bool is_valid(std::string* why = nullptr) const;
 };
 
-inline constexpr int kRegisterMapVersion = 1;
-inline constexpr int kInputRegisterCount = 13;
+inline constexpr int kRegisterMapVersion = 2;
+inline constexpr int kInputRegisterCount = 18;
 
 class DaemonRegisterServer {
  public:
