@@ -365,7 +365,10 @@ std::string RefineResult::brief_report() const {
                 model_name.c_str(), effects.size(), steps.front().rms_after_um, last.rms_after_um,
                 residual.sigma_um, residual.dof, residual_white() ? "white" : "NOT WHITE",
                 residual.whiteness.p_value, stop_reason.c_str());
-  return buf;
+  std::string out = buf;
+  if (!residual_white() && !residual.whiteness.rejected_by.empty())
+    out += "; rejected by: " + residual.whiteness.rejected_by;
+  return out;
 }
 
 RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
@@ -390,6 +393,7 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
   res.t_s = t_s;
   res.model_name = "zhao2019-eq1";
   res.alpha_per_candidate = opts.alpha / static_cast<double>(library.size());
+  res.alpha_residual = opts.residual.alpha;
 
   Model M;
   Solved cur = solve_model(cfg, M, ls_context(cfg, m_um, m_um, t_s, opts.solve), opts);

@@ -3,6 +3,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <numeric>
 #include <random>
@@ -147,6 +148,10 @@ bool ResidualAnalysisOptions::is_valid(std::string* why) const {
     return fail("mc_samples = " + std::to_string(mc_samples) + ": must be >= 19");
   if (!(alpha > 0 && alpha < 1))
     return fail("alpha = " + std::to_string(alpha) + ": must be in (0, 1)");
+  // The smallest Monte-Carlo p-value is 1/(mc_samples + 1): below alpha only with enough draws.
+  if (static_cast<double>(mc_samples + 1) * alpha <= 1.0)
+    return fail("mc_samples = " + std::to_string(mc_samples) + " cannot reach alpha = " +
+                std::to_string(alpha) + ": need mc_samples + 1 > 1/alpha");
   return true;
 }
 
@@ -193,6 +198,130 @@ Eigen::MatrixXd scan_order_times_s(const FourSensorConfig& cfg, double speed_mm_
   return t;
 }
 
+namespace {
+
+// What the null distribution of the residual looks like position by position: the variance of
+// ||r_n||² for unit noise (Σ over the two reduced rows of 1 − h_jj, h = leverage), and the time
+// order of the 4P readings.
+struct NullShape {
+  Eigen::VectorXd energy_var;   // P
+  std::vector<int> time_order;  // indices n·4 + i in time order
+};
+
+constexpr int kStatistics = 5;
+constexpr const char* kStatisticNames[kStatistics] = {
+    "Ljung-Box", "periodogram peak", "cumulative periodogram", "runs", "local excess"};
+
+struct Statistics {
+  double v[kStatistics] = {0, 0, 0, 0, 0};  // larger = less white
+  Eigen::Index local_start = 0, local_width = 0;
+};
+
+Statistics all_statistics(const Eigen::MatrixXd& res, const Eigen::VectorXd& r_reduced, int lags,
+                          const NullShape& ns, Eigen::VectorXd* power = nullptr) {
+  Statistics st;
+  const Eigen::Index P = res.rows();
+  Eigen::VectorXd pw;
+  whiteness_statistics(res, lags, &st.v[0], &st.v[1], &pw);
+  // Bartlett: KS distance of the cumulative periodogram from the uniform line.
+  const double total = pw.sum();
+  if (total > 0 && pw.size() > 1) {
+    double c = 0, d = 0;
+    const auto K = static_cast<double>(pw.size());
+    for (Eigen::Index k = 0; k < pw.size(); ++k) {
+      c += pw(k) / total;
+      d = std::max(d, std::abs(c - static_cast<double>(k + 1) / K));
+    }
+    st.v[2] = d;
+  }
+  // Runs of the signs in time order (zeros, which only an exact fit gives, count as +).
+  {
+    long n_pos = 0, n_neg = 0, runs = 0;
+    int prev = 0;
+    for (int a : ns.time_order) {
+      const int sgn = res(a / 4, a % 4) >= 0 ? 1 : -1;
+      (sgn > 0 ? n_pos : n_neg)++;
+      if (sgn != prev) ++runs;
+      prev = sgn;
+    }
+    const auto n = static_cast<double>(n_pos + n_neg);
+    const double np = static_cast<double>(n_pos), nn = static_cast<double>(n_neg);
+    const double expect = 1.0 + 2.0 * np * nn / n;
+    const double var = 2.0 * np * nn * (2.0 * np * nn - n) / (n * n * (n - 1.0));
+    st.v[3] = var > 0 ? (expect - static_cast<double>(runs)) / std::sqrt(var) : 0.0;
+  }
+  // Local excess: windows of w positions, energy over its null expectation σ̂²·Σ var, as a
+  // Wilson–Hilferty z (a χ²_d/d-like ratio made comparable across widths).
+  {
+    const double dof = ns.energy_var.sum();
+    const double s2 = dof > 0 ? r_reduced.squaredNorm() / dof : 0.0;
+    double best = -std::numeric_limits<double>::infinity();
+    if (s2 > 0) {
+      Eigen::VectorXd e(P);
+      for (Eigen::Index n = 0; n < P; ++n)
+        e(n) = r_reduced.segment<2>(2 * n).squaredNorm();
+      for (Eigen::Index w : {1, 2, 3, 5, 8}) {
+        if (w > P) break;
+        double se = e.head(w).sum(), sv = ns.energy_var.head(w).sum();
+        for (Eigen::Index n0 = 0;; ++n0) {
+          if (sv > 0.5) {  // windows at the ends where the model fits (almost) exactly carry
+                           // no information
+            const double x = se / (s2 * sv);
+            const double a = 2.0 / (9.0 * sv);
+            const double z = (std::cbrt(x) - (1.0 - a)) / std::sqrt(a);
+            if (z > best) {
+              best = z;
+              st.local_start = n0;
+              st.local_width = w;
+            }
+          }
+          if (n0 + w >= P) break;
+          se += e(n0 + w) - e(n0);
+          sv += ns.energy_var(n0 + w) - ns.energy_var(n0);
+        }
+      }
+    }
+    st.v[4] = std::isfinite(best) ? best : 0.0;
+  }
+  if (power) *power = std::move(pw);
+  return st;
+}
+
+// Upper-tail p-value of a statistic from Monte-Carlo draws: the empirical fraction where at least
+// kTailCount draws are as large, an exponential tail fitted to the largest draws beyond that
+// (peaks over threshold with the mean excess as scale).  Without the extrapolation every value
+// beyond the largest draw would get the same p = 1/(M+1), and the minimum over five statistics
+// could then not be told from the draws' own minima: the combined p-value would sit near
+// 5/(M+1) however far out the data are.  The combination stays calibrated whatever this
+// function is, because the data and the draws go through the same one.
+class UpperTail {
+ public:
+  explicit UpperTail(std::vector<double> draws) : d_(std::move(draws)) {
+    std::sort(d_.begin(), d_.end());
+    const auto n = static_cast<std::ptrdiff_t>(d_.size());
+    n_tail_ = std::max<std::ptrdiff_t>(std::min<std::ptrdiff_t>(kTailCount, n), n / 10);
+    u_ = d_[static_cast<std::size_t>(n - n_tail_)];
+    double excess = 0;
+    for (std::ptrdiff_t i = n - n_tail_; i < n; ++i)
+      excess += d_[static_cast<std::size_t>(i)] - u_;
+    beta_ = excess / static_cast<double>(n_tail_);
+  }
+  double p_value(double t) const {
+    const double M = static_cast<double>(d_.size()) + 1.0;
+    const auto ge = d_.end() - std::lower_bound(d_.begin(), d_.end(), t);
+    if (ge >= n_tail_ || !(beta_ > 0)) return (1.0 + static_cast<double>(ge)) / M;
+    return (static_cast<double>(n_tail_) / M) * std::exp(-(t - u_) / beta_);
+  }
+
+ private:
+  static constexpr std::ptrdiff_t kTailCount = 10;
+  std::vector<double> d_;
+  std::ptrdiff_t n_tail_ = 0;
+  double u_ = 0, beta_ = 0;
+};
+
+}  // namespace
+
 ResidualAnalysis analyse_residual(const ResidualSpace& space, const Eigen::MatrixXd& m_um,
                                   const Eigen::MatrixXd& t_s, const ResidualAnalysisOptions& opts) {
   std::string why;
@@ -225,11 +354,27 @@ ResidualAnalysis analyse_residual(const ResidualSpace& space, const Eigen::Matri
     out.residual_time_order_um(j) = out.residual_um(a / 4, a % 4);
   }
 
+  NullShape ns;
+  ns.time_order = idx;
+  {
+    const Eigen::MatrixXd& Q = space.basis();
+    ns.energy_var.resize(P);
+    for (int n = 0; n < P; ++n)
+      ns.energy_var(n) = 2.0 - Q.middleRows<2>(2 * n).squaredNorm();
+  }
   WhitenessTest& w = out.whiteness;
   w.lags = std::min(opts.lags, std::max(1, P / 4));
   w.mc_samples = opts.mc_samples;
-  whiteness_statistics(out.residual_um, w.lags, &w.ljung_box_q, &w.periodogram_ratio,
-                       &out.periodogram_power);
+  const Statistics data = all_statistics(out.residual_um, r, w.lags, ns, &out.periodogram_power);
+  w.ljung_box_q = data.v[0];
+  w.periodogram_ratio = data.v[1];
+  w.cumulative_periodogram_d = data.v[2];
+  w.runs_z = data.v[3];
+  w.local_z = data.v[4];
+  w.local_x_mm =
+      (static_cast<double>(data.local_start) + 0.5 * static_cast<double>(data.local_width - 1)) *
+      cfg.dx_mm;
+  w.local_width_mm = static_cast<double>(data.local_width) * cfg.dx_mm;
   const Eigen::Index K = out.periodogram_power.size();
   out.periodogram_period_mm.resize(K);
   for (Eigen::Index k = 1; k <= K; ++k)
@@ -240,22 +385,50 @@ ResidualAnalysis analyse_residual(const ResidualSpace& space, const Eigen::Matri
     out.dominant_period_mm = out.periodogram_period_mm(kmax);
   }
   if (out.dof > 0 && out.rss_um2 > 0) {
+    // Pool the data (row 0) with the draws; each statistic's p-value is its upper rank in the
+    // pool, and the p-value of the data's smallest p is the rank of that minimum among the
+    // pool's minima (the draws and the data are exchangeable under the null).
+    const int M = opts.mc_samples + 1;
+    Eigen::MatrixXd T(M, kStatistics);
+    for (int j = 0; j < kStatistics; ++j)
+      T(0, j) = data.v[j];
     std::mt19937_64 rng(opts.seed);
     std::normal_distribution<double> g(0.0, 1.0);
-    int ge_q = 0, ge_p = 0;
     Eigen::VectorXd z(2 * P);
-    for (int s = 0; s < opts.mc_samples; ++s) {
+    for (int s = 1; s < M; ++s) {
       for (Eigen::Index j = 0; j < z.size(); ++j)
         z(j) = g(rng);
-      const Eigen::MatrixXd rs = expand_residual(cfg, space.project_out(z));
-      double q = 0, pr = 0;
-      whiteness_statistics(rs, w.lags, &q, &pr);
-      if (q >= w.ljung_box_q) ++ge_q;
-      if (pr >= w.periodogram_ratio) ++ge_p;
+      const Eigen::VectorXd rz = space.project_out(z);
+      const Statistics st = all_statistics(expand_residual(cfg, rz), rz, w.lags, ns);
+      for (int j = 0; j < kStatistics; ++j)
+        T(s, j) = st.v[j];
     }
-    w.p_ljung_box = (1.0 + ge_q) / (1.0 + opts.mc_samples);
-    w.p_periodogram = (1.0 + ge_p) / (1.0 + opts.mc_samples);
-    w.p_value = std::min(1.0, 2.0 * std::min(w.p_ljung_box, w.p_periodogram));
+    Eigen::MatrixXd pr(M, kStatistics);
+    for (int j = 0; j < kStatistics; ++j) {
+      std::vector<double> draws(T.col(j).data() + 1, T.col(j).data() + M);
+      const UpperTail tail(std::move(draws));
+      for (int s = 0; s < M; ++s)
+        pr(s, j) = tail.p_value(T(s, j));
+    }
+    const Eigen::VectorXd minp = pr.rowwise().minCoeff();
+    int le = 0;
+    for (int s = 0; s < M; ++s)
+      if (minp(s) <= minp(0)) ++le;
+    w.p_ljung_box = pr(0, 0);
+    w.p_periodogram = pr(0, 1);
+    w.p_cumulative_periodogram = pr(0, 2);
+    w.p_runs = pr(0, 3);
+    w.p_local = pr(0, 4);
+    w.p_value = static_cast<double>(le) / M;
+    if (w.p_value < opts.alpha) {
+      Eigen::Index jmin = 0;
+      pr.row(0).minCoeff(&jmin);
+      for (int j = 0; j < kStatistics; ++j)
+        if (j == jmin || pr(0, j) < opts.alpha) {
+          if (!w.rejected_by.empty()) w.rejected_by += ", ";
+          w.rejected_by += kStatisticNames[j];
+        }
+    }
   }
   w.white = w.p_value >= opts.alpha;
   return out;

@@ -86,10 +86,33 @@ std::string format_refine_text(const core::RefineResult& r) {
                   c.effect.c_str(), c.F, c.p_value, c.identifiable, c.parameters);
     out += buf;
   }
-  out += r.residual_white()
-             ? "\nThe final residual passes the whiteness test.\n"
-             : "\nThe final residual is NOT white: the model still lacks something the library "
-               "does not describe.\n";
+  const core::WhitenessTest& w = r.residual.whiteness;
+  std::snprintf(buf, sizeof buf,
+                "\nwhiteness of the final residual (Monte-Carlo p-values, %d draws):\n"
+                "  Ljung-Box %.3g, periodogram peak %.3g (period %.4g mm), cumulative "
+                "periodogram %.3g,\n  runs in time order %.3g, local excess %.3g (largest at x = "
+                "%.5g mm over %.4g mm); combined p = %.3g (alpha %.3g)\n",
+                w.mc_samples, w.p_ljung_box, w.p_periodogram, r.residual.dominant_period_mm,
+                w.p_cumulative_periodogram, w.p_runs, w.p_local, w.local_x_mm, w.local_width_mm,
+                w.p_value, r.alpha_residual);
+  out += buf;
+  if (r.residual_white()) {
+    out += "\nThe final residual passes the whiteness test.\n";
+  } else {
+    out += "\nThe final residual is NOT white (" + w.rejected_by +
+           "): the model still lacks something the library does not describe";
+    if (w.p_local < r.alpha_residual) {
+      std::snprintf(buf, sizeof buf, ", with structure concentrated near x = %.5g mm",
+                    w.local_x_mm);
+      out += buf;
+    }
+    out += ".";
+    if (!r.effects.empty())
+      out +=
+          "  The effects added may partly stand in for it; treat their parameters with "
+          "caution.";
+    out += "\n";
+  }
   return out;
 }
 

@@ -119,6 +119,7 @@ struct RefineResult {
   Eigen::MatrixXd m_corrected_um;
   Eigen::MatrixXd t_s;  ///< reading times used
   double alpha_per_candidate = 0;
+  double alpha_residual = 0.01;  ///< level of the whiteness test (RefineOptions::residual.alpha)
   /// True when the final residual passes the whiteness test.  False means the model is still
   /// missing something even if no candidate in the library was significant.
   bool residual_white() const { return residual.whiteness.white; }

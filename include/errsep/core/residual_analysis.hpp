@@ -79,12 +79,38 @@ struct ResidualAnalysisOptions {
   bool is_valid(std::string* why = nullptr) const;
 };
 
+/// Whiteness of the residual: five statistics, each sensitive to a different departure from
+/// white noise, combined by the minimum of their p-values.  Every p-value is Monte-Carlo
+/// calibrated against (I − H)·ε drawn with the current model's projector (see the top of the
+/// file), and so is the minimum itself (the data and the draws are pooled and ranked: an exact
+/// level-α test for Gaussian noise, no Bonferroni loss), so on a complete model the residual is
+/// called not white in a fraction α of scans.
+///   - Ljung–Box (Box & Pierce portmanteau with the Ljung–Box weights) of each configuration's
+///     residual in position order, summed: serial correlation along x.
+///   - Periodogram max / mean of the configuration-summed periodogram: one sharp period.
+///   - Cumulative periodogram (Bartlett's test; Kolmogorov–Smirnov distance of the normalised
+///     cumulative periodogram from the diagonal): broadband, e.g. a red (low-frequency) residual.
+///   - Runs (Wald–Wolfowitz) of the signs of the residual in time order, standardised so that
+///     too FEW runs is large: slowly varying structure in time (drift, a traverse that differs).
+///   - Local excess: the largest standardised window sum of the per-position residual energy
+///     (windows of 1, 2, 3, 5, 8 positions, each scaled by its null variance, Wilson–Hilferty
+///     z), which finds structure confined to a few positions (a bump, a scratch, dust) that the
+///     global statistics dilute.
 struct WhitenessTest {
   double ljung_box_q = 0;  ///< Σ over configurations of Q = n(n+2)Σ_k ρ_k²/(n−k), position order
-  double p_ljung_box = 1;        ///< Monte-Carlo p-value of Q under the current model
-  double periodogram_ratio = 0;  ///< max / mean of the configuration-summed periodogram
-  double p_periodogram = 1;      ///< Monte-Carlo p-value of that ratio
-  double p_value = 1;            ///< min of the two, ×2 (Bonferroni)
+  double p_ljung_box = 1;               ///< Monte-Carlo p-value of Q under the current model
+  double periodogram_ratio = 0;         ///< max / mean of the configuration-summed periodogram
+  double p_periodogram = 1;             ///< Monte-Carlo p-value of that ratio
+  double cumulative_periodogram_d = 0;  ///< Bartlett KS distance
+  double p_cumulative_periodogram = 1;
+  double runs_z = 0;  ///< (expected − observed runs)/sd of the time-ordered signs
+  double p_runs = 1;
+  double local_z = 0;  ///< largest standardised window energy
+  double p_local = 1;
+  double local_x_mm = 0;      ///< centre of that window (slide position)
+  double local_width_mm = 0;  ///< its width (positions × Δx)
+  double p_value = 1;         ///< Monte-Carlo p-value of the smallest of the five p-values
+  std::string rejected_by;    ///< names of the statistics with p < alpha (empty when white)
   int lags = 0;
   int mc_samples = 0;
   bool white = true;  ///< p_value >= alpha
