@@ -1,8 +1,8 @@
 // errsep-daemon: errsep as a service.  Waits for a trigger (Modbus coil of its register map, a
-// schedule), runs the configured four-sensor scan and writes raw data and results durably to the
-// results directory.  Runs in the foreground under systemd (Type=notify; see
-// config/errsep.service); SIGHUP reloads the machine config between scans, SIGTERM stops the
-// stage, writes what was measured and exits.
+// rising edge on the machine config's [gpio] start_line, a schedule), runs the configured
+// four-sensor scan and writes raw data and results durably to the results directory.  Runs in the
+// foreground under systemd (Type=notify; see config/errsep.service); SIGHUP reloads the machine
+// config between scans, SIGTERM stops the stage, writes what was measured and exits.
 #include <CLI/CLI.hpp>
 #include <csignal>
 #include <cstdio>
@@ -38,7 +38,7 @@ int main(int argc, char** argv) {
   int keep_scans = 0;
   double max_age_days = 0;
   double schedule_s = 0;
-  int check_ms = 500, stop_timeout_ms = 5000;
+  int check_ms = 500, stop_timeout_ms = 5000, gpio_debounce_ms = 20;
   double min_free_mb = 1.0;
   bool no_separate = false, no_register_map = false;
   app.add_option("-c,--config", config_path, "machine config (TOML); re-read on SIGHUP")
@@ -62,6 +62,11 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);
   app.add_option("--schedule-s", schedule_s, "also start a scan every this many seconds (0 = off)")
       ->check(CLI::NonNegativeNumber);
+  app.add_option("--gpio-debounce-ms", gpio_debounce_ms,
+                 "GPIO start input ([gpio] start_line of the machine config): ignore rising edges "
+                 "this close to the previous one (contact bounce)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 10000));
   app.add_option("--check-ms", check_ms, "device check period while idle or in fault")
       ->capture_default_str();
   app.add_option("--stop-timeout-ms", stop_timeout_ms, "SIGTERM: exit within this bound")
@@ -84,6 +89,7 @@ int main(int argc, char** argv) {
     opts.results.retention.max_age_days = max_age_days;
     opts.schedule_interval_s = schedule_s;
     opts.check_interval = std::chrono::milliseconds(check_ms);
+    opts.gpio_debounce = std::chrono::milliseconds(gpio_debounce_ms);
     opts.stop_timeout = std::chrono::milliseconds(stop_timeout_ms);
     opts.separate = !no_separate;
 

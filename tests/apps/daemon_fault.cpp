@@ -7,6 +7,7 @@
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
+#include <fstream>
 #include <thread>
 
 #include "errsep/io/raw_scan_csv.hpp"
@@ -89,4 +90,30 @@ TEST_CASE("device simulator stopped and restarted: fault reported, recovery, nex
   const auto scan2 = io::read_raw_four_sensor_csv(*raw2);
   CHECK(scan2.complete);
   CHECK(rig.find_file(2, "result"));
+}
+
+TEST_CASE("GPIO start input on a gpiochip that does not exist: fault naming the chip") {
+  // The machine config's [gpio] start_line is the daemon's start input, opened with the other
+  // devices: a missing chip is a device fault with a message the operator can act on.
+  DaemonRig rig;
+  rig.devsim.start(rig.config, rig.tmp / "devsim.log");
+  const auto cfg = rig.tmp / "machine-gpio.toml";
+  {
+    std::ifstream in(rig.config);
+    std::ofstream out(cfg);
+    out << in.rdbuf() << "\n[gpio]\nchip = \"errsep-no-such-gpiochip\"\nstart_line = 3\n";
+  }
+  rig.config = cfg;
+  rig.start_daemon();
+  const auto r =
+      rig.wait_regs([](const std::vector<long>& x) { return x[test::reg_state] == 3; }, 15s);
+  REQUIRE(r.size() == test::kRegisterCount);
+  CHECK(r[test::reg_state] == 3);                              // fault
+  CHECK(rig.notify->wait_for("errsep-no-such-gpiochip", 5s));  // STATUS= names the chip
+  CHECK_FALSE(rig.notify->seen("READY=1"));
+  // A start coil is refused with the fault as its reason.
+  CHECK(test::mbpoll_write_coil(rig.modbus_port, 0, 1) != 0);
+  const auto r2 = rig.registers();
+  REQUIRE(r2.size() == test::kRegisterCount);
+  CHECK(r2[test::reg_trigger] == 3);  // refused: devices in fault
 }
