@@ -23,7 +23,7 @@ int main(int argc, char** argv) {
       "--reference: an independent trace x_mm,S_um[,gamma_urad] or x_mm,f_um (interferometer, "
       "CMM) on its own grid."};
   app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
-  std::string input, out_dir = "out/refine", truth, reference;
+  std::string input, out_dir = "out/refine", truth, reference, gauge = "sensor_stage";
   errsep::io::GeometryOverrides geo;
   errsep::io::RefineRunOptions opts;
   app.add_option("raw_csv", input, "raw four-sensor scan CSV")->required();
@@ -35,6 +35,11 @@ int main(int argc, char** argv) {
   app.add_option("--s2", geo.s2, "spacing s2 in samples (default: from metadata)");
   app.add_option("--s3", geo.s3, "spacing s3 in samples (default: from metadata)");
   app.add_option("--s4", geo.s4, "spacing s4 in samples (default: from metadata)");
+  app.add_option("--gauge", gauge,
+                 "curvature gauge of the separations, as errsep-separate: sensor_stage, reference, "
+                 "paper_eq12")
+      ->check(CLI::IsMember({"sensor_stage", "reference", "paper_eq12"}))
+      ->capture_default_str();
   app.add_option("--alpha", opts.refine.alpha, "significance of one step (family-wise)")
       ->capture_default_str();
   app.add_option("--whiteness-alpha", opts.refine.residual.alpha,
@@ -51,6 +56,11 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   try {
+    using errsep::core::CurvatureGauge;
+    opts.refine.solve.gauge = gauge == "sensor_stage"
+                                  ? CurvatureGauge::sensor_stage_without_curvature
+                              : gauge == "reference" ? CurvatureGauge::reference_without_curvature
+                                                     : CurvatureGauge::paper_eq12_literal;
     if (!truth.empty()) opts.truth_csv = truth;
     if (!reference.empty()) opts.reference_csv = reference;
     const auto run = errsep::io::run_refine(input, out_dir, opts, geo);

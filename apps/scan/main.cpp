@@ -3,8 +3,10 @@
 //   errsep-scan --config config/simulator.toml --out out/demo
 // Writes OUT/raw.csv (four-sensor: x_mm,m1_um..m4_um,t1_s..t4_s) or OUT/raw_displacement.csv,
 // then the result files of the separation (four-sensor: motion.csv, reference.csv, lcurve.csv,
-// residuals.csv, summary.txt).  Ctrl-C / SIGTERM: the stages are stopped, the raw data measured
-// so far is written marked "complete: false", nothing is separated, exit status 130.
+// residuals.csv, summary.txt).  --refine also runs the refine step of errsep-refine on the
+// four-sensor scan and writes its files to OUT/refine/ (io/refine_run.hpp).
+// Ctrl-C / SIGTERM: the stages are stopped, the raw data measured so far is written marked
+// "complete: false", nothing is separated, exit status 130.
 // Exit status: 0 complete, 1 usage/config/device set-up error, 3 scan failed (device fault),
 // 130 aborted.
 #include <unistd.h>
@@ -26,6 +28,7 @@
 #include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
+#include "errsep/io/refine_run.hpp"
 #include "errsep/version.hpp"
 
 namespace {
@@ -59,6 +62,12 @@ struct ProgressPrinter {
   }
 };
 
+core::CurvatureGauge gauge_of(const std::string& gauge) {
+  if (gauge == "sensor_stage") return core::CurvatureGauge::sensor_stage_without_curvature;
+  if (gauge == "reference") return core::CurvatureGauge::reference_without_curvature;
+  return core::CurvatureGauge::paper_eq12_literal;
+}
+
 /// Separation of a complete four-sensor raw scan, with the defaults of errsep-separate.
 void separate_four_sensor(const io::RawFourSensorScan& raw, const fs::path& raw_file,
                           const fs::path& out, const std::string& gauge) {
@@ -69,12 +78,7 @@ void separate_four_sensor(const io::RawFourSensorScan& raw, const fs::path& raw_
     for (Eigen::Index n = 0; n < P; ++n)
       m(n, j) = raw.m_um[static_cast<std::size_t>(j)][static_cast<std::size_t>(n)];
   core::FourSensorOptions opts;  // lambda from the L-curve corner, as errsep-separate
-  if (gauge == "sensor_stage")
-    opts.gauge = core::CurvatureGauge::sensor_stage_without_curvature;
-  else if (gauge == "reference")
-    opts.gauge = core::CurvatureGauge::reference_without_curvature;
-  else
-    opts.gauge = core::CurvatureGauge::paper_eq12_literal;
+  opts.gauge = gauge_of(gauge);
   const auto res = core::separate_four_sensor(g, m, opts);
   io::write_four_sensor_result(out, res, {raw_file.string(), "X", "Y", {}});
   std::cout << "separation: " << res.brief_report() << "\n";
@@ -106,7 +110,8 @@ int main(int argc, char** argv) {
   std::string config_path = "config/simulator.toml", out_dir, method, devsim;
   std::string gauge = "sensor_stage";
   int averages = 0, settle_ms = -1;
-  bool no_separate = false;
+  bool no_separate = false, refine = false;
+  std::string refine_reference;
   app.add_option("-c,--config", config_path, "machine config (TOML)")->capture_default_str();
   app.add_option("-o,--out", out_dir, "output directory (default: [scan] output_dir)");
   app.add_option("--method", method, "four_sensor, displacement or both (default: [scan] method)")
@@ -118,7 +123,16 @@ int main(int argc, char** argv) {
   app.add_option("--devsim", devsim,
                  "device simulator executable for an embedded config (default: errsep-devsim "
                  "next to this program)");
-  app.add_flag("--no-separate", no_separate, "record the raw scan only");
+  auto* no_sep = app.add_flag("--no-separate", no_separate, "record the raw scan only");
+  app.add_flag("--refine", refine,
+               "after the four-sensor separation, run the refine step (as errsep-refine) and write "
+               "its report and refined results to OUT/refine/")
+      ->excludes(no_sep);
+  app.add_option("--refine-reference", refine_reference,
+                 "reference trace CSV (x_mm,S_um[,gamma_urad] or x_mm,f_um) for the refine step's "
+                 "comparison; implies --refine")
+      ->excludes(no_sep)
+      ->check(CLI::ExistingFile);
   app.add_option("--gauge", gauge,
                  "curvature gauge of the separation, as errsep-separate: sensor_stage (the sensor "
                  "stage's zero-adjustment values have no quadratic part), reference (the "
@@ -210,6 +224,19 @@ int main(int argc, char** argv) {
         separate_four_sensor(*res.four_sensor, raw_file, out, gauge);
         std::cout << "results: " << out.string()
                   << "/ (motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt)\n";
+        if (refine || !refine_reference.empty()) {
+          io::RefineRunOptions ro;  // the defaults of errsep-refine, the scan's gauge
+          ro.refine.solve.gauge = gauge_of(gauge);
+          if (!refine_reference.empty()) ro.reference_csv = refine_reference;
+          const auto run = io::run_refine(raw_file, out / "refine", ro);
+          std::cout << run.result.brief_report() << "\n"
+                    << "refine: " << (out / "refine").string()
+                    << "/ (refine_report.txt, refine_steps.csv, refined motion.csv, reference.csv, "
+                       "...)\n";
+          if (!run.result.residual_white())
+            std::cerr << "warning: the refined model's residual is not white: see "
+                      << (out / "refine" / "refine_report.txt").string() << "\n";
+        }
       } else {
         separate_displacement(*res.displacement);
       }

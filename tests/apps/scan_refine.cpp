@@ -1,0 +1,90 @@
+// errsep-scan --refine: after the scan and its separation, the refine step runs on the raw file
+// and writes its report and refined results to OUT/refine/, the same files errsep-refine writes
+// from that raw file (one library call, io::run_refine, behind both).
+#include <catch2/catch.hpp>
+#include <fstream>
+#include <sstream>
+
+#include "errsep/io/csv.hpp"
+#include "support/support.hpp"
+
+using namespace errsep;
+using test::app_path;
+using test::run_command;
+using test::TempDir;
+
+namespace {
+
+std::string read_text(const std::filesystem::path& p) {
+  std::ifstream in(p);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+void replace_all(std::string& s, const std::string& from, const std::string& to) {
+  for (auto pos = s.find(from); pos != std::string::npos; pos = s.find(from, pos + to.size()))
+    s.replace(pos, from.size(), to);
+}
+
+// The embedded default config made quick, as in scan_end_to_end: N = 40, fast stages.
+std::filesystem::path write_test_config(const TempDir& dir) {
+  std::string t = read_text(test::source_dir() / "config" / "simulator.toml");
+  REQUIRE(t.find("N = 69") != std::string::npos);
+  replace_all(t, "N = 69", "N = 40");
+  replace_all(t, "speed_mm_s = 200.0", "speed_mm_s = 2000.0");
+  replace_all(t, "speed_mm_s = 100.0", "speed_mm_s = 2000.0");
+  const auto path = dir / "machine.toml";
+  std::ofstream(path) << t;
+  return path;
+}
+
+std::string scan_cmd(const std::filesystem::path& cfg, const std::filesystem::path& out) {
+  return app_path("scan").string() + " --config " + cfg.string() + " --out " + out.string() +
+         " --devsim " + app_path("devsim").string() + " --averages 5 --settle-ms 0";
+}
+
+}  // namespace
+
+TEST_CASE("scan --refine writes the refine report and refined results, as errsep-refine does") {
+  TempDir dir;
+  const auto cfg = write_test_config(dir);
+  const auto out = dir / "scan";
+  std::string output;
+  const int rc = run_command(scan_cmd(cfg, out) + " --refine", &output);
+  INFO(output);
+  REQUIRE(rc == 0);
+  CHECK(output.find("refine: model zhao2019-eq1") != std::string::npos);
+  for (const char* f : {"refine_report.txt", "refine_steps.csv", "motion.csv", "reference.csv",
+                        "residuals.csv", "lcurve.csv", "summary.txt"})
+    CHECK(std::filesystem::exists(out / "refine" / f));
+  // The scan's own results are still there, unrefined.
+  CHECK(std::filesystem::exists(out / "motion.csv"));
+  const io::CsvTable motion = io::read_csv(out / "refine" / "motion.csv");
+  REQUIRE(motion.meta("model"));
+  CHECK(motion.meta("model")->rfind("zhao2019-eq1", 0) == 0);
+  CHECK(!io::read_csv(out / "motion.csv").meta("model"));
+  // The scan recorded reading times; the refine step used them (t1_s..t4_s in the raw file).
+  CHECK(io::read_csv(out / "raw.csv").find_column("t1_s"));
+
+  // errsep-refine on the same raw file: the same step table, the same report.
+  std::string output2;
+  const auto out2 = dir / "refine";
+  REQUIRE(run_command(app_path("refine").string() + " " + (out / "raw.csv").string() + " --out " +
+                          out2.string(),
+                      &output2) == 0);
+  CHECK(read_text(out2 / "refine_steps.csv") == read_text(out / "refine" / "refine_steps.csv"));
+  CHECK(read_text(out2 / "refine_report.txt") == read_text(out / "refine" / "refine_report.txt"));
+  CHECK(read_text(out2 / "motion.csv") == read_text(out / "refine" / "motion.csv"));
+}
+
+TEST_CASE("scan --refine with --no-separate is refused before anything runs") {
+  TempDir dir;
+  const auto cfg = write_test_config(dir);
+  std::string output;
+  const int rc = run_command(scan_cmd(cfg, dir / "scan") + " --refine --no-separate", &output);
+  INFO(output);
+  CHECK(rc != 0);
+  CHECK(output.find("excludes") != std::string::npos);
+  CHECK(!std::filesystem::exists(dir / "scan"));
+}
