@@ -196,17 +196,18 @@ TEST_CASE(
 
 TEST_CASE("thermal drift: the identifiable combination is found, tau refined, error halved") {
   const double tau = 25.0;  // s; the scan lasts 128 s (4 traverses of 32 s)
-  const auto c0 = make_refine_case(0.02, 33);
+  const std::uint64_t sd = 33;
+  const auto c0 = make_refine_case(0.02, sd);
   const EffectContext ctx = scan_context(c0);
   Eigen::VectorXd p1 = Eigen::VectorXd::Zero(5);
   p1(2) = 1;
   const Eigen::MatrixXd J = reduce_columns(c0.cfg, ThermalDriftEffect(tau).jacobian(p1, ctx));
   const Eigen::MatrixXd Z = null_basis(check_identifiability(ResidualSpace(c0.cfg), J.leftCols(4)));
-  Eigen::Vector4d a(0.0, 0.0, 30.0, 0.0);  // µm on configuration 3 ...
-  a -= Z * (Z.transpose() * a);            // ... less what no scan can see
+  Eigen::Vector4d a(0.0, 0.0, 100.0, 0.0);  // µm on configuration 3 (8 µm after the next line) ...
+  a -= Z * (Z.transpose() * a);             // ... less what no scan can see
   std::printf("thermal drift injected: a = %g %g %g %g um, tau %g s\n", a(0), a(1), a(2), a(3),
               tau);
-  const auto c = make_refine_case(0.02, 33, {}, [&](Eigen::MatrixXd& m, const Eigen::MatrixXd& t) {
+  const auto c = make_refine_case(0.02, sd, {}, [&](Eigen::MatrixXd& m, const Eigen::MatrixXd& t) {
     for (int i = 0; i < 4; ++i)
       m.col(i) += a(i) * (1.0 - (-t.col(i).array() / tau).exp()).matrix();
   });
@@ -215,10 +216,18 @@ TEST_CASE("thermal drift: the identifiable combination is found, tau refined, er
   REQUIRE(r.effects.size() >= 1);
   const auto* th = dynamic_cast<const ThermalDriftEffect*>(r.effects.front().get());
   REQUIRE(th != nullptr);
+  // The estimate is the minimum-norm representative at the estimated τ̂ (the null space turns
+  // with τ); the truth in that representation is a less its part in the null space at τ̂.
+  const double tau_hat = th->tau_s(r.parameters.front());
+  Eigen::VectorXd ph = Eigen::VectorXd::Zero(5);
+  ph(2) = 1;
+  const Eigen::MatrixXd Jh = reduce_columns(c0.cfg, ThermalDriftEffect(tau_hat).jacobian(ph, ctx));
+  const Eigen::MatrixXd Zh =
+      null_basis(check_identifiability(ResidualSpace(c0.cfg), Jh.leftCols(4)));
   Eigen::VectorXd p_true(5);
-  p_true << a, tau - th->tau0_s();
-  std::printf("  tau = %.3f +- %.3f s (truth %g s)\n", th->tau_s(r.parameters.front()),
-              r.u_parameters.front()(4), tau);
+  p_true << a - Zh * (Zh.transpose() * a), tau - th->tau0_s();
+  std::printf("  Gauss-Newton iterations %d\n", r.steps[1].gauss_newton_iterations);
+  std::printf("  tau = %.3f +- %.3f s (truth %g s)\n", tau_hat, r.u_parameters.front()(4), tau);
   check_identified(r, "thermal", p_true);
   CHECK(std::abs(th->tau_s(r.parameters.front()) - tau) < 3.0 * r.u_parameters.front()(4));
 }
@@ -268,7 +277,8 @@ TEST_CASE("traverse: per-traverse S of degree 1..K leaves K directions, K-1 afte
 }
 
 TEST_CASE("traverse: S not repeating between traverses is found and corrected") {
-  const auto c0 = make_refine_case(0.02, 34);
+  const std::uint64_t sd = 34;
+  const auto c0 = make_refine_case(0.02, sd);
   const EffectContext ctx = scan_context(c0);
   const TraverseEffect tr;  // the library's: degrees 1..4
   const Eigen::MatrixXd J =
@@ -282,7 +292,7 @@ TEST_CASE("traverse: S not repeating between traverses is found and corrected") 
   for (Eigen::Index j = 0; j < p.size(); ++j)
     std::printf(" %.3f", p(j));
   std::printf(" um\n");
-  const auto c = make_refine_case(0.02, 34, {}, [&](Eigen::MatrixXd& m, const Eigen::MatrixXd&) {
+  const auto c = make_refine_case(0.02, sd, {}, [&](Eigen::MatrixXd& m, const Eigen::MatrixXd&) {
     m += tr.correction_um(p, ctx);
   });
   const auto r = run(c);
