@@ -126,6 +126,9 @@ TEST_CASE("an undeclared 5 % gain error: identified, error vs reference and trut
   CHECK(*motion.meta("model") == *steps.meta("model"));
   const io::CsvTable ref = io::read_csv(tmp / "refined" / "reference.csv");
   CHECK(ref.meta("model") == motion.meta("model"));
+  const io::CsvTable resid = io::read_csv(tmp / "refined" / "refine_residual.csv");
+  CHECK(resid.rows.size() == 4 * static_cast<std::size_t>(c.cfg.positions()));
+  CHECK(*resid.meta("residual_white") == "true");
   const std::string text = slurp(tmp / "refined" / "refine_report.txt");
   CHECK(text.find("step 1: gain") != std::string::npos);
   CHECK(text.find("comparison with the reference trace") != std::string::npos);

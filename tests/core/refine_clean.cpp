@@ -61,6 +61,27 @@ TEST_CASE("an effect not in the library (a localised bump in one traverse): resi
   CHECK(std::abs(w.local_x_mm - 150.0) <= 20.0);
 }
 
+TEST_CASE("the localised bump over 20 noise seeds: residual not white in at least 18") {
+  int runs = 0, not_white = 0, located = 0;
+  for (std::uint64_t seed = 301; seed <= 320; ++seed) {
+    const auto c = make_refine_case(0.02, seed, {}, [](Eigen::MatrixXd& m, const Eigen::MatrixXd&) {
+      for (Eigen::Index n = 0; n < m.rows(); ++n) {
+        const double x = 5.0 * static_cast<double>(n);
+        m(n, 2) += 1.5 * std::exp(-0.5 * std::pow((x - 150.0) / 8.0, 2));
+      }
+    });
+    const auto r = refine_four_sensor(c.cfg, c.sim.m_um, Eigen::MatrixXd(), RefineOptions{});
+    ++runs;
+    if (!r.residual_white()) ++not_white;
+    const auto& w = r.residual.whiteness;
+    if (w.p_local < RefineOptions{}.residual.alpha && std::abs(w.local_x_mm - 150.0) <= 20.0)
+      ++located;
+  }
+  std::printf("bump over %d seeds: not white in %d, local excess at the bump in %d\n", runs,
+              not_white, located);
+  CHECK(not_white >= 18);
+}
+
 TEST_CASE("two effects at once, loop limited to one addition: residual not white") {
   RefineOptions o;
   o.max_effects = 1;

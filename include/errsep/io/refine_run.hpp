@@ -4,6 +4,8 @@
 //
 //   DIR/refine_steps.csv        the step table (refine_report.hpp)
 //   DIR/refine_report.txt       the readable report (+ the reference comparison)
+//   DIR/refine_residual.csv     x_mm, config, t_s, residual_um of every reading under the final
+//                               model, whiteness p-values in the metadata
 //   DIR/motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt
 //                               the refined S, γ, f as a result directory
 //                               (four_sensor_result_csv.hpp), "# model: zhao2019-eq1+gain" etc.
