@@ -32,17 +32,18 @@ double unit(double x, double x0, double x1) {
   return x1 > x0 ? 2.0 * (x - x0) / (x1 - x0) - 1.0 : 0.0;
 }
 
-// ψ basis on the grid: nx·ny × K, row i + nx·j, column (k, l) = P_k(u_i)·P_l(v_j).
+// ψ basis on the grid: nx·ny × K, row i + nx·j, column (k, l) = P_k(u_i)·P_l(v_j), (k, l) ≠ (0, 0)
+// (a constant yaw cannot be told from the lateral pair's zero offset; see the header).
 Eigen::MatrixXd yaw_basis(const Eigen::VectorXd& x, const Eigen::VectorXd& y, int dxg, int dyg) {
   const Eigen::Index nx = x.size(), ny = y.size();
-  Eigen::MatrixXd B(nx * ny, (dxg + 1) * (dyg + 1));
+  Eigen::MatrixXd B(nx * ny, (dxg + 1) * (dyg + 1) - 1);
   for (Eigen::Index j = 0; j < ny; ++j)
     for (Eigen::Index i = 0; i < nx; ++i) {
       const double u = unit(x(i), x(0), x(nx - 1)), v = unit(y(j), y(0), y(ny - 1));
       int c = 0;
       for (int k = 0; k <= dxg; ++k)
         for (int l = 0; l <= dyg; ++l)
-          B(i + nx * j, c++) = legendre(k, u) * legendre(l, v);
+          if (k + l > 0) B(i + nx * j, c++) = legendre(k, u) * legendre(l, v);
     }
   return B;
 }
@@ -83,7 +84,8 @@ LateralSystem lateral_system(const TwoAxisScan& scan, const LateralPairScan& lat
   const Eigen::Index K = psi.cols();
   LateralSystem s;
   s.y.resize(3 * nx * ny);
-  s.A = Eigen::MatrixXd::Zero(3 * nx * ny, G);
+  // Columns: the G lattice values of g, then the zero offset of sensor b against sensor a.
+  s.A = Eigen::MatrixXd::Zero(3 * nx * ny, G + 1);
   s.B.resize(3 * nx * ny, K);
   const double Xk[4] = {g.lateral_a_mm, g.lateral_a_mm, g.lateral_b_mm, g.lateral_b_mm};
   for (Eigen::Index j = 0; j < ny; ++j)
@@ -96,6 +98,7 @@ LateralSystem lateral_system(const TwoAxisScan& scan, const LateralPairScan& lat
                           static_cast<int>(i) + ib - lo, static_cast<int>(i) + ib + p - lo};
       for (int q = 0; q < 4; ++q)
         s.A.block<3, 1>(row, idx[q]) += V.row(q).transpose();
+      s.A.block<3, 1>(row, G) = V.row(2).transpose() + V.row(3).transpose();
       // ψ·X_k in µm for ψ in µrad; the common part ψ·(x_axis − x) cancels in V.
       Eigen::Vector4d z;
       for (int q = 0; q < 4; ++q)
@@ -203,8 +206,10 @@ YawSimData simulate_two_axis_yaw(const TwoAxisTruth& truth, const YawTruth& yaw,
           return yaw.side_um(x + X + q * dX) + ey +
                  kUmPerRadMm * psi * (X - (x - geometry.axis_x_mm));
         };
-        (q == 0 ? L.ua_1_um : L.ua_2_um)(i, j) = lateral(geometry.lateral_a_mm) + rng.normal(se);
-        (q == 0 ? L.ub_1_um : L.ub_2_um)(i, j) = lateral(geometry.lateral_b_mm) + rng.normal(se);
+        (q == 0 ? L.ua_1_um : L.ua_2_um)(i, j) =
+            lateral(geometry.lateral_a_mm) + yaw.offset_a_um + rng.normal(se);
+        (q == 0 ? L.ub_1_um : L.ub_2_um)(i, j) =
+            lateral(geometry.lateral_b_mm) + yaw.offset_b_um + rng.normal(se);
       }
   for (int j = 0; j < ny; ++j)
     for (int i = 0; i < nx; ++i) {
@@ -243,7 +248,8 @@ TwoAxisYawResult refine_two_axis_yaw(const TwoAxisScan& scan, const LateralPairS
   res.yaw_rad = Eigen::MatrixXd::Zero(nx, ny);
   for (int k = 0; k <= o.degree_x; ++k)
     for (int l = 0; l <= o.degree_y; ++l)
-      res.parameter_names.push_back("c_" + std::to_string(k) + "_" + std::to_string(l) + "_urad");
+      if (k + l > 0)
+        res.parameter_names.push_back("c_" + std::to_string(k) + "_" + std::to_string(l) + "_urad");
 
   const LateralSystem sys = lateral_system(scan, lat, o);
   const Eigen::Index n = sys.y.size(), K = sys.B.cols();
@@ -253,9 +259,9 @@ TwoAxisYawResult refine_two_axis_yaw(const TwoAxisScan& scan, const LateralPairS
   const Eigen::MatrixXd Ag = sys.A.rightCols(sys.A.cols() - 1);
   Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qa(Ag);
   require(qa.rank() == Ag.cols(), "the side face lattice is not connected by the traverse d");
-  auto side = [&](const Eigen::VectorXd& gv) {
-    Eigen::VectorXd full(gv.size() + 1);
-    full << 0.0, gv;
+  auto side = [&](const Eigen::VectorXd& gv) {  // ĝ without the offset, g(first point) = 0
+    Eigen::VectorXd full(gv.size());
+    full << 0.0, gv.head(gv.size() - 1);
     return full;
   };
   const Eigen::VectorXd g0 = qa.solve(sys.y);

@@ -32,12 +32,16 @@
 // sensors), e_y: the table's lateral straightness at the sensors (free per point; it and the
 // common part of the yaw term cancel in the four readings' deviations from their mean).
 //
-// Base model (no yaw): u = g + e_y + noise.  It is over-determined: 4 readings per point, one
-// e_y per point and one g shared by the whole grid, so the least-squares residual (dof =
-// 3·nx·ny − (G − 1), G lattice values of g less the constant) is the redundancy in which yaw
-// shows: the pair's difference ψ·(X_b − X_a), which no g can produce (g's inclination would
-// also change the readings between scans by g′·d).  Yaw effect: ψ(x, y) = Σ c_kl P_k(u) P_l(v),
-// Legendre in u = 2(x − x_0)/(x_max − x_0) − 1 and v likewise, k ≤ degree_x, l ≤ degree_y;
+// Base model (no yaw): u = g + e_y + o_k + noise, o_b − o_a the pair's zero offset (the two
+// sensors are never zeroed on the same point of the face).  It is over-determined: 4 readings
+// per point, one e_y per point, one g shared by the whole grid and one offset, so the
+// least-squares residual (dof = 3·nx·ny − G, G lattice values of g less its constant, plus the
+// offset) is the redundancy in which yaw shows: the pair's difference ψ·(X_b − X_a), which no g
+// can produce (g's inclination would also change the readings between scans by g′·d).  A
+// constant yaw gives the same pattern as the zero offset (and as a sideways shift of reference X
+// when it is traversed by d) and is not identifiable; it is the workpiece's placement on the
+// table, a rotation of the whole map.  Yaw effect: ψ(x, y) = Σ c_kl P_k(u) P_l(v), Legendre in
+// u = 2(x − x_0)/(x_max − x_0) − 1 and v likewise, k ≤ degree_x, l ≤ degree_y, (k, l) ≠ (0, 0);
 // scored by an F-test against the base model, fitted by least squares (linear in c), standard
 // uncertainties from σ̂.  When significant, the scans are corrected (sensor 0 by ∇ŵ·δ, sensors 1,
 // 2 by r̂_k′·δξ_k, slopes from the current separation, a fixed-point iteration because ŵ
@@ -68,6 +72,7 @@ struct YawTruth {
   GridFn yaw_rad;     ///< ψ(x, y) of the x table (the y table's load moves with y)
   AxisFn side_um;     ///< g: lateral profile of reference X's side face
   GridFn lateral_um;  ///< e_y: lateral straightness of the x table at the lateral sensors
+  double offset_a_um = 0.0, offset_b_um = 0.0;  ///< zero offsets of the lateral sensors
 };
 
 struct YawSimData {
@@ -99,7 +104,7 @@ struct TwoAxisYawResult {
   TwoAxisResult before;  ///< Eqs. (10)-(27) on the raw scans
   TwoAxisResult after;   ///< on the yaw-corrected scans (= before when yaw was not added)
   bool yaw_added = false;
-  std::vector<std::string> parameter_names;  ///< c_<k>_<l>_urad
+  std::vector<std::string> parameter_names;  ///< c_<k>_<l>_urad, (k, l) ≠ (0, 0)
   Eigen::VectorXd parameters_urad, u_parameters_urad;
   Eigen::MatrixXd covariance_urad2;
   int identifiable = 0;
@@ -109,7 +114,7 @@ struct TwoAxisYawResult {
   double sigma_before_um = 0, sigma_after_um = 0;
   double rms_before_um = 0, rms_after_um = 0;  ///< RMS of the projected residual rows
   Eigen::MatrixXd yaw_rad;                     ///< ψ̂(x_i, y_j) (zero when not added)
-  Eigen::VectorXd side_um;  ///< ĝ on its lattice (from the model finally chosen)
+  Eigen::VectorXd side_um;  ///< ĝ on its lattice, first point 0 (from the model finally chosen)
   std::string brief_report() const;
 };
 
