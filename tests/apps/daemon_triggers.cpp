@@ -5,7 +5,7 @@
 //    rising edge on the start line starts a scan, other lines / falling edges / contact bounce do
 //    not, an edge during the scan is refused with its reason in the status AND in the Modbus
 //    register map (read with mbpoll, as the cell controller would), the lamp output is on while
-//    the scan runs;
+//    the scan runs; after SIGHUP the new config's input is watched and the old one released;
 //  - a start input that keeps failing is reported and polled slowly, never spun on;
 //  - the schedule: scans started by it carry trigger "schedule", a tick during a scan is refused
 //    and skipped, not queued into a second scan right after the first;
@@ -235,6 +235,38 @@ TEST_CASE("GPIO start input: a rising edge starts a scan, an edge during it is r
     const io::CsvTable t = io::read_csv(f.path);
     CHECK(t.meta("trigger") == std::optional<std::string>("gpio"));
   }
+}
+
+TEST_CASE("GPIO start input after SIGHUP: the new config's input is watched, the old one not") {
+  test::TempDir tmp;
+  Script s;
+  acq::FakeDigitalIo io1, io2;
+  std::atomic<int> builds{0};
+  const acq::SdNotifier quiet("", 0us);
+  acq::Daemon d(
+      options(tmp / "r"),
+      [&] {
+        // Build 1: line 3 of io1; after the reload: line 7 of io2.
+        return ++builds == 1 ? std::make_unique<ScriptedBackend>(s, Gpio{&io1, 3, -1})
+                             : std::make_unique<ScriptedBackend>(s, Gpio{&io2, 7, -1});
+      },
+      quiet);
+  Running run(d);
+  REQUIRE(wait_until(d, idle));
+  io1.inject({ms_ns(1000), 3, acq::Edge::rising});
+  REQUIRE(wait_until(d, [](auto x) { return x.last_scan_id == 1 && idle(x); }));
+
+  d.request_reload();
+  REQUIRE(wait_until(d, [&](auto x) { return builds == 2 && idle(x); }));
+  std::this_thread::sleep_for(100ms);
+  io1.inject({ms_ns(2000), 3, acq::Edge::rising});  // the old input: no longer watched
+  std::this_thread::sleep_for(300ms);
+  CHECK(d.status().last_scan_id == 1);
+  CHECK(s.scans == 1);
+  io2.inject({ms_ns(3000), 7, acq::Edge::rising});  // the new one
+  REQUIRE(wait_until(d, [](auto x) { return x.last_scan_id == 2 && idle(x); }));
+  CHECK(d.status().last_trigger_source == acq::TriggerSource::gpio);
+  CHECK(d.status().gpio_edges == 2);
 }
 
 namespace {
