@@ -26,10 +26,11 @@ double secs(clk::time_point t0) {
 
 struct Figures {
   double assemble_s = 0, sweep_s = 0, dense_s = -1, lambda = 0;
+  double analyze_s = 0, factorize_s = 0, solve_s = 0;
   int factorizations = 0;
 };
 
-Figures measure(int N, int count, bool dense) {
+Figures measure(int N, int count, bool dense, int threads) {
   errsep::core::FourSensorConfig cfg{5.0, 1, 1, 5, N};
   errsep::core::FourSensorSimOptions so;
   so.sigma_um = 0.1;
@@ -45,10 +46,14 @@ Figures measure(int N, int count, bool dense) {
   errsep::core::LCurveOptions lo;
   lo.count = count;
   lo.refine_iterations = 0;
+  lo.threads = threads;
   const auto lc = errsep::core::lcurve_corner(solver, sys.b, lo);
   f.sweep_s = secs(t0);
   f.lambda = lc.lambda_corner;
   f.factorizations = lc.factorizations;
+  f.analyze_s = solver.stats().analyze_s;
+  f.factorize_s = solver.stats().factorize_s;
+  f.solve_s = solver.stats().solve_s;
   if (dense) {
     t0 = clk::now();
     const Eigen::MatrixXd A(sys.A);
@@ -73,16 +78,20 @@ int main(int argc, char** argv) {
   CLI::App app{"errsep-bench-four-sensor: time and peak memory of the lambda sweep vs N"};
   app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
   std::vector<int> sizes{69, 1000, 10000, 100000, 1000000};
-  int count = 40, dense_max = 2000;
+  int count = 40, dense_max = 2000, threads = 2;
   app.add_option("--N", sizes, "problem sizes")->capture_default_str();
   app.add_option("--lambdas", count, "lambda values in the sweep (>= 40 for the target)")
       ->capture_default_str();
   app.add_option("--dense-max", dense_max, "largest N for the dense SVD baseline")
       ->capture_default_str();
+  app.add_option("--threads", threads, "threads for the lambda grid (the target is for 2 cores)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
   CLI11_PARSE(app, argc, argv);
+  std::printf("lambda grid: %d values, %d thread(s)\n", count, threads);
 
-  std::printf("%9s %10s %12s %8s %12s %12s %12s\n", "N", "assemble_s", "sweep_s", "factor",
-              "peak_MiB", "lambda", "dense_svd_s");
+  std::printf("%9s %10s %12s %10s %11s %9s %8s %12s %12s %12s\n", "N", "assemble_s", "sweep_s",
+              "analyze_s", "factorize_s", "solve_s", "factor", "peak_MiB", "lambda", "dense_svd_s");
   std::fflush(stdout);
   for (int N : sizes) {
     // Each size in its own process so that the peak resident set is that size's alone.
@@ -91,7 +100,7 @@ int main(int argc, char** argv) {
     const pid_t pid = ::fork();
     if (pid == 0) {
       ::close(fds[0]);
-      const Figures f = measure(N, count, N <= dense_max);
+      const Figures f = measure(N, count, N <= dense_max, threads);
       if (::write(fds[1], &f, sizeof f) != sizeof f) _exit(2);
       _exit(0);
     }
@@ -108,8 +117,9 @@ int main(int argc, char** argv) {
     }
     char dense[32] = "-";
     if (f.dense_s >= 0) std::snprintf(dense, sizeof dense, "%.4f", f.dense_s);
-    std::printf("%9d %10.4f %12.4f %8d %12.1f %12.4g %12s\n", N, f.assemble_s, f.sweep_s,
-                f.factorizations, ru.ru_maxrss / 1024.0, f.lambda, dense);
+    std::printf("%9d %10.4f %12.4f %10.4f %11.4f %9.4f %8d %12.1f %12.4g %12s\n", N, f.assemble_s,
+                f.sweep_s, f.analyze_s, f.factorize_s, f.solve_s, f.factorizations,
+                ru.ru_maxrss / 1024.0, f.lambda, dense);
     std::fflush(stdout);
   }
   std::printf(

@@ -23,6 +23,10 @@ struct LCurveOptions {
   double lambda_max = 0.0;     ///< 0 = automatic: the bound of σ_max(A)
   double decades = 8.0;        ///< width of the automatic range
   int refine_iterations = 12;  ///< golden-section steps on the curvature around the grid maximum
+  /// Threads for the grid sweep (each with its own CHOLMOD factor, TikhonovSolver::worker()).
+  /// The grid points are independent, so 2 threads on 2 cores halve the sweep; the refinement
+  /// after it is sequential.  Results do not depend on the number of threads.
+  int threads = 1;
   bool is_valid(std::string* why = nullptr) const;
 };
 

@@ -1,10 +1,14 @@
 #pragma once
 // Tikhonov solutions of A·X ≈ b (Eq. 17 of Zhao 2019): X_λ = (AᵀA + λ²I)⁻¹Aᵀb, by CHOLMOD on the
-// regularised normal equations.  AᵀA is formed once; the symbolic analysis (natural ordering,
-// simplicial LDLᵀ: AᵀA is banded with a few dense trailing rows) is done once in the constructor
-// and each λ costs one numeric factorisation with CHOLMOD's diagonal shift β = λ² (Ceres-style:
-// Tikhonov is a per-solve option, not a matrix edit).  This is the only place that talks to
-// CHOLMOD (through Eigen's CholmodSupport, in tikhonov_solver.cpp).
+// regularised normal equations.  AᵀA is formed once (cholmod_aat, upper triangle kept); the
+// symbolic analysis (natural ordering, simplicial LDLᵀ: AᵀA is banded with a few dense trailing
+// rows) is done once in the constructor and each λ costs one numeric factorisation with CHOLMOD's
+// diagonal shift β = λ² (Ceres-style: Tikhonov is a per-solve option, not a matrix edit).  This is
+// the only place that talks to CHOLMOD (its C API, in tikhonov_solver.cpp).
+//
+// A sweep over λ can run on several threads: worker() gives another solver over the same A and
+// AᵀA (shared, read-only) with its own CHOLMOD workspace and a copy of the analysed factor.  Each
+// solver object is used by one thread at a time.
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 #include <memory>
@@ -30,10 +34,12 @@ struct TikhonovSolverStats {
 
 class TikhonovSolver {
  public:
-  /// Forms AᵀA and Aᵀ-product structures and runs the symbolic analysis.  Throws
-  /// std::runtime_error if CHOLMOD's analysis fails.
+  /// Forms AᵀA and runs the symbolic analysis.  Throws std::runtime_error if CHOLMOD fails.
   explicit TikhonovSolver(const Eigen::SparseMatrix<double>& A);
   ~TikhonovSolver();
+  /// Another solver over the same A and AᵀA (shared, not copied) with its own factor (the
+  /// symbolic analysis is copied, not redone), for use on another thread.  Its stats start at 0.
+  std::unique_ptr<TikhonovSolver> worker() const;
   TikhonovSolver(const TikhonovSolver&) = delete;
   TikhonovSolver& operator=(const TikhonovSolver&) = delete;
 
@@ -44,16 +50,19 @@ class TikhonovSolver {
   /// X_λ for right-hand side b: solve_normal(Aᵀb).
   Eigen::VectorXd solve(const Eigen::VectorXd& b);
 
-  const Eigen::SparseMatrix<double>& A() const { return A_; }
+  const Eigen::SparseMatrix<double>& A() const { return *A_; }
   double lambda() const { return lambda_; }
   /// An upper bound of the largest singular value of A (sqrt of ‖AᵀA‖₁), for λ ranges.
   double sigma_max_bound() const { return sigma_max_bound_; }
   const TikhonovSolverStats& stats() const { return stats_; }
 
  private:
-  struct Impl;
+  struct Normal;  // AᵀA in CHOLMOD form, shared by workers
+  struct Impl;    // CHOLMOD workspace and factor, one per solver
+  TikhonovSolver() = default;
+  std::shared_ptr<const Eigen::SparseMatrix<double>> A_;
+  std::shared_ptr<Normal> normal_;
   std::unique_ptr<Impl> impl_;
-  Eigen::SparseMatrix<double> A_;
   double lambda_ = -1.0;
   double sigma_max_bound_ = 0.0;
   TikhonovSolverStats stats_;
