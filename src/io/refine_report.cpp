@@ -87,11 +87,21 @@ std::string format_refine_text(const core::RefineResult& r) {
     out += buf;
   }
   const core::WhitenessTest& w = r.residual.whiteness;
+  {
+    // Where the residual sits: per configuration, and the positions with the largest RMS.
+    const core::ResidualAnalysis& ra = r.residual;
+    std::snprintf(buf, sizeof buf,
+                  "\nresidual of the final model: sigma_hat %.3g um (dof %d); RMS per "
+                  "configuration %.3g, %.3g, %.3g, %.3g um\n",
+                  ra.sigma_um, ra.dof, ra.rms_per_config_um(0), ra.rms_per_config_um(1),
+                  ra.rms_per_config_um(2), ra.rms_per_config_um(3));
+    out += buf;
+  }
   std::snprintf(buf, sizeof buf,
                 "\nwhiteness of the final residual (Monte-Carlo p-values, %d draws):\n"
                 "  Ljung-Box %.3g, periodogram peak %.3g (period %.4g mm), cumulative "
-                "periodogram %.3g,\n  runs in time order %.3g, local excess %.3g (largest at x = "
-                "%.5g mm over %.4g mm); combined p = %.3g (alpha %.3g)\n",
+                "periodogram %.3g,\n  runs in time order %.3g, local excess %.3g (largest %.5g mm "
+                "from the first position, over %.4g mm); combined p = %.3g (alpha %.3g)\n",
                 w.mc_samples, w.p_ljung_box, w.p_periodogram, r.residual.dominant_period_mm,
                 w.p_cumulative_periodogram, w.p_runs, w.p_local, w.local_x_mm, w.local_width_mm,
                 w.p_value, r.alpha_residual);
@@ -102,8 +112,8 @@ std::string format_refine_text(const core::RefineResult& r) {
     out += "\nThe final residual is NOT white (" + w.rejected_by +
            "): the model still lacks something the library does not describe";
     if (w.p_local < r.alpha_residual) {
-      std::snprintf(buf, sizeof buf, ", with structure concentrated near x = %.5g mm",
-                    w.local_x_mm);
+      std::snprintf(buf, sizeof buf,
+                    ", with structure concentrated %.5g mm from the first position", w.local_x_mm);
       out += buf;
     }
     out += ".";

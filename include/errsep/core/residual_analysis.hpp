@@ -107,7 +107,7 @@ struct WhitenessTest {
   double p_runs = 1;
   double local_z = 0;  ///< largest standardised window energy
   double p_local = 1;
-  double local_x_mm = 0;      ///< centre of that window (slide position)
+  double local_x_mm = 0;      ///< centre of that window, n·Δx from the first position
   double local_width_mm = 0;  ///< its width (positions × Δx)
   double p_value = 1;         ///< Monte-Carlo p-value of the smallest of the five p-values
   std::string rejected_by;    ///< names of the statistics with p < alpha (empty when white)
