@@ -52,8 +52,8 @@ LCurvePoint lcurve_point(TikhonovSolver& solver, const Eigen::VectorXd& b,
   const double lambda = solver.lambda();
   const double rho = (solver.A() * x - b).squaredNorm();  // ρ = ‖r‖²
   // dx/dλ = −2λ(AᵀA + λ²I)⁻¹x, hence η' = dη/dλ = −4λ·xᵀ(AᵀA + λ²I)⁻¹x (one extra solve).
-  const Eigen::VectorXd y = solver.solve_normal(x);
-  return point_from_norms(lambda, rho, x.squaredNorm(), -4.0 * lambda * x.dot(y));
+  return point_from_norms(lambda, rho, x.squaredNorm(),
+                          -4.0 * lambda * solver.inverse_quadratic_form(x));
 }
 
 namespace {
@@ -73,8 +73,7 @@ LCurvePoint eval_at(TikhonovSolver& solver, const Eigen::VectorXd& b, const Eige
   const double bb = b.squaredNorm();
   double rho = bb - x.dot(Atb) - lambda * lambda * eta;
   if (!(rho > 1e-6 * bb)) rho = (solver.A() * x - b).squaredNorm();
-  const Eigen::VectorXd y = solver.solve_normal(x);
-  return point_from_norms(lambda, rho, eta, -4.0 * lambda * x.dot(y));
+  return point_from_norms(lambda, rho, eta, -4.0 * lambda * solver.inverse_quadratic_form(x));
 }
 }  // namespace
 

@@ -47,6 +47,8 @@ class TikhonovSolver {
   SolverStatus factorize(double lambda);
   /// Solves (AᵀA + λ²I)·y = rhs with the current factor.
   Eigen::VectorXd solve_normal(const Eigen::VectorXd& rhs);
+  /// vᵀ(AᵀA + λ²I)⁻¹v with the current factor (one triangular solve for the LDLᵀ factor).
+  double inverse_quadratic_form(const Eigen::VectorXd& v);
   /// X_λ for right-hand side b: solve_normal(Aᵀb).
   Eigen::VectorXd solve(const Eigen::VectorXd& b);
 
