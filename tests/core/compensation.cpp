@@ -49,7 +49,7 @@ TEST_CASE("compensation = -error: commanded + comp + error = commanded at the ta
     CHECK(f.comp_um[i] == Approx(s[i]).margin(1e-12));
 }
 
-TEST_CASE("the end-point line is removed by default; the table covers the whole travel") {
+TEST_CASE("the end-point line is removed by default and the table covers the whole travel") {
   std::vector<double> x, s;
   zhao_s(&x, &s);
   for (std::size_t i = 0; i < x.size(); ++i)

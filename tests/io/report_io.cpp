@@ -28,7 +28,7 @@ TEST_CASE("value +- U: U to two significant digits (rounded up), value to the sa
   CHECK(format_value_with_uncertainty(12.0, 0.0) == "12 \xC2\xB1 \xE2\x80\x94");
 }
 
-TEST_CASE("base64 matches the RFC 4648 test vectors; HTML text is escaped") {
+TEST_CASE("base64 matches the RFC 4648 test vectors, and HTML text is escaped") {
   CHECK(base64_encode("") == "");
   CHECK(base64_encode("f") == "Zg==");
   CHECK(base64_encode("fo") == "Zm8=");
