@@ -59,7 +59,7 @@ TEST_CASE("rotation and offset between the coordinate systems are removed, a dev
 }
 
 TEST_CASE(
-    "reference between its samples is interpolated linearly; positions outside are left out") {
+    "reference between its samples is interpolated linearly, positions outside are left out") {
   // Reference every 10 mm from 20 to 200 of a piecewise-linear trace: exact at every scan point.
   const Eigen::VectorXd xr = Eigen::VectorXd::LinSpaced(19, 20.0, 200.0);
   Eigen::VectorXd ref(xr.size());
