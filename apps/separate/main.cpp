@@ -102,8 +102,9 @@ int main(int argc, char** argv) {
     std::cout << res.brief_report() << "\n"
               << "results written to " << out_dir << "/ (motion.csv, reference.csv, lcurve.csv, "
               << "residuals.csv, summary.txt)\n";
-    if (res.rule == errsep::core::LambdaRule::lcurve && res.lcurve.at_edge)
-      std::cerr << "warning: the L-curve corner is at the edge of the lambda range; widen it\n";
+    if (res.lambda_fallback)
+      std::cerr << "warning: the L-curve has no corner inside the lambda range; lambda was "
+                   "chosen by the discrepancy principle instead (widen the range to check)\n";
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "errsep-separate: " << e.what() << "\n";

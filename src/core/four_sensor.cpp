@@ -114,7 +114,7 @@ std::string FourSensorResult::brief_report() const {
                 "|X|=%.4g sigma_hat=%.3g um (dof %d) factorizations=%d time=%.3f s",
                 config.N, config.positions(), config.s2, config.s3, config.s4, config.dx_mm, lambda,
                 to_string(rule),
-                (rule == LambdaRule::lcurve && lcurve.at_edge) ? ", CORNER AT RANGE EDGE" : "",
+                lambda_fallback ? ", no interior L-curve corner: discrepancy principle used" : "",
                 residual_norm, solution_norm, sigma_um, redundancy_dof, solver_stats.factorizations,
                 total_s);
   return buf;
@@ -170,18 +170,26 @@ FourSensorResult separate_four_sensor(const FourSensorConfig& cfg, const Eigen::
       opts.lcurve.lambda_max > 0 ? opts.lcurve.lambda_max : solver.sigma_max_bound();
   const double lmin = opts.lcurve.lambda_min > 0 ? opts.lcurve.lambda_min
                                                  : lmax * std::pow(10.0, -opts.lcurve.decades);
+  auto discrepancy = [&] {
+    // δ = expected norm of the noise in b: b₀ = C·m per position, so E‖noise‖² = σ²·P·‖C‖_F².
+    const double per_pos = opts.weighting == RowWeighting::paper ? pipe.C.squaredNorm() : 2.0;
+    const double delta = res.sigma_um * std::sqrt(P * per_pos);
+    return discrepancy_lambda(solver, sys.b, opts.discrepancy_tau * delta, lmin, lmax);
+  };
   switch (opts.rule) {
     case LambdaRule::lcurve:
       res.lcurve = lcurve_corner(solver, sys.b, opts.lcurve);
       res.lambda = res.lcurve.lambda_corner;
+      // No interior corner (the curve keeps bending past the range): the edge is no choice at
+      // all, so λ comes from the discrepancy principle instead, and the result says so.
+      if (res.lcurve.at_edge) {
+        res.lambda = discrepancy();
+        res.lambda_fallback = true;
+      }
       break;
-    case LambdaRule::discrepancy: {
-      // δ = expected norm of the noise in b: b₀ = C·m per position, so E‖noise‖² = σ²·P·‖C‖_F².
-      const double per_pos = opts.weighting == RowWeighting::paper ? pipe.C.squaredNorm() : 2.0;
-      const double delta = res.sigma_um * std::sqrt(P * per_pos);
-      res.lambda = discrepancy_lambda(solver, sys.b, opts.discrepancy_tau * delta, lmin, lmax);
+    case LambdaRule::discrepancy:
+      res.lambda = discrepancy();
       break;
-    }
     case LambdaRule::fixed:
       res.lambda = opts.fixed_lambda;
       break;

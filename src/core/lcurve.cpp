@@ -120,9 +120,23 @@ LCurveResult lcurve_corner(TikhonovSolver& solver, const Eigen::VectorXd& b,
     for (const auto& w : workers)
       worker_factorizations += w->stats().factorizations;
   }
-  int best = 0;
-  for (int i = 1; i < opts.count; ++i)
-    if (res.points[i].curvature > res.points[best].curvature) best = i;
+  // The corner is the largest interior local maximum of positive curvature.  A maximum at the
+  // range's edge is not a corner (the curve only keeps bending beyond the range): with a model
+  // error in the data the global maximum can sit at the smallest λ, and taking it gave an
+  // unregularised, meaningless solution.  Only when there is no interior maximum is the edge
+  // taken, flagged as at_edge.
+  int best = -1;
+  for (int i = 1; i + 1 < opts.count; ++i) {
+    const double k = res.points[i].curvature;
+    if (k > 0 && k >= res.points[i - 1].curvature && k >= res.points[i + 1].curvature &&
+        (best < 0 || k > res.points[best].curvature))
+      best = i;
+  }
+  if (best < 0) {
+    best = 0;
+    for (int i = 1; i < opts.count; ++i)
+      if (res.points[i].curvature > res.points[best].curvature) best = i;
+  }
   res.corner_index = best;
   res.at_edge = best == 0 || best == opts.count - 1;
   res.lambda_corner = res.points[best].lambda;

@@ -87,6 +87,7 @@ void write_four_sensor_result(const std::filesystem::path& dir, const core::Four
   common_meta(lc, r, info);
   lc.set_meta("lambda_chosen", fmt(r.lambda));
   lc.set_meta("corner_at_edge", r.lcurve.at_edge ? "true" : "false");
+  lc.set_meta("lambda_from_discrepancy_fallback", r.lambda_fallback ? "true" : "false");
   std::vector<double> l, rn, sn, k;
   for (const auto& p : r.lcurve.points) {
     l.push_back(p.lambda);

@@ -105,3 +105,27 @@ TEST_CASE("invalid configurations are refused with the field named") {
   const Eigen::MatrixXd wrong = Eigen::MatrixXd::Zero(10, 4);
   CHECK_THROWS_WITH(separate_four_sensor(FourSensorConfig{}, wrong), Catch::Contains("62x4"));
 }
+
+TEST_CASE("no interior L-curve corner: lambda falls back to the discrepancy principle") {
+  const FourSensorConfig cfg;
+  FourSensorSimOptions so;
+  so.sigma_um = 0.1;
+  so.seed = 3;
+  const auto sim = simulate_four_sensor(cfg, zhao2019_example1(cfg), so);
+  FourSensorOptions o;
+  o.compute_uncertainty = false;
+  // A λ range far above the corner: the curve only flattens there, no interior maximum.
+  o.lcurve.lambda_min = 1e3;
+  o.lcurve.lambda_max = 1e5;
+  const auto r = separate_four_sensor(cfg, sim.m_um, o);
+  REQUIRE(r.lcurve.at_edge);
+  CHECK(r.lambda_fallback);
+  FourSensorOptions d = o;
+  d.rule = LambdaRule::discrepancy;
+  const auto rd = separate_four_sensor(cfg, sim.m_um, d);
+  CHECK(r.lambda == Approx(rd.lambda).epsilon(1e-12));
+  CHECK(r.brief_report().find("discrepancy principle used") != std::string::npos);
+
+  const auto normal = separate_four_sensor(cfg, sim.m_um, FourSensorOptions{});
+  CHECK_FALSE(normal.lambda_fallback);
+}

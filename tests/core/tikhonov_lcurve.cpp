@@ -86,3 +86,37 @@ TEST_CASE("closed-form L-curve curvature matches finite differences and peaks at
   const double rc = (sys.A * solver.solve(sys.b) - sys.b).norm();
   CHECK(rc < 1.1 * rmin);
 }
+
+TEST_CASE("an L-curve without an interior corner is flagged at_edge") {
+  // A = I, b = 1: ‖r‖ and ‖x‖ trade smoothly and the curvature is negative everywhere.
+  const int n = 20;
+  Eigen::SparseMatrix<double> A(n, n);
+  for (int i = 0; i < n; ++i)
+    A.insert(i, i) = 1.0;
+  A.makeCompressed();
+  TikhonovSolver solver(A);
+  LCurveOptions o;
+  o.count = 40;
+  o.lambda_min = 1e-4;
+  o.lambda_max = 1e-1;
+  const auto lc = lcurve_corner(solver, Eigen::VectorXd::Ones(n), o);
+  CHECK(lc.at_edge);
+}
+
+TEST_CASE("the threaded L-curve sweep gives the same curve as the sequential one") {
+  const auto sys = example_system(0.1);
+  TikhonovSolver s1(sys.A), s2(sys.A);
+  LCurveOptions o;
+  o.count = 41;
+  const auto seq = lcurve_corner(s1, sys.b, o);
+  o.threads = 2;
+  const auto par = lcurve_corner(s2, sys.b, o);
+  REQUIRE(par.points.size() == seq.points.size());
+  for (std::size_t i = 0; i < seq.points.size(); ++i) {
+    CHECK(par.points[i].lambda == seq.points[i].lambda);
+    CHECK(par.points[i].residual_norm == Approx(seq.points[i].residual_norm).epsilon(1e-12));
+    CHECK(par.points[i].curvature == Approx(seq.points[i].curvature).epsilon(1e-9));
+  }
+  CHECK(par.lambda_corner == Approx(seq.lambda_corner).epsilon(1e-9));
+  CHECK(par.factorizations == seq.factorizations);
+}

@@ -62,7 +62,9 @@ struct FourSensorResult {
   double lambda = 0;
   LambdaRule rule = LambdaRule::lcurve;
   CurvatureGauge gauge = CurvatureGauge::sensor_stage_without_curvature;
-  LCurveResult lcurve;       ///< the whole curve (filled for rule lcurve)
+  LCurveResult lcurve;  ///< the whole curve (filled for rule lcurve)
+  /// Rule lcurve found no interior corner (lcurve.at_edge): λ is the discrepancy principle's.
+  bool lambda_fallback = false;
   double residual_norm = 0;  ///< ‖A·X_λ − b‖
   double solution_norm = 0;  ///< ‖X_λ‖
   double sigma_um = 0;       ///< sensor noise σ̂ implied by the redundant equations

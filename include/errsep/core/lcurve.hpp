@@ -32,10 +32,10 @@ struct LCurveOptions {
 
 struct LCurveResult {
   std::vector<LCurvePoint> points;  ///< the grid, ascending λ (refined points not included)
-  double lambda_corner = 0;         ///< λ of maximum curvature (after refinement)
+  double lambda_corner = 0;  ///< λ of the largest interior curvature maximum (after refinement)
   double curvature_corner = 0;
   int corner_index = -1;  ///< grid index of the maximum before refinement
-  bool at_edge = false;   ///< the maximum is at the first or last grid point
+  bool at_edge = false;   ///< no interior maximum: the corner is the first or last grid point
   int factorizations = 0;
 };
 
