@@ -42,7 +42,7 @@ Figures measure(int N, int count, bool dense, int threads) {
       cfg, sim.m_um, errsep::core::CurvatureGauge::sensor_stage_without_curvature);
   f.assemble_s = secs(t0);
   t0 = clk::now();
-  errsep::core::TikhonovSolver solver(sys.A);
+  errsep::core::TikhonovSolver solver(sys.A, 4);  // Δe: the border columns
   errsep::core::LCurveOptions lo;
   lo.count = count;
   lo.refine_iterations = 0;

@@ -129,7 +129,7 @@ FourSensorResult separate_four_sensor(const FourSensorConfig& cfg, const Eigen::
   if (!m_um.allFinite()) throw std::invalid_argument("sensor outputs contain non-finite values");
 
   const AugmentedSystem sys = assemble_four_sensor_system(cfg, m_um, opts.gauge, opts.weighting);
-  TikhonovSolver solver(sys.A);
+  TikhonovSolver solver(sys.A, 4);  // the border: Δe, the last 4 unknowns (Eq. 7)
   Pipeline pipe{
       cfg, opts, solver, combination_matrix(cfg), {}, cfg.offsets_samples(), cfg.offsets_mm()};
   pipe.C23 = pipe.C.middleCols<2>(1);

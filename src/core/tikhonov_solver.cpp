@@ -2,6 +2,8 @@
 
 #include <cholmod.h>
 
+#include <Eigen/Cholesky>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -75,7 +77,12 @@ const char* to_string(SolverStatus s) {
 // Read-only once built, so workers on other threads share it.
 struct TikhonovSolver::Normal {
   cholmod_common cm{};
-  cholmod_sparse* upper = nullptr;
+  cholmod_sparse* upper = nullptr;  ///< all of AᵀA (n × n, upper)
+  /// The band block B: the leading m × m of `upper`.  Column j of an upper-stored matrix holds
+  /// rows <= j only, so B is the first m columns of `upper` with the same arrays.
+  cholmod_sparse band{};
+  Eigen::MatrixXd C;  ///< m × k coupling of the band unknowns with the border (mostly zero)
+  Eigen::MatrixXd D;  ///< k × k border block
   Normal() { start_common(cm); }
   ~Normal() {
     cholmod_free_sparse(&upper, &cm);
@@ -91,7 +98,25 @@ struct TikhonovSolver::Impl {
   // Solution and workspace of cholmod_solve2, kept between solves: a fresh 8 MB vector per solve
   // at N = 10⁶ costs page faults comparable to the solve itself.
   cholmod_dense *X = nullptr, *Y = nullptr, *E = nullptr;
+  Eigen::MatrixXd W;              ///< L⁻¹C (m × k)
+  Eigen::VectorXd d;              ///< the diagonal D of the band's LDLᵀ
+  Eigen::LLT<Eigen::MatrixXd> S;  ///< Schur complement D + λ²I − WᵀD⁻¹W of the border
   bool factor_ok = false;
+
+  /// out = op⁻¹·v for CHOLMOD system `sys` (CHOLMOD_L or CHOLMOD_DLt) on the band factor.
+  void band_solve(int sys, const double* v, Eigen::Index rows, Eigen::Index cols, double* out) {
+    cholmod_dense b{};
+    b.nrow = static_cast<size_t>(rows);
+    b.ncol = static_cast<size_t>(cols);
+    b.nzmax = b.nrow * b.ncol;
+    b.d = b.nrow;
+    b.x = const_cast<double*>(v);
+    b.xtype = CHOLMOD_REAL;
+    b.dtype = CHOLMOD_DOUBLE;
+    if (!cholmod_solve2(sys, L, &b, nullptr, &X, nullptr, &Y, &E, &cm))
+      throw std::runtime_error("CHOLMOD solve failed (status " + std::to_string(cm.status) + ")");
+    std::copy_n(static_cast<const double*>(X->x), rows * cols, out);
+  }
   Impl() { start_common(cm); }
   ~Impl() {
     cholmod_free_dense(&X, &cm);
@@ -104,10 +129,14 @@ struct TikhonovSolver::Impl {
   Impl& operator=(const Impl&) = delete;
 };
 
-TikhonovSolver::TikhonovSolver(const Eigen::SparseMatrix<double>& A)
+TikhonovSolver::TikhonovSolver(const Eigen::SparseMatrix<double>& A, int border_columns)
     : A_(std::make_shared<const Eigen::SparseMatrix<double>>(A)),
       normal_(std::make_shared<Normal>()),
-      impl_(std::make_unique<Impl>()) {
+      impl_(std::make_unique<Impl>()),
+      border_(border_columns) {
+  if (border_ < 0 || border_ >= A.cols())
+    throw std::invalid_argument("TikhonovSolver: border_columns = " + std::to_string(border_) +
+                                " for a matrix with " + std::to_string(A.cols()) + " columns");
   const auto t0 = std::chrono::steady_clock::now();
   cholmod_common& cm = normal_->cm;
   // AᵀA = F·Fᵀ with F = Aᵀ (cholmod_aat; 3x faster than Eigen's sparse-sparse product here).
@@ -145,10 +174,35 @@ TikhonovSolver::TikhonovSolver(const Eigen::SparseMatrix<double>& A)
   // solution sees.
   cholmod_drop(1e-13 * max_abs, normal_->upper, &cm);
 
-  impl_->L = cholmod_analyze(normal_->upper, &impl_->cm);
+  const auto n = static_cast<Eigen::Index>(normal_->upper->ncol);
+  const Eigen::Index m = n - border_;
+  normal_->band = *normal_->upper;
+  normal_->band.nrow = normal_->band.ncol = static_cast<size_t>(m);
+  normal_->C = Eigen::MatrixXd::Zero(m, border_);
+  normal_->D = Eigen::MatrixXd::Zero(border_, border_);
+  {
+    const auto* p = static_cast<const int*>(normal_->upper->p);
+    const auto* i = static_cast<const int*>(normal_->upper->i);
+    const auto* x = static_cast<const double*>(normal_->upper->x);
+    for (Eigen::Index c = m; c < n; ++c)
+      for (int q = p[c]; q < p[c + 1]; ++q) {
+        if (i[q] < m) {
+          normal_->C(i[q], c - m) = x[q];
+        } else {
+          normal_->D(i[q] - m, c - m) = x[q];
+          normal_->D(c - m, i[q] - m) = x[q];
+        }
+      }
+  }
+
+  impl_->L = cholmod_analyze(&normal_->band, &impl_->cm);
   if (!impl_->L || impl_->cm.status < CHOLMOD_OK)
     throw std::runtime_error("CHOLMOD symbolic analysis failed (status " +
                              std::to_string(impl_->cm.status) + ")");
+  // The border elimination and inverse_quadratic_form read D off the simplicial LDLᵀ factor and
+  // assume no fill-reducing permutation (the natural order of a band is already fill-free).
+  if (impl_->L->ordering != CHOLMOD_NATURAL || impl_->L->is_super)
+    throw std::runtime_error("CHOLMOD did not keep the natural-order simplicial factor");
   stats_.analyze_s = seconds_since(t0);
 }
 
@@ -159,6 +213,7 @@ std::unique_ptr<TikhonovSolver> TikhonovSolver::worker() const {
   w->A_ = A_;
   w->normal_ = normal_;
   w->sigma_max_bound_ = sigma_max_bound_;
+  w->border_ = border_;
   w->impl_ = std::make_unique<Impl>();
   w->impl_->L = cholmod_copy_factor(impl_->L, &w->impl_->cm);
   if (!w->impl_->L) throw std::runtime_error("CHOLMOD could not copy the factor for a worker");
@@ -167,56 +222,83 @@ std::unique_ptr<TikhonovSolver> TikhonovSolver::worker() const {
 
 SolverStatus TikhonovSolver::factorize(double lambda) {
   const auto t0 = std::chrono::steady_clock::now();
-  double beta[2] = {lambda * lambda, 0.0};  // AᵀA + βI with β = λ²
-  const int ok = cholmod_factorize_p(normal_->upper, beta, nullptr, 0, impl_->L, &impl_->cm);
+  double beta[2] = {lambda * lambda, 0.0};  // B + βI with β = λ²
+  const int ok = cholmod_factorize_p(&normal_->band, beta, nullptr, 0, impl_->L, &impl_->cm);
   ++stats_.factorizations;
-  stats_.factorize_s += seconds_since(t0);
   lambda_ = lambda;
   // cholmod_factorize_p returns TRUE even when a pivot failed: check status and L->minor too.
-  impl_->factor_ok = ok && impl_->cm.status == CHOLMOD_OK && impl_->L->minor == impl_->L->n;
+  impl_->factor_ok =
+      ok && impl_->cm.status == CHOLMOD_OK && impl_->L->minor == impl_->L->n && !impl_->L->is_ll;
+  if (impl_->factor_ok) {
+    const auto m = static_cast<Eigen::Index>(impl_->L->n);
+    const auto* Lp = static_cast<const int*>(impl_->L->p);
+    const auto* Lx = static_cast<const double*>(impl_->L->x);
+    impl_->d.resize(m);
+    for (Eigen::Index j = 0; j < m; ++j)
+      impl_->d(j) = Lx[Lp[j]];  // D_j on L's diagonal
+    if (border_ > 0) {
+      // Block LDLᵀ of [B C; Cᵀ D]: W = L⁻¹C, Schur complement S = D + λ²I − WᵀD_B⁻¹W.
+      impl_->W.resize(m, border_);
+      impl_->band_solve(CHOLMOD_L, normal_->C.data(), m, border_, impl_->W.data());
+      Eigen::MatrixXd S = normal_->D;
+      S.diagonal().array() += lambda * lambda;
+      S.noalias() -= impl_->W.transpose() * impl_->d.cwiseInverse().asDiagonal() * impl_->W;
+      impl_->S.compute(S);
+      impl_->factor_ok = impl_->S.info() == Eigen::Success;
+    }
+  }
+  stats_.factorize_s += seconds_since(t0);
   return impl_->factor_ok ? SolverStatus::success : SolverStatus::not_positive_definite;
 }
 
 Eigen::VectorXd TikhonovSolver::solve_normal(const Eigen::VectorXd& rhs) {
   if (!impl_->factor_ok)
     throw std::logic_error("TikhonovSolver::solve_normal without a successful factorisation");
-  if (rhs.size() != static_cast<Eigen::Index>(impl_->L->n))
+  const auto m = static_cast<Eigen::Index>(impl_->L->n);
+  if (rhs.size() != m + border_)
     throw std::invalid_argument("TikhonovSolver::solve_normal: right-hand side has " +
                                 std::to_string(rhs.size()) + " entries, expected " +
-                                std::to_string(impl_->L->n));
+                                std::to_string(m + border_));
   const auto t0 = std::chrono::steady_clock::now();
-  cholmod_dense b = view(rhs);
-  if (!cholmod_solve2(CHOLMOD_A, impl_->L, &b, nullptr, &impl_->X, nullptr, &impl_->Y, &impl_->E,
-                      &impl_->cm))
-    throw std::runtime_error("CHOLMOD solve failed (status " + std::to_string(impl_->cm.status) +
-                             ")");
-  Eigen::VectorXd out =
-      Eigen::Map<const Eigen::VectorXd>(static_cast<const double*>(impl_->X->x), rhs.size());
+  Eigen::VectorXd out(rhs.size());
+  if (border_ == 0) {
+    cholmod_dense b = view(rhs);
+    if (!cholmod_solve2(CHOLMOD_A, impl_->L, &b, nullptr, &impl_->X, nullptr, &impl_->Y, &impl_->E,
+                        &impl_->cm))
+      throw std::runtime_error("CHOLMOD solve failed (status " + std::to_string(impl_->cm.status) +
+                               ")");
+    out = Eigen::Map<const Eigen::VectorXd>(static_cast<const double*>(impl_->X->x), m);
+  } else {
+    // z = L⁻¹r₁, y = S⁻¹(r₂ − WᵀD_B⁻¹z), x = (D_B Lᵀ)⁻¹(z − W·y).
+    Eigen::VectorXd z(m);
+    impl_->band_solve(CHOLMOD_L, rhs.data(), m, 1, z.data());
+    const Eigen::VectorXd y =
+        impl_->S.solve(rhs.tail(border_) - impl_->W.transpose() * z.cwiseQuotient(impl_->d));
+    z.noalias() -= impl_->W * y;
+    impl_->band_solve(CHOLMOD_DLt, z.data(), m, 1, out.data());
+    out.tail(border_) = y;
+  }
   ++stats_.solves;
   stats_.solve_s += seconds_since(t0);
   return out;
 }
 
 double TikhonovSolver::inverse_quadratic_form(const Eigen::VectorXd& v) {
-  const cholmod_factor* L = impl_->L;
-  // With the natural ordering and a simplicial LDLᵀ factor, vᵀ(LDLᵀ)⁻¹v = Σ z_j²/D_j with
-  // z = L⁻¹v: one triangular solve instead of two.  Any other factor kind: a full solve.
-  if (!impl_->factor_ok || L->is_ll || L->is_super || L->ordering != CHOLMOD_NATURAL)
-    return v.dot(solve_normal(v));
-  if (v.size() != static_cast<Eigen::Index>(L->n))
+  if (!impl_->factor_ok)
+    throw std::logic_error("TikhonovSolver::inverse_quadratic_form without a factorisation");
+  const auto m = static_cast<Eigen::Index>(impl_->L->n);
+  if (v.size() != m + border_)
     throw std::invalid_argument("TikhonovSolver::inverse_quadratic_form: wrong vector size");
   const auto t0 = std::chrono::steady_clock::now();
-  cholmod_dense b = view(v);
-  if (!cholmod_solve2(CHOLMOD_L, impl_->L, &b, nullptr, &impl_->X, nullptr, &impl_->Y, &impl_->E,
-                      &impl_->cm))
-    throw std::runtime_error("CHOLMOD solve failed (status " + std::to_string(impl_->cm.status) +
-                             ")");
-  const auto* z = static_cast<const double*>(impl_->X->x);
-  const auto* Lp = static_cast<const int*>(L->p);
-  const auto* Lx = static_cast<const double*>(L->x);
-  double q = 0.0;
-  for (size_t j = 0; j < L->n; ++j)
-    q += z[j] * z[j] / Lx[Lp[j]];  // D_j on L's diagonal
+  // vᵀM⁻¹v = zᵀD_B⁻¹z + tᵀS⁻¹t with z = L⁻¹v₁, t = v₂ − WᵀD_B⁻¹z: one triangular solve.
+  Eigen::VectorXd z(m);
+  impl_->band_solve(CHOLMOD_L, v.data(), m, 1, z.data());
+  const Eigen::VectorXd zd = z.cwiseQuotient(impl_->d);
+  double q = z.dot(zd);
+  if (border_ > 0) {
+    const Eigen::VectorXd t = v.tail(border_) - impl_->W.transpose() * zd;
+    q += t.dot(impl_->S.solve(t));
+  }
   ++stats_.solves;
   stats_.solve_s += seconds_since(t0);
   return q;

@@ -24,21 +24,28 @@ AugmentedSystem example_system(double sigma) {
 
 TEST_CASE("CHOLMOD Tikhonov solution equals the dense one for every lambda") {
   const auto sys = example_system(0.1);
-  TikhonovSolver solver(sys.A);
   const Eigen::MatrixXd A = Eigen::MatrixXd(sys.A);
   const Eigen::MatrixXd AtA = A.transpose() * A;
-  for (double lambda : {0.0, 1e-3, 0.05, 1.0, 10.0}) {
-    REQUIRE(solver.factorize(lambda) == SolverStatus::success);
-    const Eigen::VectorXd x = solver.solve(sys.b);
-    const Eigen::MatrixXd M = AtA + lambda * lambda * Eigen::MatrixXd::Identity(A.cols(), A.cols());
-    const Eigen::VectorXd ref = M.ldlt().solve(A.transpose() * sys.b);
-    INFO("lambda = " << lambda);
-    // Tolerance scaled by the condition number of M and machine epsilon.
-    Eigen::JacobiSVD<Eigen::MatrixXd> svd(M);
-    const double cond = svd.singularValues()(0) / svd.singularValues().tail(1)(0);
-    CHECK((x - ref).norm() <= 10 * cond * 2.2e-16 * ref.norm());
+  // Without a border (CHOLMOD factorises all of AᵀA) and with the Δe border eliminated by its
+  // Schur complement: both must give the dense solution and the dense quadratic form.
+  for (int border : {0, 4}) {
+    TikhonovSolver solver(sys.A, border);
+    for (double lambda : {0.0, 1e-3, 0.05, 1.0, 10.0}) {
+      REQUIRE(solver.factorize(lambda) == SolverStatus::success);
+      const Eigen::VectorXd x = solver.solve(sys.b);
+      const Eigen::MatrixXd M =
+          AtA + lambda * lambda * Eigen::MatrixXd::Identity(A.cols(), A.cols());
+      const Eigen::VectorXd ref = M.ldlt().solve(A.transpose() * sys.b);
+      INFO("border = " << border << ", lambda = " << lambda);
+      // Tolerance scaled by the condition number of M and machine epsilon.
+      Eigen::JacobiSVD<Eigen::MatrixXd> svd(M);
+      const double cond = svd.singularValues()(0) / svd.singularValues().tail(1)(0);
+      CHECK((x - ref).norm() <= 10 * cond * 2.2e-16 * ref.norm());
+      const double q_ref = ref.dot(M.ldlt().solve(ref));
+      CHECK(std::abs(solver.inverse_quadratic_form(ref) - q_ref) <= 10 * cond * 2.2e-16 * q_ref);
+    }
+    CHECK(solver.stats().factorizations == 5);
   }
-  CHECK(solver.stats().factorizations == 5);
 }
 
 TEST_CASE("spacings with a common factor are refused: A would be rank-deficient") {

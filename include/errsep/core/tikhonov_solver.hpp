@@ -35,7 +35,15 @@ struct TikhonovSolverStats {
 class TikhonovSolver {
  public:
   /// Forms AᵀA and runs the symbolic analysis.  Throws std::runtime_error if CHOLMOD fails.
-  explicit TikhonovSolver(const Eigen::SparseMatrix<double>& A);
+  ///
+  /// `border_columns` = k > 0: the last k columns of A couple to (nearly) all others, as the
+  /// zero-adjustment differences Δe of Eq. (7) do, so AᵀA is a band with a k-wide border.
+  /// CHOLMOD then factorises only the band B (twice as fast as band plus border: the border rows
+  /// of the factor are dense) and the border is eliminated by its k × k Schur complement
+  /// S = D − Cᵀ B⁻¹ C (k forward substitutions per λ).  The band block alone must be positive
+  /// definite at the λ used (it is for every gauge of four_sensor_system: f alone has no null
+  /// direction there, or λ > 0).
+  explicit TikhonovSolver(const Eigen::SparseMatrix<double>& A, int border_columns = 0);
   ~TikhonovSolver();
   /// Another solver over the same A and AᵀA (shared, not copied) with its own factor (the
   /// symbolic analysis is copied, not redone), for use on another thread.  Its stats start at 0.
@@ -65,6 +73,7 @@ class TikhonovSolver {
   std::shared_ptr<const Eigen::SparseMatrix<double>> A_;
   std::shared_ptr<Normal> normal_;
   std::unique_ptr<Impl> impl_;
+  int border_ = 0;
   double lambda_ = -1.0;
   double sigma_max_bound_ = 0.0;
   TikhonovSolverStats stats_;
