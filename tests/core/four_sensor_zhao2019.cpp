@@ -7,6 +7,12 @@
 // figures do not meet issue 2's bars (1.5x the paper's ΔS_max and ΔS^a_max) and Example 2 exceeds
 // 2.6 µm for low harmonic orders k.  Those bars are printed as MET / NOT MET below and are NOT
 // asserted (asserting a widened bar would hide the gap); the γ bars, PE1/PE2 and Fig. 3(d) are.
+// Why: the last test case computes the unbiased floor — even with e known, the minimum-variance
+// unbiased Ŝ has a standard deviation of 2.17 µm at σ = 0.1 µm, i.e. an expected ΔS_max over 20
+// runs of about 4 µm.  The paper's 1.1 µm needs regularisation bias that happens to be small for
+// its test profiles; with the identity regulariser no λ gives both ΔS_max ≤ 1.65 and ΔS^a ≤ 0.225
+// (fixed-λ sweep over 200 seeds: λ = 0.05 gives 2.08 / 0.32, λ = 0.1 gives 1.52 / 0.66).
+#include <Eigen/Dense>
 #include <catch2/catch.hpp>
 #include <cstdio>
 
@@ -132,4 +138,41 @@ TEST_CASE("Example 2 (Eq. 24): dS_max at sigma = 0.2 over harmonic orders (bar 2
     const Figures f_ls = run(cfg, zhao2019_example2(cfg, k), so, ls, 3);
     CHECK(f.dS_max < f_ls.dS_max);
   }
+}
+
+// Why the S bars are out of reach: the best any unbiased estimator can do.  The readings of Eq. (1)
+// with white noise σ are a linear model in (f, S, γ, e); its least-squares estimate is the
+// minimum-variance unbiased one (Gauss–Markov; Cramér–Rao for Gaussian noise).  Even when the
+// zero-adjustment values e are KNOWN (so only the line of S and f is gauged, by Eq. 11), the
+// standard deviation of Ŝ at the worst position times ~1.87 (the mean largest |z| of 20 normal
+// draws) exceeds the paper's ΔS_max = 1.1 µm at σ = 0.1 µm, and its 1.5× bar.  So the paper's
+// figures need a biased (regularised) estimator whose bias happens to be small for its test
+// profiles; the identity-Tikhonov frontier (printed by the first test case) does not reach them.
+TEST_CASE(
+    "Example 1: the unbiased floor of dS_max at sigma = 0.1 um lies above the paper's 1.1 um") {
+  const FourSensorConfig cfg;
+  const int N = cfg.N, P = cfg.positions();
+  const auto k = cfg.offsets_samples();
+  const auto O = cfg.offsets_mm();
+  const double sigma = 0.1;
+  // Unknowns f (N), S (P), γ (P); e known.  Rows: 4P readings, plus f(x_0) = f(x_{N−1}) = 0.
+  Eigen::MatrixXd A = Eigen::MatrixXd::Zero(4 * P + 2, N + 2 * P);
+  for (int n = 0; n < P; ++n)
+    for (int i = 0; i < 4; ++i) {
+      A(4 * n + i, n + k[i]) = 1.0;
+      A(4 * n + i, N + n) = 1.0;
+      A(4 * n + i, N + P + n) = O[i];
+    }
+  A(4 * P, 0) = 1e4;  // the gauge rows, heavily weighted: exact constraints
+  A(4 * P + 1, N - 1) = 1e4;
+  const Eigen::MatrixXd Minv = (A.transpose() * A).inverse();
+  const Eigen::MatrixXd G = Minv * A.topRows(4 * P).transpose();  // estimate = G · readings
+  const Eigen::MatrixXd GS = G.middleRows(N, P);
+  const Eigen::VectorXd sd = (sigma * sigma * GS * GS.transpose()).diagonal().cwiseSqrt();
+  const double floor_dS_max = 1.87 * sd.maxCoeff();
+  std::printf(
+      "\nunbiased floor at sigma = 0.1 um, e known: max sd(S) = %.2f um, expected dS_max "
+      "over 20 runs >= %.2f um (paper 1.1, bar 1.65)\n",
+      sd.maxCoeff(), floor_dS_max);
+  CHECK(floor_dS_max > 1.5 * 1.1);
 }
