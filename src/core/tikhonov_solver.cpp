@@ -97,9 +97,13 @@ struct TikhonovSolver::Impl {
   cholmod_factor* L = nullptr;
   // Solution and workspace of cholmod_solve2, kept between solves: a fresh 8 MB vector per solve
   // at N = 10⁶ costs page faults comparable to the solve itself.
+  // One set per right-hand-side width (1 and the border's k): alternating widths in one set would
+  // reallocate it on every call.
   cholmod_dense *X = nullptr, *Y = nullptr, *E = nullptr;
-  Eigen::MatrixXd W;              ///< L⁻¹C (m × k)
-  Eigen::VectorXd d;              ///< the diagonal D of the band's LDLᵀ
+  cholmod_dense *Xk = nullptr, *Yk = nullptr, *Ek = nullptr;
+  Eigen::MatrixXd W;   ///< L⁻¹C (m × k)
+  Eigen::MatrixXd Wd;  ///< D_B⁻¹W (m × k), kept: a temporary per λ would cost page faults
+  Eigen::VectorXd d;   ///< the diagonal D of the band's LDLᵀ
   Eigen::LLT<Eigen::MatrixXd> S;  ///< Schur complement D + λ²I − WᵀD⁻¹W of the border
   bool factor_ok = false;
 
@@ -113,15 +117,20 @@ struct TikhonovSolver::Impl {
     b.x = const_cast<double*>(v);
     b.xtype = CHOLMOD_REAL;
     b.dtype = CHOLMOD_DOUBLE;
-    if (!cholmod_solve2(sys, L, &b, nullptr, &X, nullptr, &Y, &E, &cm))
+    const bool single = cols == 1;
+    if (!cholmod_solve2(sys, L, &b, nullptr, single ? &X : &Xk, nullptr, single ? &Y : &Yk,
+                        single ? &E : &Ek, &cm))
       throw std::runtime_error("CHOLMOD solve failed (status " + std::to_string(cm.status) + ")");
-    std::copy_n(static_cast<const double*>(X->x), rows * cols, out);
+    std::copy_n(static_cast<const double*>((single ? X : Xk)->x), rows * cols, out);
   }
   Impl() { start_common(cm); }
   ~Impl() {
     cholmod_free_dense(&X, &cm);
     cholmod_free_dense(&Y, &cm);
     cholmod_free_dense(&E, &cm);
+    cholmod_free_dense(&Xk, &cm);
+    cholmod_free_dense(&Yk, &cm);
+    cholmod_free_dense(&Ek, &cm);
     cholmod_free_factor(&L, &cm);
     cholmod_finish(&cm);
   }
@@ -240,9 +249,11 @@ SolverStatus TikhonovSolver::factorize(double lambda) {
       // Block LDLᵀ of [B C; Cᵀ D]: W = L⁻¹C, Schur complement S = D + λ²I − WᵀD_B⁻¹W.
       impl_->W.resize(m, border_);
       impl_->band_solve(CHOLMOD_L, normal_->C.data(), m, border_, impl_->W.data());
+      impl_->Wd.resize(m, border_);
+      impl_->Wd = impl_->W.array().colwise() / impl_->d.array();
       Eigen::MatrixXd S = normal_->D;
       S.diagonal().array() += lambda * lambda;
-      S.noalias() -= impl_->W.transpose() * impl_->d.cwiseInverse().asDiagonal() * impl_->W;
+      S.noalias() -= impl_->W.transpose() * impl_->Wd;
       impl_->S.compute(S);
       impl_->factor_ok = impl_->S.info() == Eigen::Success;
     }
@@ -272,8 +283,7 @@ Eigen::VectorXd TikhonovSolver::solve_normal(const Eigen::VectorXd& rhs) {
     // z = L⁻¹r₁, y = S⁻¹(r₂ − WᵀD_B⁻¹z), x = (D_B Lᵀ)⁻¹(z − W·y).
     Eigen::VectorXd z(m);
     impl_->band_solve(CHOLMOD_L, rhs.data(), m, 1, z.data());
-    const Eigen::VectorXd y =
-        impl_->S.solve(rhs.tail(border_) - impl_->W.transpose() * z.cwiseQuotient(impl_->d));
+    const Eigen::VectorXd y = impl_->S.solve(rhs.tail(border_) - impl_->Wd.transpose() * z);
     z.noalias() -= impl_->W * y;
     impl_->band_solve(CHOLMOD_DLt, z.data(), m, 1, out.data());
     out.tail(border_) = y;
