@@ -128,8 +128,9 @@ FourSensorResult separate_four_sensor(const FourSensorConfig& cfg, const Eigen::
   if (!opts.is_valid(&why)) throw std::invalid_argument("invalid options: " + why);
   if (!m_um.allFinite()) throw std::invalid_argument("sensor outputs contain non-finite values");
 
-  const AugmentedSystem sys = assemble_four_sensor_system(cfg, m_um, opts.gauge, opts.weighting);
-  TikhonovSolver solver(sys.A, 4);  // the border: Δe, the last 4 unknowns (Eq. 7)
+  AugmentedSystem sys = assemble_four_sensor_system(cfg, m_um, opts.gauge, opts.weighting);
+  // A moves into the solver (solver.A() from here on); the border: Δe, the last 4 unknowns (Eq. 7).
+  TikhonovSolver solver(std::move(sys.A), 4);
   Pipeline pipe{
       cfg, opts, solver, combination_matrix(cfg), {}, cfg.offsets_samples(), cfg.offsets_mm()};
   pipe.C23 = pipe.C.middleCols<2>(1);
@@ -202,7 +203,7 @@ FourSensorResult separate_four_sensor(const FourSensorConfig& cfg, const Eigen::
     throw std::runtime_error("factorisation failed at the chosen lambda = " +
                              std::to_string(res.lambda));
   const Eigen::VectorXd X = pipe.solve_X(sys.b);
-  res.residual_norm = (sys.A * X - sys.b).norm();
+  res.residual_norm = (solver.A() * X - sys.b).norm();
   res.solution_norm = X.norm();
   res.f_um = X.head(N);
   res.delta_e_um = X.tail<4>();

@@ -139,13 +139,22 @@ struct TikhonovSolver::Impl {
 };
 
 TikhonovSolver::TikhonovSolver(const Eigen::SparseMatrix<double>& A, int border_columns)
-    : A_(std::make_shared<const Eigen::SparseMatrix<double>>(A)),
-      normal_(std::make_shared<Normal>()),
-      impl_(std::make_unique<Impl>()),
-      border_(border_columns) {
-  if (border_ < 0 || border_ >= A.cols())
+    : A_(std::make_shared<const Eigen::SparseMatrix<double>>(A)) {
+  build(border_columns);
+}
+
+TikhonovSolver::TikhonovSolver(Eigen::SparseMatrix<double>&& A, int border_columns)
+    : A_(std::make_shared<const Eigen::SparseMatrix<double>>(std::move(A))) {
+  build(border_columns);
+}
+
+void TikhonovSolver::build(int border_columns) {
+  normal_ = std::make_shared<Normal>();
+  impl_ = std::make_unique<Impl>();
+  border_ = border_columns;
+  if (border_ < 0 || border_ >= A_->cols())
     throw std::invalid_argument("TikhonovSolver: border_columns = " + std::to_string(border_) +
-                                " for a matrix with " + std::to_string(A.cols()) + " columns");
+                                " for a matrix with " + std::to_string(A_->cols()) + " columns");
   const auto t0 = std::chrono::steady_clock::now();
   cholmod_common& cm = normal_->cm;
   // AᵀA = F·Fᵀ with F = Aᵀ (cholmod_aat; 3x faster than Eigen's sparse-sparse product here).
