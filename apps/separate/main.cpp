@@ -51,6 +51,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--lcurve-points", opts.lcurve.count, "lambda values on the L-curve grid")
       ->capture_default_str();
+  app.add_option("--threads", opts.lcurve.threads,
+                 "threads for the L-curve grid (same result; faster for long scans)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
   CLI11_PARSE(app, argc, argv);
 
   try {

@@ -171,6 +171,7 @@ FourSensorResult separate_four_sensor(const FourSensorConfig& cfg, const Eigen::
       opts.lcurve.lambda_max > 0 ? opts.lcurve.lambda_max : solver.sigma_max_bound();
   const double lmin = opts.lcurve.lambda_min > 0 ? opts.lcurve.lambda_min
                                                  : lmax * std::pow(10.0, -opts.lcurve.decades);
+  int worker_factorizations = 0;
   auto discrepancy = [&] {
     // δ = expected norm of the noise in b: b₀ = C·m per position, so E‖noise‖² = σ²·P·‖C‖_F².
     const double per_pos = opts.weighting == RowWeighting::paper ? pipe.C.squaredNorm() : 2.0;
@@ -178,8 +179,13 @@ FourSensorResult separate_four_sensor(const FourSensorConfig& cfg, const Eigen::
     return discrepancy_lambda(solver, sys.b, opts.discrepancy_tau * delta, lmin, lmax);
   };
   switch (opts.rule) {
-    case LambdaRule::lcurve:
+    case LambdaRule::lcurve: {
+      const int own_before = solver.stats().factorizations;
       res.lcurve = lcurve_corner(solver, sys.b, opts.lcurve);
+      // Factorisations done by the sweep's worker threads (not in solver.stats()).
+      worker_factorizations =
+          res.lcurve.factorizations - (solver.stats().factorizations - own_before);
+    }
       res.lambda = res.lcurve.lambda_corner;
       // No interior corner (the curve keeps bending past the range): the edge is no choice at
       // all, so λ comes from the discrepancy principle instead, and the result says so.
@@ -248,6 +254,7 @@ FourSensorResult separate_four_sensor(const FourSensorConfig& cfg, const Eigen::
     res.u_f_um = (res.u_f_um * scale).cwiseSqrt();
   }
   res.solver_stats = solver.stats();
+  res.solver_stats.factorizations += worker_factorizations;
   res.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return res;
 }

@@ -104,7 +104,12 @@ struct TikhonovSolver::Impl {
   Eigen::MatrixXd W;   ///< L⁻¹C (m × k)
   Eigen::MatrixXd Wd;  ///< D_B⁻¹W (m × k), kept: a temporary per λ would cost page faults
   Eigen::VectorXd d;   ///< the diagonal D of the band's LDLᵀ
-  Eigen::LLT<Eigen::MatrixXd> S;  ///< Schur complement D + λ²I − WᵀD⁻¹W of the border
+  // LDLᵀ with pivoting, not LLᵀ: like CHOLMOD's simplicial LDLᵀ of the whole matrix it fails only
+  // on an exactly zero pivot.  At λ = 0 with the default gauge the bow direction (quadratic f with
+  // Δe) is determined only by the weak gauge row, and for long scans (N ≳ 3000) its Schur pivot
+  // is lost to round-off and may come out slightly negative; the least-squares solution is then
+  // arbitrary in that one direction (Fig. 3(d)) but still usable for σ̂ from the residual.
+  Eigen::LDLT<Eigen::MatrixXd> S;  ///< Schur complement D + λ²I − WᵀD⁻¹W of the border
   bool factor_ok = false;
 
   /// out = op⁻¹·v for CHOLMOD system `sys` (CHOLMOD_L or CHOLMOD_DLt) on the band factor.
