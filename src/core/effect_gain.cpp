@@ -1,5 +1,8 @@
 #include "errsep/core/effect_gain.hpp"
 
+#include <cmath>
+#include <cstdio>
+
 namespace errsep::core {
 
 std::string GainEffect::description() const {
@@ -35,6 +38,23 @@ Eigen::MatrixXd GainEffect::jacobian(const Eigen::VectorXd& p, const EffectConte
 
 std::unique_ptr<ModelEffect> GainEffect::clone() const {
   return std::make_unique<GainEffect>(*this);
+}
+
+std::string GainEffect::implausibility(const Eigen::VectorXd& p, const EffectContext&) const {
+  // Displacement sensors (capacitive, inductive, laser triangulation) are calibrated to within a
+  // percent or two of their nominal sensitivity; a gain off by more than 10 % relative to
+  // configuration 1 is a wrong range setting or a broken sensor that a check against a gauge
+  // block shows before any scan, not an error the separation should absorb.
+  constexpr double kMaxGain = 0.10;
+  std::string why;
+  for (Eigen::Index j = 0; j < p.size(); ++j)
+    if (!(std::abs(p(j)) <= kMaxGain)) {
+      char buf[80];
+      std::snprintf(buf, sizeof buf, "%s|g%d| = %.4g > %.2g", why.empty() ? "" : ", ",
+                    static_cast<int>(j) + 2, std::abs(p(j)), kMaxGain);
+      why += buf;
+    }
+  return why;
 }
 
 }  // namespace errsep::core

@@ -85,4 +85,10 @@ std::unique_ptr<ModelEffect> PeriodicEffect::clone() const {
   return std::make_unique<PeriodicEffect>(*this);
 }
 
+std::string PeriodicEffect::implausibility(const Eigen::VectorXd& p,
+                                           const EffectContext& ctx) const {
+  // A periodic positioning error is a slide positioning error: the same bound.
+  return slide_positioning_implausibility(basis(ctx.cfg) * p, ctx.cfg);
+}
+
 }  // namespace errsep::core

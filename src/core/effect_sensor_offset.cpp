@@ -1,6 +1,8 @@
 #include "errsep/core/effect_sensor_offset.hpp"
 
 #include <array>
+#include <cmath>
+#include <cstdio>
 
 namespace errsep::core {
 
@@ -52,6 +54,29 @@ Eigen::MatrixXd SensorOffsetEffect::jacobian(const Eigen::VectorXd& p,
 
 std::unique_ptr<ModelEffect> SensorOffsetEffect::clone() const {
   return std::make_unique<SensorOffsetEffect>(*this);
+}
+
+std::string SensorOffsetEffect::implausibility(const Eigen::VectorXd& p,
+                                               const EffectContext& ctx) const {
+  // The sensor holder is machined to tenths of a millimetre; a spacing off by a quarter of its
+  // nominal value (1.25 mm of 5 mm, 6.25 mm of 25 mm) is a gross assembly or configuration
+  // error that a ruler finds before any scan, and beyond the linearisation in δO the effect's
+  // signature rests on (δO small against the scale on which f varies, see the header).
+  constexpr double kMaxFraction = 0.25;
+  const std::array<double, 3> D_mm = {ctx.cfg.s2 * ctx.cfg.dx_mm, ctx.cfg.s3 * ctx.cfg.dx_mm,
+                                      ctx.cfg.s4 * ctx.cfg.dx_mm};
+  std::string why;
+  for (Eigen::Index j = 0; j < p.size() && j < 3; ++j) {
+    const double limit_mm = kMaxFraction * D_mm[static_cast<std::size_t>(j)];
+    if (!(std::abs(p(j)) <= limit_mm)) {
+      char buf[100];
+      std::snprintf(buf, sizeof buf, "%s|dD%d| = %.4g mm > %.2g of the nominal %.4g mm",
+                    why.empty() ? "" : ", ", static_cast<int>(j) + 2, std::abs(p(j)), kMaxFraction,
+                    D_mm[static_cast<std::size_t>(j)]);
+      why += buf;
+    }
+  }
+  return why;
 }
 
 }  // namespace errsep::core

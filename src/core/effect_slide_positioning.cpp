@@ -1,5 +1,7 @@
 #include "errsep/core/effect_slide_positioning.hpp"
 
+#include <cmath>
+#include <cstdio>
 #include <string>
 
 namespace errsep::core {
@@ -86,6 +88,24 @@ Eigen::MatrixXd SlidePositioningEffect::jacobian(const Eigen::VectorXd& p,
 
 std::unique_ptr<ModelEffect> SlidePositioningEffect::clone() const {
   return std::make_unique<SlidePositioningEffect>(*this);
+}
+
+std::string slide_positioning_implausibility(const Eigen::VectorXd& dx_um,
+                                             const FourSensorConfig& cfg) {
+  if (dx_um.size() == 0) return {};
+  const double limit_um = 0.5 * 1000.0 * cfg.dx_mm;
+  Eigen::Index n = 0;
+  const double worst = dx_um.cwiseAbs().maxCoeff(&n);
+  if (std::isfinite(worst) && worst <= limit_um) return {};
+  char buf[160];
+  std::snprintf(buf, sizeof buf, "|dx| = %.4g um at x = %.4g mm > half the sample interval %.4g um",
+                worst, static_cast<double>(n) * cfg.dx_mm, limit_um);
+  return buf;
+}
+
+std::string SlidePositioningEffect::implausibility(const Eigen::VectorXd& p,
+                                                   const EffectContext& ctx) const {
+  return slide_positioning_implausibility(basis(ctx.cfg) * p, ctx.cfg);
 }
 
 }  // namespace errsep::core

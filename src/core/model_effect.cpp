@@ -104,4 +104,9 @@ std::vector<std::unique_ptr<ModelEffect>> default_effect_library() {
   return lib;
 }
 
+std::string ModelEffect::implausibility(const Eigen::VectorXd& /*p*/,
+                                        const EffectContext& /*ctx*/) const {
+  return {};
+}
+
 }  // namespace errsep::core

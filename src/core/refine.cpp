@@ -301,7 +301,8 @@ struct Scored {
 
 std::vector<Scored> score_candidates(const FourSensorConfig& cfg, const Solved& cur,
                                      const std::vector<std::unique_ptr<ModelEffect>>& library,
-                                     const Model& M, const RefineOptions& opts) {
+                                     const Model& M, const RefineOptions& opts,
+                                     const std::vector<std::string>& excluded) {
   std::vector<Scored> out;
   const Eigen::VectorXd r = cur.space.project_out(reduce_readings(cfg, cur.m_c));
   const double rss = r.squaredNorm();
@@ -309,6 +310,8 @@ std::vector<Scored> score_candidates(const FourSensorConfig& cfg, const Solved& 
     bool present = false;
     for (const auto& e : M.effects)
       present = present || e->name() == eff->name();
+    for (const auto& x : excluded)
+      present = present || x == eff->name();
     if (present) continue;
     Scored best;
     best.score.effect = eff->name();
@@ -368,6 +371,11 @@ std::string RefineResult::brief_report() const {
   std::string out = buf;
   if (!residual_white() && !residual.whiteness.rejected_by.empty())
     out += "; rejected by: " + residual.whiteness.rejected_by;
+  for (const auto& rc : rejected)
+    out += "; " + rc.effect + " " + rc.reason;
+  for (const auto& k : implausible_kept)
+    out += "; " + k;
+  if (!model_complete()) out += "; model incomplete";
   return out;
 }
 
@@ -417,84 +425,161 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
     res.residual = ra;
   }
 
-  res.stop_reason = "no candidate significant";
-  while (true) {
-    if (static_cast<int>(M.effects.size()) >= opts.max_effects) {
-      res.stop_reason = "maximum number of effects reached";
+  // Physical plausibility.  An effect added in one round may fit with implausible parameters
+  // only because another effect is still missing (PE1 with a periodic positioning error present
+  // fits dD4 ~ 9 mm alone, 0.6 mm once the periodic error is in), so an addition is tentative:
+  // the verdict is on the parameters of the joint model when the loop stops.  If an effect is
+  // still implausible then, the loop goes back to the last model whose effects were all
+  // plausible, records the implausible ones as rejected, and continues without them.
+  struct Snapshot {
+    Model M;
+    Solved cur;
+    std::size_t steps = 0;
+    FourSensorResult sep;
+    ResidualAnalysis residual;
+    std::string model_name;
+  };
+  auto implausibility_of = [&](const Model& model, const EffectContext& ctx, std::size_t e) {
+    return model.effects[e]->implausibility(model.p[e], ctx);
+  };
+  Snapshot plausible{M, cur, res.steps.size(), current_sep, res.residual, res.model_name};
+  std::vector<std::string> excluded;  // rejected as implausible: not scored again
+  for (std::size_t rollbacks = 0;; ++rollbacks) {
+    res.stop_reason = "no candidate significant";
+    while (true) {
+      if (static_cast<int>(M.effects.size()) >= opts.max_effects) {
+        res.stop_reason = "maximum number of effects reached";
+        break;
+      }
+      std::vector<Scored> scores = score_candidates(cfg, cur, library, M, opts, excluded);
+      std::vector<CandidateScore> table;
+      const Scored* best = nullptr;
+      for (const auto& s : scores) {
+        table.push_back(s.score);
+        if (s.variant && (!best || s.score.p_value < best->score.p_value)) best = &s;
+      }
+      // Threshold: α split over the candidates of this round (Bonferroni).
+      const double threshold =
+          opts.alpha / static_cast<double>(std::max<std::size_t>(1, scores.size()));
+      if (!best || best->score.p_value >= threshold) {
+        res.final_round = std::move(table);
+        res.stop_reason = scores.empty() ? "library exhausted" : "no candidate significant";
+        break;
+      }
+      RefineStep st;
+      st.index = static_cast<int>(res.steps.size());
+      st.effect = best->score.effect;
+      st.description = best->variant->description();
+      st.parameter_names = best->variant->parameter_names();
+      st.F = best->score.F;
+      st.p_value = best->score.p_value;
+      st.identifiable = best->score.identifiable;
+      st.relative_sv = best->score.relative_sv;
+      st.rss_before_um2 = cur.rss;
+      st.rms_before_um = std::sqrt(cur.rss / (4.0 * P));
+      st.candidates = std::move(table);
+      const std::vector<Eigen::VectorXd> p_saved = M.p;  // the joint re-solve moves them all
+      M.effects.push_back(best->variant);
+      M.p.push_back(best->p0);
+      Solved next = solve_model(cfg, M, cur.ctx, opts);
+      if (!(next.rss < cur.rss)) {
+        // The linearised score promised a reduction the non-linear re-solve did not deliver.
+        M.effects.pop_back();
+        M.p = p_saved;
+        res.final_round = std::move(st.candidates);
+        res.stop_reason = "Gauss-Newton for '" + st.effect + "' did not reduce the residual";
+        break;
+      }
+      cur = std::move(next);
+      st.gauss_newton_iterations = cur.iterations;
+      st.parameters = M.p.back();
+      st.u_parameters = cur.u.back();
+      {
+        // The added effect's block of the joint linearisation.
+        const Eigen::Index k = st.parameters.size(), c0 = M.total() - k;
+        st.covariance = cur.s2 * cur.last.cov_unit.block(c0, c0, k, k);
+        // The determined combinations of this effect's parameters: the part of the joint
+        // directions' basis in its block, orthonormalised.
+        const Eigen::MatrixXd Wb = cur.last.directions.middleRows(c0, k);
+        Eigen::JacobiSVD<Eigen::MatrixXd> ws(Wb, Eigen::ComputeThinU);
+        int kid = 0;
+        for (Eigen::Index j = 0; j < ws.singularValues().size(); ++j)
+          if (ws.singularValues()(j) > 1e-8) ++kid;
+        st.identifiable_directions = ws.matrixU().leftCols(kid);
+        st.identifiable = kid;
+      }
+      st.rss_after_um2 = cur.rss;
+      st.rms_after_um = std::sqrt(cur.rss / (4.0 * P));
+      const ResidualAnalysis ra = analyse(cur);
+      st.dof_after = ra.dof;
+      st.sigma_after_um = ra.sigma_um;
+      st.whiteness_after = ra.whiteness;
+      st.dominant_period_mm = ra.dominant_period_mm;
+      const FourSensorResult sep = separate_four_sensor(cfg, cur.m_c, opts.solve);
+      if (truth) {
+        st.error_before = profile_errors(current_sep, *truth);
+        st.error_after = profile_errors(sep, *truth);
+      }
+      current_sep = sep;
+      res.residual = ra;
+      res.model_name += "+" + st.effect;
+      res.steps.push_back(std::move(st));
+      bool all_plausible = true;
+      for (std::size_t e = 0; e < M.effects.size(); ++e)
+        all_plausible = all_plausible && implausibility_of(M, cur.ctx, e).empty();
+      if (all_plausible)
+        plausible = Snapshot{M, cur, res.steps.size(), current_sep, res.residual, res.model_name};
+    }
+    // The verdict on the joint model's parameters.
+    std::vector<std::size_t> bad;
+    for (std::size_t e = 0; e < M.effects.size(); ++e)
+      if (!implausibility_of(M, cur.ctx, e).empty()) bad.push_back(e);
+    if (bad.empty()) break;
+    if (res.stop_reason == "maximum number of effects reached") {
+      // The caller capped the model below what the data need: the effects in it stand in for the
+      // missing ones.  They stay (the caller asked for this many), flagged, and the verdict is
+      // "incomplete".
+      for (std::size_t e : bad)
+        res.implausible_kept.push_back(M.effects[e]->name() + ": implausible parameters (" +
+                                       implausibility_of(M, cur.ctx, e) +
+                                       "), kept because the loop was capped at max_effects");
       break;
     }
-    std::vector<Scored> scores = score_candidates(cfg, cur, library, M, opts);
-    std::vector<CandidateScore> table;
-    const Scored* best = nullptr;
-    for (const auto& s : scores) {
-      table.push_back(s.score);
-      if (s.variant && (!best || s.score.p_value < best->score.p_value)) best = &s;
-    }
-    // Threshold: α split over the candidates of this round (Bonferroni).
-    const double threshold =
-        opts.alpha / static_cast<double>(std::max<std::size_t>(1, scores.size()));
-    if (!best || best->score.p_value >= threshold) {
-      res.final_round = std::move(table);
-      res.stop_reason = scores.empty() ? "library exhausted" : "no candidate significant";
-      break;
-    }
-    RefineStep st;
-    st.index = static_cast<int>(res.steps.size());
-    st.effect = best->score.effect;
-    st.description = best->variant->description();
-    st.parameter_names = best->variant->parameter_names();
-    st.F = best->score.F;
-    st.p_value = best->score.p_value;
-    st.identifiable = best->score.identifiable;
-    st.relative_sv = best->score.relative_sv;
-    st.rss_before_um2 = cur.rss;
-    st.rms_before_um = std::sqrt(cur.rss / (4.0 * P));
-    st.candidates = std::move(table);
-    M.effects.push_back(best->variant);
-    M.p.push_back(best->p0);
-    Solved next = solve_model(cfg, M, cur.ctx, opts);
-    if (!(next.rss < cur.rss)) {
-      // The linearised score promised a reduction the non-linear re-solve did not deliver.
-      M.effects.pop_back();
-      M.p.pop_back();
-      res.final_round = std::move(st.candidates);
-      res.stop_reason = "Gauss-Newton for '" + st.effect + "' did not reduce the residual";
-      break;
-    }
-    cur = std::move(next);
-    st.gauss_newton_iterations = cur.iterations;
-    st.parameters = M.p.back();
-    st.u_parameters = cur.u.back();
+    // Reject the most recently added implausible effect: it was added on top of the others and
+    // is the likeliest stand-in for what is missing (an earlier one may become plausible once it
+    // is gone, as PE1 does when a spurious gain is removed).  One per rollback, so the loop ends.
+    const std::size_t e = bad.back();
     {
-      // The added effect's block of the joint linearisation.
-      const Eigen::Index k = st.parameters.size(), c0 = M.total() - k;
-      st.covariance = cur.s2 * cur.last.cov_unit.block(c0, c0, k, k);
-      // The determined combinations of this effect's parameters: the part of the joint
-      // directions' basis in its block, orthonormalised.
-      const Eigen::MatrixXd Wb = cur.last.directions.middleRows(c0, k);
-      Eigen::JacobiSVD<Eigen::MatrixXd> ws(Wb, Eigen::ComputeThinU);
-      int kid = 0;
-      for (Eigen::Index j = 0; j < ws.singularValues().size(); ++j)
-        if (ws.singularValues()(j) > 1e-8) ++kid;
-      st.identifiable_directions = ws.matrixU().leftCols(kid);
-      st.identifiable = kid;
+      RejectedCandidate rc;
+      rc.round = static_cast<int>(e);
+      rc.effect = M.effects[e]->name();
+      rc.description = M.effects[e]->description();
+      rc.parameter_names = M.effects[e]->parameter_names();
+      rc.parameters = M.p[e];
+      rc.u_parameters = cur.u[e];
+      const std::size_t si = e + 1;  // steps[0] is the base model
+      if (si < res.steps.size()) {
+        rc.F = res.steps[si].F;
+        rc.p_value = res.steps[si].p_value;
+      }
+      rc.reason = "rejected: implausible parameters (" + implausibility_of(M, cur.ctx, e) + ")";
+      res.rejected.push_back(std::move(rc));
+      excluded.push_back(M.effects[e]->name());
     }
-    st.rss_after_um2 = cur.rss;
-    st.rms_after_um = std::sqrt(cur.rss / (4.0 * P));
-    const ResidualAnalysis ra = analyse(cur);
-    st.dof_after = ra.dof;
-    st.sigma_after_um = ra.sigma_um;
-    st.whiteness_after = ra.whiteness;
-    st.dominant_period_mm = ra.dominant_period_mm;
-    const FourSensorResult sep = separate_four_sensor(cfg, cur.m_c, opts.solve);
-    if (truth) {
-      st.error_before = profile_errors(current_sep, *truth);
-      st.error_after = profile_errors(sep, *truth);
+    // An effect already in the plausible snapshot cannot be removed by going back to it; then
+    // exclude the first effect added after the snapshot as well.
+    if (e < plausible.M.effects.size() && plausible.M.effects.size() < M.effects.size())
+      excluded.push_back(M.effects[plausible.M.effects.size()]->name());
+    M = plausible.M;
+    cur = plausible.cur;
+    res.steps.resize(plausible.steps);
+    current_sep = plausible.sep;
+    res.residual = plausible.residual;
+    res.model_name = plausible.model_name;
+    if (rollbacks + 1 >= library.size()) {
+      res.stop_reason = "implausible effects rejected until the library was exhausted";
+      break;
     }
-    current_sep = sep;
-    res.residual = ra;
-    res.model_name += "+" + st.effect;
-    res.steps.push_back(std::move(st));
   }
   res.effects = M.effects;
   res.parameters = M.p;

@@ -12,6 +12,16 @@ CsvTable refine_csv(const core::RefineResult& r) {
   t.set_meta("model", r.model_name);
   t.set_meta("stop_reason", r.stop_reason);
   t.set_meta("residual_white", r.residual_white() ? "true" : "false");
+  t.set_meta("model_complete", r.model_complete() ? "true" : "false");
+  // Significant candidates not added because their fitted parameters are physically implausible.
+  for (std::size_t i = 0; i < r.rejected.size(); ++i) {
+    const std::string key = "rejected" + std::to_string(i);
+    t.set_meta(key + "_effect", r.rejected[i].effect);
+    t.set_meta(key + "_round", std::to_string(r.rejected[i].round));
+    t.set_meta(key + "_status", r.rejected[i].reason);
+  }
+  for (std::size_t i = 0; i < r.implausible_kept.size(); ++i)
+    t.set_meta("implausible_kept" + std::to_string(i), r.implausible_kept[i]);
   t.columns = {"step",
                "parameter_index",
                "value",
@@ -80,6 +90,18 @@ std::string format_refine_text(const core::RefineResult& r) {
       out += buf;
     }
   }
+  for (const auto& rc : r.rejected) {
+    std::snprintf(buf, sizeof buf, "\nround %d: %s  (F = %.4g, p = %.3g) NOT ADDED\n", rc.round + 1,
+                  rc.effect.c_str(), rc.F, rc.p_value);
+    out += buf;
+    out += "  " + rc.reason + "\n";
+    for (Eigen::Index j = 0; j < rc.parameters.size(); ++j) {
+      std::snprintf(buf, sizeof buf, "    %-14s = %.6g  (u = %.3g, k = 1)\n",
+                    rc.parameter_names[static_cast<std::size_t>(j)].c_str(), rc.parameters(j),
+                    rc.u_parameters(j));
+      out += buf;
+    }
+  }
   out += "\ncandidates when the loop stopped (" + r.stop_reason + "):\n";
   for (const auto& c : r.final_round) {
     std::snprintf(buf, sizeof buf, "  %-9s F = %-9.4g p = %-9.3g identifiable %d of %d\n",
@@ -106,17 +128,26 @@ std::string format_refine_text(const core::RefineResult& r) {
                 w.p_cumulative_periodogram, w.p_runs, w.p_local, w.local_x_mm, w.local_width_mm,
                 w.p_value, r.alpha_residual);
   out += buf;
-  if (r.residual_white()) {
+  for (const auto& k : r.implausible_kept)
+    out += "\nWARNING: " + k + ".\n";
+  if (r.residual_white() && r.rejected.empty() && r.implausible_kept.empty()) {
     out += "\nThe final residual passes the whiteness test.\n";
+  } else if (r.residual_white()) {
+    out +=
+        "\nThe final residual passes the whiteness test, but the model is still incomplete: "
+        "significant effects fitted only with implausible parameters (see above), so the data "
+        "hold something the library does not describe.\n";
   } else {
     out += "\nThe final residual is NOT white (" + w.rejected_by +
-           "): the model still lacks something the library does not describe";
+           "): the model is incomplete, it still lacks something the library does not describe";
     if (w.p_local < r.alpha_residual) {
       std::snprintf(buf, sizeof buf,
                     ", with structure concentrated %.5g mm from the first position", w.local_x_mm);
       out += buf;
     }
     out += ".";
+    if (!r.rejected.empty())
+      out += "  Effects that would explain it only with implausible parameters were rejected.";
     if (!r.effects.empty())
       out +=
           "  The effects added may partly stand in for it; treat their parameters with "

@@ -101,3 +101,44 @@ TEST_CASE("two effects at once, loop limited to one addition: residual not white
   std::printf("two effects, loop free: %s\n", full.brief_report().c_str());
   CHECK(full.effects.size() >= 2);
 }
+
+// The same bump: before plausibility checks the loop added gain with g4 = 2.14 and PE1 with
+// dD4 = 31 mm, effects that "explain" the residual with parameters no instrument has.  Now every
+// added effect must be within its physical range, whatever was rejected must say why, and the
+// verdict must be "model incomplete".
+TEST_CASE("the localised bump: no implausible effect is added and the model is called incomplete") {
+  const auto c = make_refine_case(0.02, 21, {}, [](Eigen::MatrixXd& m, const Eigen::MatrixXd&) {
+    for (Eigen::Index n = 0; n < m.rows(); ++n) {
+      const double x = 5.0 * static_cast<double>(n);
+      m(n, 2) += 1.5 * std::exp(-0.5 * std::pow((x - 150.0) / 8.0, 2));
+    }
+  });
+  const auto r =
+      refine_four_sensor(c.cfg, c.sim.m_um, Eigen::MatrixXd(), RefineOptions{}, &c.truth);
+  std::printf("bump, plausibility: %s\n", r.brief_report().c_str());
+  for (const auto& rc : r.rejected)
+    std::printf("  %s: %s\n", rc.effect.c_str(), rc.reason.c_str());
+  // Every effect in the final model is physically plausible with its final parameters.
+  EffectContext ctx;
+  ctx.cfg = c.cfg;
+  REQUIRE(r.effects.size() == r.parameters.size());
+  for (std::size_t e = 0; e < r.effects.size(); ++e) {
+    INFO(r.effects[e]->name());
+    CHECK(r.effects[e]->implausibility(r.parameters[e], ctx).empty());
+  }
+  // In particular no gain beyond 10 % and no spacing error beyond a quarter of the nominal.
+  for (std::size_t e = 0; e < r.effects.size(); ++e) {
+    if (r.effects[e]->name() == "gain") CHECK(r.parameters[e].cwiseAbs().maxCoeff() <= 0.10);
+    if (r.effects[e]->name() == "pe1")
+      for (int j = 0; j < 3; ++j)
+        CHECK(std::abs(r.parameters[e](j)) <= 0.25 * c.cfg.dx_mm *
+                                                  (j == 0   ? c.cfg.s2
+                                                   : j == 1 ? c.cfg.s3
+                                                            : c.cfg.s4));
+  }
+  for (const auto& rc : r.rejected)
+    CHECK(rc.reason.rfind("rejected: implausible parameters (", 0) == 0);
+  CHECK_FALSE(r.model_complete());
+  CHECK_FALSE(r.residual_white());
+  CHECK(r.brief_report().find("model incomplete") != std::string::npos);
+}

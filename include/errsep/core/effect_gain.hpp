@@ -13,6 +13,7 @@ class GainEffect final : public ModelEffect {
   std::vector<std::string> parameter_names() const override { return {"g2", "g3", "g4"}; }
   Eigen::MatrixXd correction_um(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
   Eigen::MatrixXd jacobian(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
+  std::string implausibility(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
   std::unique_ptr<ModelEffect> clone() const override;
 };
 

@@ -19,6 +19,7 @@ class PeriodicEffect final : public ModelEffect {
   Eigen::MatrixXd jacobian(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
   std::vector<std::unique_ptr<ModelEffect>> variants(const EffectContext& ctx) const override;
   double effective_trials(const EffectContext& ctx) const override;
+  std::string implausibility(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
   std::unique_ptr<ModelEffect> clone() const override;
   double period_mm() const { return period_mm_; }
 

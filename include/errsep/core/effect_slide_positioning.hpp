@@ -20,6 +20,14 @@ Eigen::MatrixXd slide_positioning_jacobian(const Eigen::MatrixXd& phi, const Eff
 Eigen::MatrixXd slide_positioning_correction_um(const Eigen::VectorXd& dx_um,
                                                 const EffectContext& ctx);
 
+/// Plausibility of a slide positioning error δx(x_n) (µm, P): empty, or why not.  |δx| must stay
+/// below half the sample interval: the slide is sampled every Δx by its scale or encoder, and an
+/// error of half an interval or more would assign readings to the wrong grid point, a counting
+/// fault of the acquisition rather than a positioning error of the slideway (real slideways:
+/// micrometres to tens of micrometres over the travel).
+std::string slide_positioning_implausibility(const Eigen::VectorXd& dx_um,
+                                             const FourSensorConfig& cfg);
+
 class SlidePositioningEffect final : public ModelEffect {
  public:
   explicit SlidePositioningEffect(int degree = 3) : degree_(degree) {}
@@ -28,6 +36,7 @@ class SlidePositioningEffect final : public ModelEffect {
   std::vector<std::string> parameter_names() const override;
   Eigen::MatrixXd correction_um(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
   Eigen::MatrixXd jacobian(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
+  std::string implausibility(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
   std::unique_ptr<ModelEffect> clone() const override;
   /// φ_k(x_n), P × degree: Legendre P_k(2x/L − 1), k = 1..degree.
   Eigen::MatrixXd basis(const FourSensorConfig& cfg) const;

@@ -76,6 +76,11 @@ class ModelEffect {
   /// How many independent trials `variants` amounts to, for the look-elsewhere correction of the
   /// best variant's p-value (Šidák: 1 − (1 − p)^M).  Default 1.
   virtual double effective_trials(const EffectContext& ctx) const;
+  /// Physical plausibility of fitted parameters p: empty when they are within the range a real
+  /// instrument can have, otherwise why not (e.g. "|g4| = 2.14 > 0.1").  An effect whose fit
+  /// leaves that range is "explaining" a residual it did not cause, and the loop does not add
+  /// it.  Default: no bound known (always plausible).
+  virtual std::string implausibility(const Eigen::VectorXd& p, const EffectContext& ctx) const;
   virtual std::unique_ptr<ModelEffect> clone() const = 0;
 };
 

@@ -106,9 +106,25 @@ struct RefineStep {
   std::vector<CandidateScore> candidates;  ///< the scores that chose this step (empty for base)
 };
 
+/// A significant candidate that was not added because its fitted parameters are physically
+/// implausible (ModelEffect::implausibility): it "explains" the residual with values no real
+/// instrument has, so something the library does not describe is in the data.
+struct RejectedCandidate {
+  int round = 0;  ///< loop round (number of effects in the model when it was scored)
+  std::string effect;
+  std::string description;
+  std::vector<std::string> parameter_names;
+  Eigen::VectorXd parameters, u_parameters;  ///< after the joint re-solve that was discarded
+  double F = 0, p_value = 1;
+  std::string reason;  ///< "rejected: implausible parameters (...)"
+};
+
 struct RefineResult {
   std::vector<RefineStep> steps;            ///< steps[0] is the base model
   std::vector<CandidateScore> final_round;  ///< scores when the loop stopped
+  std::vector<RejectedCandidate> rejected;  ///< significant but implausible, not added
+  /// Effects with implausible parameters kept only because the loop hit max_effects.
+  std::vector<std::string> implausible_kept;
   std::string stop_reason;
   std::string model_name;  ///< "zhao2019-eq1" plus "+effect" for each addition
   std::vector<std::shared_ptr<const ModelEffect>> effects;  ///< added, in order
@@ -123,6 +139,11 @@ struct RefineResult {
   /// True when the final residual passes the whiteness test.  False means the model is still
   /// missing something even if no candidate in the library was significant.
   bool residual_white() const { return residual.whiteness.white; }
+  /// The verdict: the residual is white and no significant candidate had to be rejected as
+  /// implausible (a rejection means the data hold something the library cannot describe).
+  bool model_complete() const {
+    return residual_white() && rejected.empty() && implausible_kept.empty();
+  }
   std::string brief_report() const;
 };
 
