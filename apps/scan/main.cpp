@@ -3,12 +3,11 @@
 //   errsep-scan --config config/simulator.toml --out out/demo
 // Writes OUT/raw.csv (four-sensor: x_mm,m1_um..m4_um,t1_s..t4_s) or OUT/raw_displacement.csv,
 // then the result files of the separation (four-sensor: motion.csv, reference.csv, lcurve.csv,
-// residuals.csv, summary.txt).  --refine also runs the refine step of errsep-refine on the
-// four-sensor scan and writes its files to OUT/refine/ (io/refine_run.hpp).
-// Ctrl-C / SIGTERM: the stages are stopped, the raw data measured so far is written marked
-// "complete: false", nothing is separated, exit status 130.
-// Exit status: 0 complete, 1 usage/config/device set-up error, 3 scan failed (device fault),
-// 130 aborted.
+// residuals.csv, summary.txt).  --refine (or [refine] enabled = true in the config) also runs the
+// refine step of errsep-refine on the four-sensor scan and writes its files to OUT/refine/
+// (io/refine_run.hpp). Ctrl-C / SIGTERM: the stages are stopped, the raw data measured so far is
+// written marked "complete: false", nothing is separated, exit status 130. Exit status: 0 complete,
+// 1 usage/config/device set-up error, 3 scan failed (device fault), 130 aborted.
 #include <unistd.h>
 #include <CLI/CLI.hpp>
 #include <atomic>
@@ -224,17 +223,19 @@ int main(int argc, char** argv) {
         separate_four_sensor(*res.four_sensor, raw_file, out, gauge);
         std::cout << "results: " << out.string()
                   << "/ (motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt)\n";
-        if (refine || !refine_reference.empty()) {
+        if (refine || !refine_reference.empty() || cfg.refine.enabled) {
           io::RefineRunOptions ro;  // the defaults of errsep-refine, the scan's gauge
           ro.refine.solve.gauge = gauge_of(gauge);
+          ro.refine.alpha = cfg.refine.alpha;  // [refine] alpha (default 0.01, as errsep-refine)
           if (!refine_reference.empty()) ro.reference_csv = refine_reference;
           const auto run = io::run_refine(raw_file, out / "refine", ro);
           std::cout << run.result.brief_report() << "\n"
                     << "refine: " << (out / "refine").string()
                     << "/ (refine_report.txt, refine_steps.csv, refined motion.csv, reference.csv, "
                        "...)\n";
-          if (!run.result.residual_white())
-            std::cerr << "warning: the refined model's residual is not white: see "
+          if (!run.result.model_complete())
+            std::cerr << "warning: the refined model is incomplete (residual not white or "
+                         "implausible effects rejected): see "
                       << (out / "refine" / "refine_report.txt").string() << "\n";
         }
       } else {

@@ -631,11 +631,22 @@ void read_simulator(const Reader& root, MachineConfig& c) {
   }
 }
 
+void read_refine(const Reader& root, MachineConfig& c) {
+  const toml::table* t = root.sub("refine");
+  if (!t) return;
+  Reader r(root.file(), *t, "refine");
+  r.only({"enabled", "alpha"});
+  r.get("enabled", c.refine.enabled);
+  r.get("alpha", c.refine.alpha);
+  // A significance level: 0 would never add anything, 1 would add every candidate.
+  r.check("alpha", c.refine.alpha > 0.0 && c.refine.alpha < 1.0, "must be in (0, 1)");
+}
+
 MachineConfig build(const toml::table& root, const std::string& name) {
   MachineConfig c;
   c.source = name;
   Reader r(name, root, "");
-  r.only({"bus", "sensor", "stage", "gpio", "sampler", "scan", "simulator"});
+  r.only({"bus", "sensor", "stage", "gpio", "sampler", "scan", "refine", "simulator"});
   read_buses(name, root, c);
   if (c.buses.empty()) throw ConfigError(name, 0, "bus", "at least one [[bus]] is required");
   read_sensors(name, root, c);
@@ -643,6 +654,7 @@ MachineConfig build(const toml::table& root, const std::string& name) {
   read_gpio(r, c);
   read_sampler(r, c);
   read_scan(r, c);
+  read_refine(r, c);
   read_simulator(r, c);
   // Port 0 means "the embedded simulator's ephemeral port"; without it nothing fills it in.
   for (std::size_t i = 0; i < c.buses.size(); ++i) {

@@ -1,6 +1,7 @@
 // errsep-scan --refine: after the scan and its separation, the refine step runs on the raw file
 // and writes its report and refined results to OUT/refine/, the same files errsep-refine writes
 // from that raw file (one library call, io::run_refine, behind both).
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <fstream>
 #include <sstream>
@@ -87,4 +88,79 @@ TEST_CASE("scan --refine with --no-separate is refused before anything runs") {
   CHECK(rc != 0);
   CHECK(output.find("excludes") != std::string::npos);
   CHECK(!std::filesystem::exists(dir / "scan"));
+}
+
+namespace {
+
+// The quick test config with a [refine] table appended; `line` gets the line of its first key.
+std::filesystem::path write_config_with_refine(const TempDir& dir, const std::string& body,
+                                               int* line) {
+  const auto path = write_test_config(dir);
+  std::string t = read_text(path);
+  if (!t.empty() && t.back() != '\n') t += '\n';
+  *line = static_cast<int>(std::count(t.begin(), t.end(), '\n')) + 2;
+  t += "[refine]\n" + body;
+  std::ofstream(path) << t;
+  return path;
+}
+
+}  // namespace
+
+TEST_CASE("[refine] enabled = true in the machine config runs the refine step like --refine") {
+  TempDir dir;
+  int line = 0;
+  const auto cfg = write_config_with_refine(dir, "enabled = true\nalpha = 0.01\n", &line);
+  const auto out = dir / "scan";
+  std::string output;
+  const int rc = run_command(scan_cmd(cfg, out), &output);
+  INFO(output);
+  REQUIRE(rc == 0);
+  CHECK(output.find("refine: model zhao2019-eq1") != std::string::npos);
+  for (const char* f : {"refine_report.txt", "refine_steps.csv", "motion.csv"})
+    CHECK(std::filesystem::exists(out / "refine" / f));
+  // The same step table errsep-refine writes from the raw file (alpha 0.01 is its default).
+  const auto out2 = dir / "refine";
+  std::string output2;
+  REQUIRE(run_command(app_path("refine").string() + " " + (out / "raw.csv").string() + " --out " +
+                          out2.string(),
+                      &output2) == 0);
+  CHECK(read_text(out2 / "refine_steps.csv") == read_text(out / "refine" / "refine_steps.csv"));
+}
+
+TEST_CASE("[refine] enabled = false (the default) runs no refine step") {
+  TempDir dir;
+  int line = 0;
+  const auto cfg = write_config_with_refine(dir, "enabled = false\n", &line);
+  const auto out = dir / "scan";
+  std::string output;
+  const int rc = run_command(scan_cmd(cfg, out), &output);
+  INFO(output);
+  REQUIRE(rc == 0);
+  CHECK(std::filesystem::exists(out / "motion.csv"));
+  CHECK(!std::filesystem::exists(out / "refine"));
+}
+
+TEST_CASE("a bad [refine] value is a file:line error and nothing runs") {
+  struct Bad {
+    const char* body;
+    const char* key;
+    const char* problem;
+  };
+  for (const Bad& b : {Bad{"enabled = \"yes\"\n", "refine.enabled", "expected true or false"},
+                       Bad{"enabled = true\nalpha = 1.5\n", "refine.alpha", "must be in (0, 1)"},
+                       Bad{"enable = true\n", "refine.enable", "unknown key"}}) {
+    TempDir dir;
+    int line = 0;
+    const auto cfg = write_config_with_refine(dir, b.body, &line);
+    if (std::string(b.key) == "refine.alpha") ++line;  // alpha is the second key
+    std::string output;
+    const int rc = run_command(scan_cmd(cfg, dir / "scan"), &output);
+    INFO(b.body << output);
+    CHECK(rc != 0);
+    const std::string where = cfg.string() + ":" + std::to_string(line) + ":";
+    CHECK(output.find(where) != std::string::npos);
+    CHECK(output.find(b.key) != std::string::npos);
+    CHECK(output.find(b.problem) != std::string::npos);
+    CHECK(!std::filesystem::exists(dir / "scan"));
+  }
 }

@@ -129,6 +129,12 @@ struct ScanConfig {
   std::filesystem::path output_dir = "scans";  ///< relative to the current directory
 };
 
+/// The refine step after a four-sensor scan ([refine], errsep-refine; core/refine.hpp).
+struct RefineConfig {
+  bool enabled = false;  ///< true: errsep-scan runs it as with --refine
+  double alpha = 0.01;   ///< family-wise significance of one step (RefineOptions::alpha)
+};
+
 /// One harmonic a·sin(2π·x/period + phase) of a simulated profile.
 struct Harmonic {
   double amplitude = 0.0;  ///< µm (for gamma: µrad)
@@ -188,6 +194,7 @@ struct MachineConfig {
   std::optional<GpioConfig> gpio;
   SamplerConfig sampler;
   ScanConfig scan;
+  RefineConfig refine;
   SimulatorConfig simulator;
 
   const BusConfig* find_bus(const std::string& name) const;
