@@ -23,7 +23,7 @@ int main(int argc, char** argv) {
       "--reference: an independent trace x_mm,S_um[,gamma_urad] or x_mm,f_um (interferometer, "
       "CMM) on its own grid."};
   app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
-  std::string input, out_dir = "out/refine", truth, reference, gauge = "sensor_stage";
+  std::string input, out_dir = "out/refine", truth, reference, gauge = "reference";
   errsep::io::GeometryOverrides geo;
   errsep::io::RefineRunOptions opts;
   app.add_option("raw_csv", input, "raw four-sensor scan CSV")->required();

@@ -107,7 +107,7 @@ int main(int argc, char** argv) {
       "separate it."};
   app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
   std::string config_path = "config/simulator.toml", out_dir, method, devsim;
-  std::string gauge = "sensor_stage";
+  std::string gauge = "reference";
   int averages = 0, settle_ms = -1;
   bool no_separate = false, refine = false;
   std::string refine_reference;
@@ -133,9 +133,9 @@ int main(int argc, char** argv) {
       ->excludes(no_sep)
       ->check(CLI::ExistingFile);
   app.add_option("--gauge", gauge,
-                 "curvature gauge of the separation, as errsep-separate: sensor_stage (the sensor "
-                 "stage's zero-adjustment values have no quadratic part), reference (the "
-                 "reference surface has no curvature), paper_eq12")
+                 "curvature gauge of the separation, as errsep-separate: reference (the reference "
+                 "surface has no bow; exact, the default), sensor_stage (the sensor stage's "
+                 "zero-adjustment values have no quadratic part), paper_eq12")
       ->check(CLI::IsMember({"sensor_stage", "reference", "paper_eq12"}))
       ->capture_default_str();
   CLI11_PARSE(app, argc, argv);

@@ -33,7 +33,7 @@ int main(int argc, char** argv) {
       "one column per sensor configuration), optional '# dx_mm: 5', '# s2: 1', '# s3: 1', "
       "'# s4: 5' metadata lines."};
   app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
-  std::string input, out_dir = "out/separate", rule = "lcurve", gauge = "sensor_stage";
+  std::string input, out_dir = "out/separate", rule = "lcurve", gauge = "reference";
   double lambda = 0;
   int s2 = 0, s3 = 0, s4 = 0;
   double dx = 0;
@@ -47,7 +47,10 @@ int main(int argc, char** argv) {
   app.add_option("--rule", rule, "lambda rule: lcurve, discrepancy, fixed, ls")
       ->capture_default_str();
   app.add_option("--lambda", lambda, "lambda for --rule fixed");
-  app.add_option("--gauge", gauge, "curvature gauge: sensor_stage (default), reference, paper_eq12")
+  app.add_option(
+         "--gauge", gauge,
+         "curvature gauge: reference (f has no bow, exact; default), sensor_stage (the stage's "
+         "zero-adjustment values have no quadratic part, weak row), paper_eq12")
       ->capture_default_str();
   app.add_option("--lcurve-points", opts.lcurve.count, "lambda values on the L-curve grid")
       ->capture_default_str();
@@ -106,9 +109,12 @@ int main(int argc, char** argv) {
     std::cout << res.brief_report() << "\n"
               << "results written to " << out_dir << "/ (motion.csv, reference.csv, lcurve.csv, "
               << "residuals.csv, summary.txt)\n";
-    if (res.lambda_fallback)
+    if (res.lambda_fallback == errsep::core::LambdaFallback::discrepancy)
       std::cerr << "warning: the L-curve has no corner inside the lambda range; lambda was "
                    "chosen by the discrepancy principle instead (widen the range to check)\n";
+    else if (res.lambda_fallback == errsep::core::LambdaFallback::no_regularisation)
+      std::cerr << "note: the L-curve has no corner (the unregularised solution is not "
+                   "dominated by noise); no regularisation applied\n";
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "errsep-separate: " << e.what() << "\n";

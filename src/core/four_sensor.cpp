@@ -23,6 +23,18 @@ const char* to_string(LambdaRule r) {
   return "unknown";
 }
 
+const char* to_string(LambdaFallback f) {
+  switch (f) {
+    case LambdaFallback::none:
+      return "none";
+    case LambdaFallback::no_regularisation:
+      return "no_regularisation";
+    case LambdaFallback::discrepancy:
+      return "discrepancy";
+  }
+  return "unknown";
+}
+
 bool FourSensorOptions::is_valid(std::string* why) const {
   auto fail = [&](const std::string& m) {
     if (why) *why = m;
@@ -114,21 +126,30 @@ std::string FourSensorResult::brief_report() const {
                 "|X|=%.4g sigma_hat=%.3g um (dof %d) factorizations=%d time=%.3f s",
                 config.N, config.positions(), config.s2, config.s3, config.s4, config.dx_mm, lambda,
                 to_string(rule),
-                lambda_fallback ? ", no interior L-curve corner: discrepancy principle used" : "",
+                lambda_fallback == LambdaFallback::discrepancy
+                    ? ", no L-curve corner: discrepancy principle used"
+                : lambda_fallback == LambdaFallback::no_regularisation
+                    ? ", no L-curve corner: not noise-dominated, no regularisation"
+                    : "",
                 residual_norm, solution_norm, sigma_um, redundancy_dof, solver_stats.factorizations,
                 total_s);
   return buf;
 }
 
-FourSensorResult separate_four_sensor(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
-                                      const FourSensorOptions& opts) {
+namespace {
+
+FourSensorResult separate(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
+                          const Eigen::MatrixXd* g_um, const FourSensorOptions& opts) {
   const auto t0 = std::chrono::steady_clock::now();
   std::string why;
   if (!cfg.is_valid(&why)) throw std::invalid_argument("invalid configuration: " + why);
   if (!opts.is_valid(&why)) throw std::invalid_argument("invalid options: " + why);
   if (!m_um.allFinite()) throw std::invalid_argument("sensor outputs contain non-finite values");
+  if (g_um && !g_um->allFinite())
+    throw std::invalid_argument("combined outputs contain non-finite values");
 
   AugmentedSystem sys = assemble_four_sensor_system(cfg, m_um, opts.gauge, opts.weighting);
+  if (g_um) sys.b = right_hand_side_combined(cfg, *g_um, opts.gauge, opts.weighting);
   // A moves into the solver (solver.A() from here on); the border: Δe, the last 4 unknowns (Eq. 7).
   TikhonovSolver solver(std::move(sys.A), 4);
   Pipeline pipe{
@@ -187,11 +208,19 @@ FourSensorResult separate_four_sensor(const FourSensorConfig& cfg, const Eigen::
           res.lcurve.factorizations - (solver.stats().factorizations - own_before);
     }
       res.lambda = res.lcurve.lambda_corner;
-      // No interior corner (the curve keeps bending past the range): the edge is no choice at
-      // all, so λ comes from the discrepancy principle instead, and the result says so.
-      if (res.lcurve.at_edge) {
-        res.lambda = discrepancy();
-        res.lambda_fallback = true;
+      // No corner: the maximum is at the edge of the range (the curve keeps bending past it), or
+      // the curve has no vertical branch (the unregularised solution is not noise-dominated).
+      // With the curvature fixed exactly there is then nothing to regularise; with a weak
+      // curvature row a small λ would leave the nearly null bow free (Fig. 3(d)), so λ comes from
+      // the discrepancy principle.  Either way the result says so.
+      if (!res.lcurve.has_corner) {
+        if (opts.gauge == CurvatureGauge::reference_without_curvature) {
+          res.lambda = 0.0;  // raised to lambda_floor below
+          res.lambda_fallback = LambdaFallback::no_regularisation;
+        } else {
+          res.lambda = discrepancy();
+          res.lambda_fallback = LambdaFallback::discrepancy;
+        }
       }
       break;
     case LambdaRule::discrepancy:
@@ -257,6 +286,20 @@ FourSensorResult separate_four_sensor(const FourSensorConfig& cfg, const Eigen::
   res.solver_stats.factorizations += worker_factorizations;
   res.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return res;
+}
+
+}  // namespace
+
+FourSensorResult separate_four_sensor(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
+                                      const FourSensorOptions& opts) {
+  return separate(cfg, m_um, nullptr, opts);
+}
+
+FourSensorResult separate_four_sensor_combined(const FourSensorConfig& cfg,
+                                               const Eigen::MatrixXd& m_um,
+                                               const Eigen::MatrixXd& g_um,
+                                               const FourSensorOptions& opts) {
+  return separate(cfg, m_um, &g_um, opts);
 }
 
 }  // namespace errsep::core

@@ -1,5 +1,7 @@
 #include "errsep/core/four_sensor_simulation.hpp"
 
+#include "errsep/core/four_sensor_system.hpp"
+
 #include <cmath>
 #include <numbers>
 #include <random>
@@ -22,8 +24,11 @@ FourSensorSimData simulate_four_sensor(const FourSensorConfig& cfg, const Slidew
   std::mt19937_64 rng(opts.seed);
   std::normal_distribution<double> noise(0.0, 1.0);
 
+  const bool on_g = opts.noise_model == NoiseModel::combined_outputs;
+  const Eigen::Matrix4d C = combination_matrix(cfg);
   FourSensorSimData d;
   d.m_um.resize(P, 4);
+  d.g_um.resize(P, 4);
   d.x_mm.resize(P);
   d.S_um.resize(P);
   d.gamma_rad.resize(P);
@@ -32,12 +37,20 @@ FourSensorSimData simulate_four_sensor(const FourSensorConfig& cfg, const Slidew
     d.x_mm(n) = x;
     d.S_um(n) = truth.S_um(x);
     d.gamma_rad(n) = truth.gamma_rad(x);
+    Eigen::Vector4d clean;
     for (int i = 0; i < 4; ++i) {
       // PE2 (Eq. 20): the slide stands at x + PE2(x) when commanded to x; every quantity that moves
       // with the slide is sampled there.
       const double xa = opts.positioning_error_um ? x + 1e-3 * opts.positioning_error_um(x) : x;
-      d.m_um(n, i) = four_sensor_reading_um(truth, xa, O[i]) + truth.e_um[static_cast<size_t>(i)] +
-                     opts.sigma_um * noise(rng);  // Eq. (1) plus noise
+      clean(i) = four_sensor_reading_um(truth, xa, O[i]) + truth.e_um[static_cast<size_t>(i)];
+      d.m_um(n, i) = clean(i) + opts.sigma_um * noise(rng);  // Eq. (1) plus noise
+    }
+    if (on_g) {
+      const Eigen::Vector4d g = C * clean;
+      for (int r = 0; r < 4; ++r)
+        d.g_um(n, r) = g(r) + opts.sigma_um * noise(rng);
+    } else {
+      d.g_um.row(n) = (C * d.m_um.row(n).transpose()).transpose();
     }
   }
   d.f_x_mm.resize(N);

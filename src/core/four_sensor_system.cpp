@@ -94,11 +94,12 @@ Eigen::Matrix<double, 2, 4> whitening_matrix(const FourSensorConfig& cfg) {
   return T;
 }
 
-Eigen::VectorXd right_hand_side(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
-                                CurvatureGauge gauge, RowWeighting weighting) {
+namespace {
+// b of Eq. (16) from b₀ (4P, Eq. 6).
+Eigen::VectorXd rhs_from_b0(const FourSensorConfig& cfg, const Eigen::VectorXd& b0,
+                            CurvatureGauge gauge, RowWeighting weighting) {
   const int N = cfg.N, P = cfg.positions();
   const int per = weighting == RowWeighting::paper ? 4 : 2;
-  const Eigen::VectorXd b0 = data_vector(cfg, m_um);
   Eigen::VectorXd b = Eigen::VectorXd::Zero(system_rows(cfg, gauge, weighting));
   if (weighting == RowWeighting::paper) {
     b.head(4 * P) = b0;
@@ -116,6 +117,25 @@ Eigen::VectorXd right_hand_side(const FourSensorConfig& cfg, const Eigen::Matrix
     b(per * P + 2) = 2.0 / (static_cast<double>(N) * (N - 1)) * sum;
   }
   return b;
+}
+}  // namespace
+
+Eigen::VectorXd right_hand_side(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
+                                CurvatureGauge gauge, RowWeighting weighting) {
+  return rhs_from_b0(cfg, data_vector(cfg, m_um), gauge, weighting);
+}
+
+Eigen::VectorXd right_hand_side_combined(const FourSensorConfig& cfg, const Eigen::MatrixXd& g_um,
+                                         CurvatureGauge gauge, RowWeighting weighting) {
+  const int P = cfg.positions();
+  if (g_um.rows() != P || g_um.cols() != 4)
+    throw std::invalid_argument("combined outputs are " + std::to_string(g_um.rows()) + "x" +
+                                std::to_string(g_um.cols()) + ", configuration needs " +
+                                std::to_string(P) + "x4");
+  Eigen::VectorXd b0(4 * P);
+  for (int n = 0; n < P; ++n)
+    b0.segment<4>(4 * n) = g_um.row(n).transpose();
+  return rhs_from_b0(cfg, b0, gauge, weighting);
 }
 
 AugmentedSystem assemble_four_sensor_system(const FourSensorConfig& cfg,
@@ -183,20 +203,26 @@ AugmentedSystem assemble_four_sensor_system(const FourSensorConfig& cfg,
 
 void apply_gauge(const FourSensorConfig& cfg, CurvatureGauge gauge, Eigen::VectorXd& X) {
   if (gauge != CurvatureGauge::reference_without_curvature) return;
-  // Discrete Legendre P2 on the N points: t² made orthogonal to constants and to t.
   const int N = cfg.N;
-  const Eigen::VectorXd t = Eigen::VectorXd::LinSpaced(N, -1.0, 1.0);
-  Eigen::VectorXd p2 = t.array().square().matrix();
-  p2.array() -= p2.mean();
-  p2 -= (p2.dot(t) / t.squaredNorm()) * t;
+  const Eigen::VectorXd bow = reference_bow(cfg);
   const Eigen::MatrixXd Z = null_space_basis(cfg);
-  // Conditions on X + Z·a: f(x_0) = 0, f(x_{N−1}) = 0 (Eq. 11), p2·f = 0.
+  // Conditions on X + Z·a: f(x_0) = 0, f(x_{N−1}) = 0 (Eq. 11), bow·f = 0.
   Eigen::Matrix3d G;
   Eigen::Vector3d h;
   G.row(0) = Z.row(0);
   G.row(1) = Z.row(N - 1);
-  G.row(2) = p2.transpose() * Z.topRows(N);
-  h << -X(0), -X(N - 1), -p2.dot(X.head(N));
+  G.row(2) = bow.transpose() * Z.topRows(N);
+  h << -X(0), -X(N - 1), -bow.dot(X.head(N));
   X += Z * G.partialPivLu().solve(h);
+}
+
+Eigen::VectorXd reference_bow(const FourSensorConfig& cfg) {
+  const int N = cfg.N;
+  Eigen::VectorXd bow(N);
+  for (int n = 0; n < N; ++n) {
+    const double t = static_cast<double>(n) / (N - 1);
+    bow(n) = t * (1.0 - t);
+  }
+  return bow;
 }
 }  // namespace errsep::core

@@ -20,6 +20,7 @@ bool LCurveOptions::is_valid(std::string* why) const {
                 "] is empty or negative");
   if (!(decades > 0)) return fail("decades = " + std::to_string(decades) + ": must be > 0");
   if (refine_iterations < 0) return fail("refine_iterations must be >= 0");
+  if (!(min_branch_decades >= 0)) return fail("min_branch_decades must be >= 0");
   if (threads < 1 || threads > 64)
     return fail("threads = " + std::to_string(threads) + ": must be 1 to 64");
   return true;
@@ -167,6 +168,9 @@ LCurveResult lcurve_corner(TikhonovSolver& solver, const Eigen::VectorXd& b,
       res.curvature_corner = fm;
     }
   }
+  res.branch_decades = std::log10(res.points.front().solution_norm /
+                                  res.points[static_cast<std::size_t>(best)].solution_norm);
+  res.has_corner = !res.at_edge && res.branch_decades >= opts.min_branch_decades;
   res.factorizations = solver.stats().factorizations - before + worker_factorizations;
   return res;
 }

@@ -87,7 +87,8 @@ void write_four_sensor_result(const std::filesystem::path& dir, const core::Four
   common_meta(lc, r, info);
   lc.set_meta("lambda_chosen", fmt(r.lambda));
   lc.set_meta("corner_at_edge", r.lcurve.at_edge ? "true" : "false");
-  lc.set_meta("lambda_from_discrepancy_fallback", r.lambda_fallback ? "true" : "false");
+  lc.set_meta("corner_branch_decades", fmt(r.lcurve.branch_decades));
+  lc.set_meta("lambda_fallback", core::to_string(r.lambda_fallback));
   std::vector<double> l, rn, sn, k;
   for (const auto& p : r.lcurve.points) {
     l.push_back(p.lambda);

@@ -106,28 +106,64 @@ TEST_CASE("invalid configurations are refused with the field named") {
   CHECK_THROWS_WITH(separate_four_sensor(FourSensorConfig{}, wrong), Catch::Contains("62x4"));
 }
 
-TEST_CASE("no interior L-curve corner: lambda falls back to the discrepancy principle") {
+TEST_CASE("no L-curve corner with the weak curvature row: lambda from the discrepancy principle") {
   const FourSensorConfig cfg;
   FourSensorSimOptions so;
   so.sigma_um = 0.1;
   so.seed = 3;
   const auto sim = simulate_four_sensor(cfg, zhao2019_example1(cfg), so);
   FourSensorOptions o;
+  o.gauge = CurvatureGauge::sensor_stage_without_curvature;
   o.compute_uncertainty = false;
   // A λ range far above the corner: the curve only flattens there, no interior maximum.
   o.lcurve.lambda_min = 1e3;
   o.lcurve.lambda_max = 1e5;
   const auto r = separate_four_sensor(cfg, sim.m_um, o);
   REQUIRE(r.lcurve.at_edge);
-  CHECK(r.lambda_fallback);
+  CHECK(r.lambda_fallback == LambdaFallback::discrepancy);
   FourSensorOptions d = o;
   d.rule = LambdaRule::discrepancy;
   const auto rd = separate_four_sensor(cfg, sim.m_um, d);
   CHECK(r.lambda == Approx(rd.lambda).epsilon(1e-12));
   CHECK(r.brief_report().find("discrepancy principle used") != std::string::npos);
 
-  const auto normal = separate_four_sensor(cfg, sim.m_um, FourSensorOptions{});
-  CHECK_FALSE(normal.lambda_fallback);
+  FourSensorOptions plain;
+  plain.gauge = CurvatureGauge::sensor_stage_without_curvature;
+  const auto normal = separate_four_sensor(cfg, sim.m_um, plain);
+  CHECK(normal.lambda_fallback == LambdaFallback::none);
+  // Its curve has the vertical branch of the nearly null bow (over a decade).
+  CHECK(normal.lcurve.branch_decades > 0.5);
+}
+
+TEST_CASE("no L-curve corner with the curvature fixed exactly: no regularisation, said so") {
+  // Example 1 at σ = 0.1 µm: with the bow fixed by the gauge the solution norm hardly grows as
+  // λ → 0 (the curve has no vertical branch), so there is nothing to regularise.
+  const FourSensorConfig cfg;
+  FourSensorSimOptions so;
+  so.sigma_um = 0.1;
+  so.seed = 3;
+  const auto sim = simulate_four_sensor(cfg, zhao2019_example1(cfg), so);
+  FourSensorOptions o;  // default: reference_without_curvature, L-curve
+  o.compute_uncertainty = false;
+  const auto r = separate_four_sensor(cfg, sim.m_um, o);
+  INFO("branch " << r.lcurve.branch_decades << " decades, lambda " << r.lambda);
+  CHECK(r.lcurve.branch_decades < o.lcurve.min_branch_decades);
+  CHECK_FALSE(r.lcurve.has_corner);
+  CHECK(r.lambda_fallback == LambdaFallback::no_regularisation);
+  CHECK(r.lambda < 1e-5);
+  CHECK(r.brief_report().find("no regularisation") != std::string::npos);
+  // The result is then the least-squares one: the same as asking for it.
+  FourSensorOptions ls = o;
+  ls.rule = LambdaRule::least_squares;
+  const auto r_ls = separate_four_sensor(cfg, sim.m_um, ls);
+  CHECK((r.S_um - r_ls.S_um).cwiseAbs().maxCoeff() < 1e-9);
+  // A much larger noise level does build a branch (σ = 3 µm: the noise dominates f's low modes).
+  so.sigma_um = 3.0;
+  const auto noisy =
+      separate_four_sensor(cfg, simulate_four_sensor(cfg, zhao2019_example1(cfg), so).m_um, o);
+  INFO("sigma 3: branch " << noisy.lcurve.branch_decades);
+  CHECK(noisy.lcurve.has_corner);
+  CHECK(noisy.lambda_fallback == LambdaFallback::none);
 }
 
 TEST_CASE(

@@ -20,6 +20,19 @@ enum class LambdaRule {
 };
 const char* to_string(LambdaRule r);
 
+/// What LambdaRule::lcurve did when the curve had no corner to take (LCurveResult::has_corner).
+enum class LambdaFallback {
+  none,  ///< the corner was taken
+  /// No corner and the null space is handled exactly (CurvatureGauge::reference_without_curvature):
+  /// the unregularised solution is not noise-dominated, so none is applied (λ = the smallest
+  /// that keeps the factorisation defined).
+  no_regularisation,
+  /// No corner with a gauge whose curvature row is weak (the bow is nearly null): λ from the
+  /// discrepancy principle instead, since a small λ would leave the bow unregularised.
+  discrepancy,
+};
+const char* to_string(LambdaFallback f);
+
 /// How S and γ are taken from the outputs once f is known.
 enum class MotionEstimator {
   /// Eq. (18) S = m_1 − f̄, Eq. (19) γ = [m_4 − m_1 − (f̄(x+O_4) − f̄(x))]/O_4 (without e_4).
@@ -35,7 +48,7 @@ struct FourSensorOptions {
   double fixed_lambda = 0.0;  ///< used with LambdaRule::fixed
   LCurveOptions lcurve;
   double discrepancy_tau = 1.0;
-  CurvatureGauge gauge = CurvatureGauge::sensor_stage_without_curvature;
+  CurvatureGauge gauge = CurvatureGauge::reference_without_curvature;
   RowWeighting weighting = RowWeighting::paper;
   MotionEstimator motion = MotionEstimator::all_configurations;
   /// Iterated Tikhonov steps X ← X + (AᵀA+λ²I)⁻¹Aᵀ(b − AX) with the same factor: each step
@@ -61,10 +74,10 @@ struct FourSensorResult {
 
   double lambda = 0;
   LambdaRule rule = LambdaRule::lcurve;
-  CurvatureGauge gauge = CurvatureGauge::sensor_stage_without_curvature;
+  CurvatureGauge gauge = CurvatureGauge::reference_without_curvature;
   LCurveResult lcurve;  ///< the whole curve (filled for rule lcurve)
-  /// Rule lcurve found no interior corner (lcurve.at_edge): λ is the discrepancy principle's.
-  bool lambda_fallback = false;
+  /// Rule lcurve found no corner (lcurve.has_corner false): what was done instead.
+  LambdaFallback lambda_fallback = LambdaFallback::none;
   double residual_norm = 0;  ///< ‖A·X_λ − b‖
   double solution_norm = 0;  ///< ‖X_λ‖
   double sigma_um = 0;       ///< sensor noise σ̂ implied by the redundant equations
@@ -81,5 +94,14 @@ struct FourSensorResult {
 /// data, std::runtime_error if the system cannot be solved.
 FourSensorResult separate_four_sensor(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
                                       const FourSensorOptions& opts = {});
+
+/// The same when the combined outputs g(x_n) = C·m(x_n) of Eq. (9) are measured in their own
+/// right (P × 4 µm, row n = g_1..g_4 at x_n), as when the combinations are formed in the
+/// instrument: b₀ is taken from g, and m only for S and γ (Eqs. 18–19).  With g = C·m it is
+/// separate_four_sensor(cfg, m, opts).  The uncertainties assume white noise on m.
+FourSensorResult separate_four_sensor_combined(const FourSensorConfig& cfg,
+                                               const Eigen::MatrixXd& m_um,
+                                               const Eigen::MatrixXd& g_um,
+                                               const FourSensorOptions& opts = {});
 
 }  // namespace errsep::core

@@ -27,6 +27,13 @@ struct LCurveOptions {
   /// The grid points are independent, so 2 threads on 2 cores halve the sweep; the refinement
   /// after it is sequential.  Results do not depend on the number of threads.
   int threads = 1;
+  /// An L-curve has a corner only if it has an L: a vertical branch on which the noise inflates
+  /// the solution as λ falls.  The branch is measured as log10(‖X_λmin‖/‖X_corner‖); below this
+  /// many decades the unregularised solution is not dominated by noise and there is no corner to
+  /// take (0.05 decades: ‖X‖ grows by less than 12 %, i.e. the noise part of the unregularised
+  /// solution is below about half of its size).  The paper's own system (weak curvature row) has
+  /// a branch of 1.2 decades at σ = 0.1 µm; with the curvature fixed exactly, 0.001 to 0.05.
+  double min_branch_decades = 0.05;
   bool is_valid(std::string* why = nullptr) const;
 };
 
@@ -36,6 +43,12 @@ struct LCurveResult {
   double curvature_corner = 0;
   int corner_index = -1;  ///< grid index of the maximum before refinement
   bool at_edge = false;   ///< no interior maximum: the corner is the first or last grid point
+  /// log10(‖X‖ at the smallest λ of the grid / ‖X‖ at the corner): the height of the vertical
+  /// (noise) branch below the corner.
+  double branch_decades = 0;
+  /// False when the curve has no corner to take: the maximum is at the edge of the range, or
+  /// the vertical branch is lower than LCurveOptions::min_branch_decades.
+  bool has_corner = false;
   int factorizations = 0;
 };
 
