@@ -6,6 +6,7 @@
 
 #include "errsep/core/four_sensor.hpp"
 #include "errsep/core/four_sensor_simulation.hpp"
+#include "errsep/io/csv.hpp"
 #include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/version.hpp"
@@ -20,6 +21,7 @@ int main(int argc, char** argv) {
   std::uint64_t seed = 1;
   int example = 1, k = 3;
   bool pe1 = false, pe2 = false;
+  std::string noise_on = "sensors";
   errsep::core::FourSensorConfig cfg;
   app.add_option("--out", out_dir, "output directory")->capture_default_str();
   app.add_option("--sigma-um", sigma, "sensor noise standard deviation, um")->capture_default_str();
@@ -28,6 +30,12 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({1, 2}))
       ->capture_default_str();
   app.add_option("--k", k, "harmonic order of Example 2")->capture_default_str();
+  app.add_option("--noise-on", noise_on,
+                 "where the noise enters: sensors (each reading m_i, the physics) or combined "
+                 "(each combined output g = C m of Eq. 9 and each m_i, the model under which the "
+                 "paper's section-3 figures come out; the g are written to DIR/combined.csv)")
+      ->check(CLI::IsMember({"sensors", "combined"}))
+      ->capture_default_str();
   app.add_flag("--pe1", pe1, "sensor positioning error PE1 (D = 5.012, 4.985, 25.02 mm)");
   app.add_flag("--pe2", pe2, "slideway positioning error PE2 (Eq. 20)");
   app.add_option("--dx-mm", cfg.dx_mm, "sampling interval, mm")->capture_default_str();
@@ -45,6 +53,8 @@ int main(int argc, char** argv) {
     errsep::core::FourSensorSimOptions so;
     so.sigma_um = sigma;
     so.seed = seed;
+    const bool combined = noise_on == "combined";
+    if (combined) so.noise_model = errsep::core::NoiseModel::combined_outputs;
     if (pe1) so.actual_spacing_mm = errsep::core::zhao2019_pe1_spacing_mm();
     if (pe2) so.positioning_error_um = errsep::core::zhao2019_pe2_um(cfg.travel_mm());
     const auto sim = errsep::core::simulate_four_sensor(cfg, truth, so);
@@ -58,11 +68,27 @@ int main(int argc, char** argv) {
         raw.m_um[static_cast<size_t>(j)].push_back(sim.m_um(n, j));
     raw.metadata = {{"source", "errsep-simulate example " + std::to_string(example)},
                     {"sigma_um", std::to_string(sigma)},
-                    {"seed", std::to_string(seed)}};
+                    {"seed", std::to_string(seed)},
+                    {"noise_on", noise_on}};
     std::filesystem::create_directories(out_dir);
     errsep::io::write_raw_four_sensor_csv(std::filesystem::path(out_dir) / "raw.csv", raw);
 
-    const auto res = errsep::core::separate_four_sensor(cfg, sim.m_um);
+    if (combined) {
+      errsep::io::CsvTable g;
+      g.set_meta("source", "errsep-simulate example " + std::to_string(example));
+      g.set_meta("units", "x in mm, combined outputs g = C m (Zhao 2019 Eq. 9) in um");
+      g.set_meta("noise_on", noise_on);
+      g.add_column("x_mm", raw.x_mm);
+      for (int r = 0; r < 4; ++r) {
+        std::vector<double> col(static_cast<size_t>(sim.g_um.rows()));
+        for (Eigen::Index n = 0; n < sim.g_um.rows(); ++n)
+          col[static_cast<size_t>(n)] = sim.g_um(n, r);
+        g.add_column("g" + std::to_string(r + 1) + "_um", col);
+      }
+      errsep::io::write_csv(std::filesystem::path(out_dir) / "combined.csv", g);
+    }
+    const auto res = combined ? errsep::core::separate_four_sensor_combined(cfg, sim.m_um, sim.g_um)
+                              : errsep::core::separate_four_sensor(cfg, sim.m_um);
     errsep::io::write_four_sensor_result(out_dir, res, {out_dir + "/raw.csv", "X", "Y", {}});
     Eigen::VectorXd dS = res.S_um - sim.S_um;
     Eigen::VectorXd dg = res.gamma_rad - sim.gamma_rad;
@@ -71,8 +97,8 @@ int main(int argc, char** argv) {
               << "truth comparison: max|dS| = " << dS.cwiseAbs().maxCoeff()
               << " um, max|dgamma| (constant removed) = "
               << dg.cwiseAbs().maxCoeff() * errsep::core::kDegPerRad << " deg\n"
-              << "written: " << out_dir << "/raw.csv, motion.csv, reference.csv, lcurve.csv, "
-              << "residuals.csv, summary.txt\n";
+              << "written: " << out_dir << "/raw.csv, " << (combined ? "combined.csv, " : "")
+              << "motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt\n";
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "errsep-simulate: " << e.what() << "\n";

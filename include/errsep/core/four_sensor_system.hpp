@@ -24,7 +24,7 @@ namespace errsep::core {
 
 /// How the three non-identifiable components of f (constant, linear, quadratic) are fixed.
 enum class CurvatureGauge {
-  /// Default; the paper's structure with Eq. (12) replaced by an assumption that holds for any
+  /// The paper's structure with Eq. (12) replaced by an assumption that holds for any
   /// spacing.  Rows of A (weight 1, as Eq. 15 has them): Eq. (11), and: the zero-adjustment values
   /// of the sensor stage have no component quadratic in the sensor position (e = a + b·O + d·O³
   /// when expanded in 1, O, O², O³; a quadratic e_i is exactly what trades with a bow of f).  As a
@@ -32,7 +32,8 @@ enum class CurvatureGauge {
   /// Eq. (12) the row moves Δe only by ~2/(N−1)² of a bow's amplitude, so for λ > 0 the Tikhonov
   /// term (minimum ‖X‖) effectively chooses the curvature; at λ = 0 the row does.
   sensor_stage_without_curvature,
-  /// The reference surface has no curvature of its own, fixed exactly: Eq. (11) — f(x_0) =
+  /// The default.  The reference surface has no curvature of its own, fixed exactly: Eq. (11) —
+  /// f(x_0) =
   /// f(x_{N−1}) = 0 — and f has no component along the bow b(x_n) = t_n(1 − t_n), t_n = n/(N−1),
   /// the shape the unidentifiable quadratic takes between the two fixed ends.  This is what
   /// Eq. (12) must have meant (it fixes the curvature, and nothing else), stated as an assumption
