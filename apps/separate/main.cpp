@@ -10,6 +10,7 @@
 #include "errsep/io/csv.hpp"
 #include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
+#include "errsep/io/staged_directory.hpp"
 #include "errsep/version.hpp"
 
 namespace {
@@ -88,7 +89,7 @@ int main(int argc, char** argv) {
     for (int n = 0; n < P; ++n) {
       const double expect = scan.x_mm[0] + n * cfg.dx_mm;
       if (std::abs(scan.x_mm[static_cast<size_t>(n)] - expect) > 1e-6 * std::max(1.0, cfg.dx_mm))
-        throw errsep::io::CsvError(input, 0,
+        throw errsep::io::CsvError(input, scan.line_of(static_cast<std::size_t>(n)),
                                    "x_mm of data row " + std::to_string(n + 1) + " is " +
                                        std::to_string(scan.x_mm[static_cast<size_t>(n)]) +
                                        ", expected " + std::to_string(expect) +
@@ -99,13 +100,23 @@ int main(int argc, char** argv) {
     std::string why;
     if (!cfg.is_valid(&why))
       throw errsep::io::CsvError(input, 0,
-                                 std::to_string(P) + " rows do not fit the spacing: " + why);
+                                 "spacings s = (" + std::to_string(cfg.s2) + ", " +
+                                     std::to_string(cfg.s3) + ", " + std::to_string(cfg.s4) +
+                                     ") with " + std::to_string(P) + " rows: " + why);
     Eigen::MatrixXd m(P, 4);
     for (int j = 0; j < 4; ++j)
       for (int n = 0; n < P; ++n)
         m(n, j) = scan.m_um[static_cast<size_t>(j)][static_cast<size_t>(n)];
-    const auto res = errsep::core::separate_four_sensor(cfg, m, opts);
-    errsep::io::write_four_sensor_result(out_dir, res, {input, "X", "Y", {}});
+    errsep::core::FourSensorResult res;
+    try {
+      res = errsep::core::separate_four_sensor(cfg, m, opts);
+    } catch (const std::exception& e) {  // name the file the data came from
+      throw std::runtime_error(input + ": " + e.what());
+    }
+    // All result files appear together or not at all.
+    errsep::io::StagedDirectory stage(out_dir, "separate");
+    errsep::io::write_four_sensor_result(stage.dir(), res, {input, "X", "Y", {}});
+    stage.commit();
     std::cout << res.brief_report() << "\n"
               << "results written to " << out_dir << "/ (motion.csv, reference.csv, lcurve.csv, "
               << "residuals.csv, summary.txt)\n";

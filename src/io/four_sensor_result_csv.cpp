@@ -112,9 +112,16 @@ void write_four_sensor_result(const std::filesystem::path& dir, const core::Four
   summary << r.brief_report() << "\n"
           << "source: " << info.source << "\n"
           << "identifiability: the constant and linear parts of f are fixed by f(x_0) = "
-             "f(x_{N-1}) = 0 (Eq. 11); its quadratic part by the assumption that the sensor "
-             "stage's zero-adjustment values have no quadratic component in the sensor position "
-             "(replaces Eq. 12); gamma is reported up to the constant e4/(D2+D3+D4).\n";
+             "f(x_{N-1}) = 0 (Eq. 11); its quadratic part by the assumption that "
+          << (r.gauge == core::CurvatureGauge::reference_without_curvature
+                  ? "the reference surface has no bow (f orthogonal to t(1-t)), imposed exactly"
+              : r.gauge == core::CurvatureGauge::sensor_stage_without_curvature
+                  ? "the sensor stage's zero-adjustment values have no quadratic component in the "
+                    "sensor position (a weak row in place of Eq. 12)"
+                  : "Eq. (12) holds as printed")
+          << "; gamma is reported up to the constant e4/(D2+D3+D4).\n"
+          << "lambda: " << core::to_string(r.rule) << ", L-curve branch " << r.lcurve.branch_decades
+          << " decades, fallback " << core::to_string(r.lambda_fallback) << "\n";
 
   write_csv(dir / "motion.csv", motion);
   write_csv(dir / "reference.csv", ref);

@@ -178,6 +178,7 @@ RawFourSensorScan read_raw_four_sensor_csv(const std::filesystem::path& file,
   require_complete(s.complete, t, file, opts);
   if (s.complete) check_finite(t, file);
   s.x_mm = t.column("x_mm", file);
+  s.row_line = t.row_line;
   for (int i = 0; i < 4; ++i)
     s.m_um[static_cast<std::size_t>(i)] = t.column("m" + std::to_string(i + 1) + "_um", file);
   int n_t = 0;

@@ -42,8 +42,13 @@ struct RawFourSensorScan {
   /// Other "# key: value" lines (counts, timestamps, config, ...), in order, written after the
   /// format/complete/geometry lines.
   std::vector<std::pair<std::string, std::string>> metadata;
+  /// 1-based line of each row in the file it was read from (empty when built in memory), for
+  /// error messages that name the line.
+  std::vector<std::size_t> row_line;
 
   std::size_t positions() const { return x_mm.size(); }
+  /// The source line of row n, or 0 when unknown.
+  std::size_t line_of(std::size_t n) const { return n < row_line.size() ? row_line[n] : 0; }
   /// Value of a metadata key, or nullopt.
   std::optional<std::string> meta(const std::string& key) const;
 };
