@@ -50,6 +50,11 @@ Eigen::MatrixXd PeriodicEffect::jacobian(const Eigen::VectorXd& p, const EffectC
   return slide_positioning_jacobian(phi, ctx, phi * p);
 }
 
+Eigen::MatrixXd PeriodicEffect::f_shift_mm(const Eigen::VectorXd& p,
+                                           const FourSensorConfig& cfg) const {
+  return slide_positioning_f_shift_mm(basis(cfg) * p);
+}
+
 std::vector<std::unique_ptr<ModelEffect>> PeriodicEffect::variants(const EffectContext& ctx) const {
   std::vector<std::unique_ptr<ModelEffect>> v;
   if (period_mm_ > 0) {  // a period already chosen (the effect is in the model)

@@ -52,6 +52,15 @@ Eigen::MatrixXd SensorOffsetEffect::jacobian(const Eigen::VectorXd& p,
   return J;
 }
 
+Eigen::MatrixXd SensorOffsetEffect::f_shift_mm(const Eigen::VectorXd& p,
+                                               const FourSensorConfig& cfg) const {
+  const auto dO = offsets_error(p);
+  Eigen::MatrixXd s(cfg.positions(), 4);
+  for (int i = 0; i < 4; ++i)
+    s.col(i).setConstant(dO[static_cast<std::size_t>(i)]);
+  return s;
+}
+
 std::unique_ptr<ModelEffect> SensorOffsetEffect::clone() const {
   return std::make_unique<SensorOffsetEffect>(*this);
 }

@@ -32,6 +32,13 @@ Eigen::MatrixXd slide_positioning_jacobian(const Eigen::MatrixXd& phi, const Eff
   return J;
 }
 
+Eigen::MatrixXd slide_positioning_f_shift_mm(const Eigen::VectorXd& dx_um) {
+  Eigen::MatrixXd s(dx_um.size(), 4);
+  for (int i = 0; i < 4; ++i)
+    s.col(i) = 1e-3 * dx_um;
+  return s;
+}
+
 Eigen::MatrixXd slide_positioning_correction_um(const Eigen::VectorXd& dx_um,
                                                 const EffectContext& ctx) {
   const Eigen::Index P = dx_um.size();
@@ -84,6 +91,11 @@ Eigen::MatrixXd SlidePositioningEffect::jacobian(const Eigen::VectorXd& p,
                                                  const EffectContext& ctx) const {
   const Eigen::MatrixXd phi = basis(ctx.cfg);
   return slide_positioning_jacobian(phi, ctx, phi * p);
+}
+
+Eigen::MatrixXd SlidePositioningEffect::f_shift_mm(const Eigen::VectorXd& p,
+                                                   const FourSensorConfig& cfg) const {
+  return slide_positioning_f_shift_mm(basis(cfg) * p);
 }
 
 std::unique_ptr<ModelEffect> SlidePositioningEffect::clone() const {

@@ -82,6 +82,10 @@ double EffectContext::gamma_slope_at(double x) const {
   return spline_eval(gamma_rad, g_m2_, cfg.dx_mm, x, true);
 }
 
+Eigen::MatrixXd ModelEffect::f_shift_mm(const Eigen::VectorXd&, const FourSensorConfig&) const {
+  return {};
+}
+
 std::vector<std::unique_ptr<ModelEffect>> ModelEffect::variants(const EffectContext&) const {
   std::vector<std::unique_ptr<ModelEffect>> v;
   v.push_back(clone());

@@ -47,26 +47,138 @@ double p_value_F(double F, int k, int dof) {
   return boost::math::cdf(boost::math::complement(dist, F));
 }
 
-// The least-squares (λ = 0) fit of the base model to corrected readings.
-EffectContext ls_context(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
-                         const Eigen::MatrixXd& m_c, const Eigen::MatrixXd& t_s,
-                         const FourSensorOptions& solve) {
-  // f̂, Ŝ, γ̂ for the corrections and Jacobians come from the caller's solver (its λ rule fixes
-  // the non-identifiable curvature as the reported result does; the least-squares gauge row
-  // would put a bow into f̂ and, through f̂(x+O+δ) − f̂(x+O), into the corrected readings).  The
-  // residuals and tests never use them: they are projections of the readings.
-  FourSensorOptions o = solve;
-  o.compute_uncertainty = false;
-  const FourSensorResult r = separate_four_sensor(cfg, m_c, o);
+// The base model of Eq. (1) in the reduced space (residual_analysis.hpp: S and γ eliminated per
+// position by V₂), with the reference surface sampled at arbitrary points: reading (n, i) sees
+// f(x_n + O_i + δ_ni) through the natural cubic spline through f(x_0..x_{N−1}), which is linear
+// in those samples, so for given shifts δ the model is still linear in (f, e) and its least-
+// squares fit is one dense QR (N = 69: 124 × 68).  δ = 0 is the design of Eqs. (4)–(10).
+//
+// Gauge: f(x_0) = f(x_{N−1}) = 0 (Eq. 11), f ⟂ the bow t(1 − t) (CurvatureGauge::
+// reference_without_curvature, the solver's default) and e_1 = e_4 = 0; f is parametrised in the
+// (N − 3)-dimensional subspace that satisfies the three conditions, e by e_2, e_3.  The design
+// then has full column rank N − 1 for δ = 0 and stays full rank as δ moves, so the residual is a
+// smooth function of the effect parameters (a rank decided by a tolerance would jump when a shift
+// makes the bow weakly visible).  This fit is the linearisation point of the effects and the
+// source of the residual; the reported separations use the caller's solver options.
+class ShiftedBase {
+ public:
+  explicit ShiftedBase(const FourSensorConfig& cfg) : cfg_(cfg), V_(residual_basis(cfg)) {
+    const int N = cfg.N;
+    Eigen::MatrixXd C = Eigen::MatrixXd::Zero(3, N);
+    C(0, 0) = 1.0;
+    C(1, N - 1) = 1.0;
+    C.row(2) = reference_bow(cfg).transpose();
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(C, Eigen::ComputeFullV);
+    B_ = svd.matrixV().rightCols(N - 3);
+    M2_.resize(N, N);
+    for (int j = 0; j < N; ++j)
+      M2_.col(j) = spline_second_derivatives(Eigen::VectorXd::Unit(N, j), cfg.dx_mm);
+  }
+
+  struct Fit {
+    Eigen::VectorXd r;  ///< reduced residual, 2P
+    double rss = 0;
+    Eigen::MatrixXd Q;  ///< orthonormal basis of the design's column space, 2P × (N − 1)
+    Eigen::VectorXd f_um, S_um, gamma_rad;
+    Eigen::Vector4d e_um = Eigen::Vector4d::Zero();
+  };
+
+  /// Interpolation weights of the spline at y (mm): f(y) = w·f(x_0..x_{N−1}).  The same
+  /// formula as spline_eval (model_effect.cpp), linear extrapolation outside the grid.
+  Eigen::RowVectorXd weights(double y) const {
+    const int N = cfg_.N;
+    const double h = cfg_.dx_mm, xmax = (N - 1) * h;
+    Eigen::RowVectorXd w = Eigen::RowVectorXd::Zero(N);
+    if (y <= 0) {
+      w = -h * (2.0 * M2_.row(0) + M2_.row(1)) / 6.0 * y;
+      w(0) += 1.0 - y / h;
+      w(1) += y / h;
+      return w;
+    }
+    if (y >= xmax) {
+      const double d = y - xmax;
+      w = h * (M2_.row(N - 2) + 2.0 * M2_.row(N - 1)) / 6.0 * d;
+      w(N - 1) += 1.0 + d / h;
+      w(N - 2) -= d / h;
+      return w;
+    }
+    const int j = std::min(static_cast<int>(y / h), N - 2);
+    const double a = ((j + 1) * h - y) / h, b = 1.0 - a;
+    w = ((a * a * a - a) * M2_.row(j) + (b * b * b - b) * M2_.row(j + 1)) * (h * h / 6.0);
+    w(j) += a;
+    w(j + 1) += b;
+    return w;
+  }
+
+  /// Least-squares fit of Eq. (1) to readings m (P × 4) with f sampled at x_n + O_i + δ_ni
+  /// (δ: P × 4 mm, or empty for none).
+  Fit fit(const Eigen::MatrixXd& m_um, const Eigen::MatrixXd& shift_mm) const {
+    const int N = cfg_.N, P = cfg_.positions(), nf = N - 3;
+    const auto k = cfg_.offsets_samples();
+    const auto O = cfg_.offsets_mm();
+    Eigen::MatrixXd W(4 * P, N);  // f(y_ni) = W.row(4n + i)·f
+    for (int n = 0; n < P; ++n)
+      for (int i = 0; i < 4; ++i) {
+        const std::size_t si = static_cast<std::size_t>(i);
+        if (shift_mm.size() == 0)
+          W.row(4 * n + i) = Eigen::RowVectorXd::Unit(N, n + k[si]);
+        else
+          W.row(4 * n + i) = weights(n * cfg_.dx_mm + O[si] + shift_mm(n, i));
+      }
+    const Eigen::MatrixXd WB = W * B_;
+    Eigen::MatrixXd G(2 * P, nf + 2);
+    for (int n = 0; n < P; ++n) {
+      G.block(2 * n, 0, 2, nf) = V_.transpose() * WB.middleRows(4 * n, 4);
+      G.block(2 * n, nf, 2, 2) = V_.middleRows(1, 2).transpose();  // e_2, e_3
+    }
+    const Eigen::VectorXd y = reduce_readings(cfg_, m_um);
+    Eigen::HouseholderQR<Eigen::MatrixXd> qr(G);
+    const Eigen::VectorXd z = qr.solve(y);
+    Fit out;
+    out.r = y - G * z;
+    out.rss = out.r.squaredNorm();
+    out.Q = qr.householderQ() * Eigen::MatrixXd::Identity(2 * P, nf + 2);
+    out.f_um = B_ * z.head(nf);
+    out.e_um << 0.0, z(nf), z(nf + 1), 0.0;
+    // S and γ per position: least squares of what is left of the four readings on (1, O_i).
+    const Eigen::VectorXd fy = W * out.f_um;
+    Eigen::Matrix<double, 4, 2> A;
+    for (int i = 0; i < 4; ++i)
+      A(i, 0) = 1.0, A(i, 1) = O[static_cast<std::size_t>(i)];
+    const auto Aqr = A.colPivHouseholderQr();
+    out.S_um.resize(P);
+    out.gamma_rad.resize(P);
+    for (int n = 0; n < P; ++n) {
+      Eigen::Vector4d d;
+      for (int i = 0; i < 4; ++i)
+        d(i) = m_um(n, i) - fy(4 * n + i) - out.e_um(i);
+      const Eigen::Vector2d sg = Aqr.solve(d);
+      out.S_um(n) = sg(0);
+      out.gamma_rad(n) = 1e-3 * sg(1);  // µm/mm → rad
+    }
+    return out;
+  }
+
+  const FourSensorConfig& config() const { return cfg_; }
+
+ private:
+  FourSensorConfig cfg_;
+  Eigen::Matrix<double, 4, 2> V_;
+  Eigen::MatrixXd B_;   // N × (N − 3), orthonormal basis of the gauge subspace of f
+  Eigen::MatrixXd M2_;  // N × N, spline second derivatives per unit sample
+};
+
+EffectContext make_context(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
+                           const Eigen::MatrixXd& t_s, const ShiftedBase::Fit& fit) {
   EffectContext ctx;
   ctx.cfg = cfg;
   ctx.m_um = m_raw;
   ctx.t_s = t_s;
-  ctx.f_um = r.f_um;
-  ctx.S_um = r.S_um;
-  ctx.gamma_rad = r.gamma_rad;
-  ctx.e_um = r.e_um;
-  ctx.residual_um = r.sensor_residual_um;
+  ctx.f_um = fit.f_um;
+  ctx.S_um = fit.S_um;
+  ctx.gamma_rad = fit.gamma_rad;
+  ctx.e_um = fit.e_um;
+  ctx.residual_um = expand_residual(cfg, fit.r);
   ctx.prepare();
   return ctx;
 }
@@ -92,11 +204,46 @@ Eigen::VectorXd concat(const Model& M) {
   return v;
 }
 
+// f̂(y + δ) − f̂(y) for every reading, y = x_n + O_i.
+Eigen::MatrixXd f_shift_part(const EffectContext& ctx, const Eigen::MatrixXd& shift_mm) {
+  const auto O = ctx.cfg.offsets_mm();
+  Eigen::MatrixXd d(shift_mm.rows(), 4);
+  for (Eigen::Index n = 0; n < shift_mm.rows(); ++n)
+    for (int i = 0; i < 4; ++i) {
+      const double y = static_cast<double>(n) * ctx.cfg.dx_mm + O[static_cast<std::size_t>(i)];
+      d(n, i) = ctx.f_at(y + shift_mm(n, i)) - ctx.f_at(y);
+    }
+  return d;
+}
+
+// The readings split for the exact fit: `rest` = m minus every correction except the shift of
+// f's sampling points (f̂(y + δ) − f̂(y) of PE1, PE2, periodic), and the total shift δ.
+struct Split {
+  Eigen::MatrixXd rest;
+  Eigen::MatrixXd shift_mm;  // empty when no effect shifts f
+};
+
+Split split_readings(const Model& M, const EffectContext& ctx) {
+  Split s{ctx.m_um, {}};
+  for (std::size_t j = 0; j < M.effects.size(); ++j) {
+    Eigen::MatrixXd c = M.effects[j]->correction_um(M.p[j], ctx);
+    const Eigen::MatrixXd sh = M.effects[j]->f_shift_mm(M.p[j], ctx.cfg);
+    if (sh.size() != 0) {
+      c -= f_shift_part(ctx, sh);
+      if (s.shift_mm.size() == 0) s.shift_mm = Eigen::MatrixXd::Zero(sh.rows(), 4);
+      s.shift_mm += sh;
+    }
+    s.rest -= c;
+  }
+  return s;
+}
+
+// The readings corrected for every effect: Eq. (1) holds for them with f at the nominal points.
+// The shifts of all effects are applied together (f̂ at y + Σδ), not one correction per effect.
 Eigen::MatrixXd corrected(const Model& M, const EffectContext& ctx) {
-  Eigen::MatrixXd m = ctx.m_um;
-  for (std::size_t j = 0; j < M.effects.size(); ++j)
-    m -= M.effects[j]->correction_um(M.p[j], ctx);
-  return m;
+  const Split s = split_readings(M, ctx);
+  if (s.shift_mm.size() == 0) return s.rest;
+  return s.rest - f_shift_part(ctx, s.shift_mm);
 }
 
 Eigen::MatrixXd model_jacobian(const Model& M, const EffectContext& ctx) {
@@ -112,38 +259,55 @@ Eigen::MatrixXd model_jacobian(const Model& M, const EffectContext& ctx) {
 }
 
 // Least-squares step on projected columns with the identifiable directions only.  Columns are
-// scaled to unit norm (effects mix units: gains, mm, µm/s) and the step is taken along the right
-// singular vectors of the projected, scaled columns.  With `p_current` (Gauss–Newton), a direction
-// is kept only when the total parameter's signal along it, |c_j + s_j·v_jᵀp̃|, exceeds
-// kappa·σ̂: a direction the data barely determine would otherwise put its large uncertainty into
-// the corrected readings and from there into S, γ and f; such a direction is set to zero.
+// scaled to unit norm (effects mix units: gains, mm, µm/s): with D the column norms, the scaled
+// parameters are p̃ = D·p and the projected, scaled columns (I − H)·J·D⁻¹ = U·Σ·Vᵀ.  The data
+// see p only through Vᵀ·D·p: the determined combinations of the parameters are ℓ_j = D·v_j
+// (v_j with s_j above tolerance), and the directions no data can see are D⁻¹·v_j of the others
+// (absorbed by f, S, γ, e, e.g. a drift common to all configurations).  The estimate is the one
+// with no component along those (orthogonal to them in parameter units), which is the span of
+// the ℓ_j: so ℓ_jᵀp̂ = v_jᵀp̃̂ is the estimate of ℓ_jᵀp whatever the invisible part of the truth,
+// with variance σ²/s_j², and the covariance of p̂ is σ²·(I − ZZᵀ)·D⁻¹VΣ⁻²VᵀD⁻¹·(I − ZZᵀ) (Z the
+// invisible directions).  With `p_current` (Gauss–Newton), a direction is kept only when the
+// total parameter's signal along it, |c_j + s_j·v_jᵀp̃|, exceeds kappa·σ̂: a direction the data
+// barely determine would otherwise put its large uncertainty into the corrected readings and
+// from there into S, γ and f; such a direction is set to zero.
 struct ProjectedFit {
   Eigen::VectorXd dp;
-  Eigen::MatrixXd cov_unit;    // (JᵀRJ)⁺ on the kept directions, parameter units
-  Eigen::MatrixXd directions;  // k × kept: orthonormal basis of the determined combinations
+  Eigen::MatrixXd cov_unit;  // covariance of p̂ / σ², parameter units
+  // k × kept, orthonormal (parameter units): the combinations ℓᵀp the data determine; p̂ lies in
+  // their span.
+  Eigen::MatrixXd determined;
+  // k × kept: parameter perturbations whose projected columns span what the fit explains (for the
+  // model's column space).
+  Eigen::MatrixXd column_directions;
   Eigen::VectorXd relative_sv;
   double delta_rss = 0;
   int identifiable = 0;  // structurally identifiable directions
   int kept = 0;          // directions kept after the significance truncation
 };
 
-ProjectedFit projected_fit(const ResidualSpace& base, const Eigen::MatrixXd& Jr,
+// Q: orthonormal basis of the model the columns are projected against.
+ProjectedFit projected_fit(const Eigen::MatrixXd& Q, const Eigen::MatrixXd& Jr,
                            const Eigen::VectorXd& r, double tol,
                            const Eigen::VectorXd* p_current = nullptr, double kappa = 0.0) {
   ProjectedFit out;
   const Eigen::Index k = Jr.cols();
   out.dp = Eigen::VectorXd::Zero(k);
   out.cov_unit = Eigen::MatrixXd::Zero(k, k);
+  out.determined.resize(k, 0);
+  out.column_directions.resize(k, 0);
   if (k == 0) return out;
-  Eigen::MatrixXd RJ = base.project_out(Jr);
+  const int base_dof = static_cast<int>(Q.rows() - Q.cols());
+  Eigen::MatrixXd RJ = Jr - Q * (Q.transpose() * Jr);
   Eigen::VectorXd D(k);
   for (Eigen::Index c = 0; c < k; ++c) {
     D(c) = Jr.col(c).norm();
     if (!(D(c) > 0)) D(c) = 1.0;
     RJ.col(c) /= D(c);
   }
-  Eigen::JacobiSVD<Eigen::MatrixXd> svd(RJ, Eigen::ComputeThinU | Eigen::ComputeThinV);
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(RJ, Eigen::ComputeThinU | Eigen::ComputeFullV);
   const Eigen::VectorXd& sv = svd.singularValues();
+  const Eigen::MatrixXd& V = svd.matrixV();
   out.relative_sv = sv;
   int kid = 0;
   for (Eigen::Index j = 0; j < sv.size(); ++j)
@@ -156,14 +320,14 @@ ProjectedFit projected_fit(const ResidualSpace& base, const Eigen::MatrixXd& Jr,
     c(j) = svd.matrixU().col(j).dot(r);
     fit_all += c(j) * c(j);
   }
-  const int dof = base.dof() - kid;
+  const int dof = base_dof - kid;
   const double sigma = dof > 0 ? std::sqrt(std::max(0.0, r.squaredNorm() - fit_all) / dof) : 0.0;
   Eigen::VectorXd dps = Eigen::VectorXd::Zero(k);  // scaled step
   Eigen::VectorXd ps = Eigen::VectorXd::Zero(k);
   if (p_current) ps = p_current->cwiseProduct(D);
   std::vector<int> kept, free_dirs;
   for (int j = 0; j < kid; ++j) {
-    const Eigen::VectorXd v = svd.matrixV().col(j);
+    const Eigen::VectorXd v = V.col(j);
     const double total = c(j) + sv(j) * v.dot(ps);  // signal of the whole parameter along v
     if (p_current && std::abs(total) <= kappa * sigma) {
       free_dirs.push_back(j);
@@ -175,37 +339,37 @@ ProjectedFit projected_fit(const ResidualSpace& base, const Eigen::MatrixXd& Jr,
   }
   // Directions the significance rule dropped are taken out of the parameters (scaled metric).
   for (int j : free_dirs)
-    dps -= svd.matrixV().col(j) * svd.matrixV().col(j).dot(ps + dps);
-  // Directions no data can determine (absorbed by f, S, γ, e, e.g. a drift common to all
-  // configurations): the estimate is the part of p orthogonal to them in parameter units, so a
-  // true p orthogonal to them is recovered and the report's "identifiable part" is well defined.
-  if (p_current && kid < svd.matrixV().cols()) {
-    const Eigen::Index k0 = svd.matrixV().cols() - kid;
-    Eigen::MatrixXd Z = D.cwiseInverse().asDiagonal() * svd.matrixV().rightCols(k0);
+    dps -= V.col(j) * V.col(j).dot(ps + dps);
+  // Z: the directions no data can see, orthonormal in parameter units.
+  const Eigen::Index k0 = k - kid;
+  Eigen::MatrixXd Z(k, k0);
+  if (k0 > 0) {
+    Z = D.cwiseInverse().asDiagonal() * V.rightCols(k0);
     Eigen::HouseholderQR<Eigen::MatrixXd> zq(Z);
     Z = zq.householderQ() * Eigen::MatrixXd::Identity(k, k0);
+  }
+  // The estimate has no component along Z (see above).
+  if (p_current && k0 > 0) {
     Eigen::VectorXd p_new = (ps + dps).cwiseQuotient(D);
     p_new -= Z * (Z.transpose() * p_new);
     dps = p_new.cwiseProduct(D) - ps;
   }
   out.kept = static_cast<int>(kept.size());
   out.dp = dps.cwiseQuotient(D);
-  Eigen::MatrixXd B(k, out.kept);  // D⁻¹·v_j / s_j
+  if (out.kept == 0) return out;
+  Eigen::MatrixXd Bm(k, out.kept), L(k, out.kept), Cd(k, out.kept);
   for (int q = 0; q < out.kept; ++q) {
     const int j = kept[static_cast<std::size_t>(q)];
-    B.col(q) = svd.matrixV().col(j).cwiseQuotient(D) / sv(j);
+    Bm.col(q) = V.col(j).cwiseQuotient(D) / sv(j);  // D⁻¹·v_j / s_j
+    L.col(q) = V.col(j).cwiseProduct(D);            // ℓ_j = D·v_j
+    Cd.col(q) = V.col(j).cwiseQuotient(D);          // D⁻¹·v_j
   }
-  out.cov_unit = B * B.transpose();
-  // Determined combinations ℓᵀp: the row space of the kept part, orthonormal in parameter units.
-  if (out.kept > 0) {
-    Eigen::MatrixXd W(k, out.kept);
-    for (int q = 0; q < out.kept; ++q)
-      W.col(q) = svd.matrixV().col(kept[static_cast<std::size_t>(q)]).cwiseQuotient(D);
-    Eigen::HouseholderQR<Eigen::MatrixXd> qr(W);
-    out.directions = qr.householderQ() * Eigen::MatrixXd::Identity(k, out.kept);
-  } else {
-    out.directions.resize(k, 0);
-  }
+  if (k0 > 0) Bm -= Z * (Z.transpose() * Bm);
+  out.cov_unit = Bm * Bm.transpose();
+  Eigen::HouseholderQR<Eigen::MatrixXd> lq(L);
+  out.determined = lq.householderQ() * Eigen::MatrixXd::Identity(k, out.kept);
+  Eigen::HouseholderQR<Eigen::MatrixXd> cq(Cd);
+  out.column_directions = cq.householderQ() * Eigen::MatrixXd::Identity(k, out.kept);
   return out;
 }
 
@@ -220,73 +384,84 @@ struct Solved {
   double s2 = 0;
 };
 
-// Gauss–Newton on the model's effect parameters with the base unknowns eliminated.
-Solved solve_model(const FourSensorConfig& cfg, Model& M, EffectContext ctx,
-                   const RefineOptions& opts) {
-  const ResidualSpace base(cfg);
+// Gauss–Newton on the model's effect parameters with the base unknowns eliminated (variable
+// projection): rss(p) = ‖r(p)‖², r(p) the residual of the exact least-squares fit of Eq. (1) to
+// the readings corrected with p, f sampled at the points the effects shift it to.  The Jacobian
+// is the effects' J projected against that fit's design (Kaufman's approximation of the
+// projector's derivative), evaluated at its f̂, Ŝ, γ̂.  A step is accepted only if it lowers
+// rss(p) (backtracking, halving up to 10 times); the iteration stops when every
+// |Δp_j| < tolerance·u(p_j), when no step lowers rss, or after max_gauss_newton iterations.
+Solved solve_model(const ShiftedBase& sb, Model& M, EffectContext ctx, const RefineOptions& opts) {
+  const FourSensorConfig& cfg = sb.config();
   const int k = M.total();
-  int it = 0, halvings = 0;
-  double rss_prev = std::numeric_limits<double>::infinity();
-  Eigen::VectorXd step = Eigen::VectorXd::Zero(k);
-  auto add_to_params = [&M](const Eigen::VectorXd& d) {
+  auto evaluate = [&](const Model& model, const EffectContext& c) {
+    const Split s = split_readings(model, c);
+    return sb.fit(s.rest, s.shift_mm);
+  };
+  auto with_step = [](const Model& from, const Eigen::VectorXd& d) {
+    Model to = from;
     Eigen::Index c = 0;
-    for (auto& p : M.p) {
+    for (auto& p : to.p) {
       p += d.segment(c, p.size());
       c += p.size();
     }
+    return to;
   };
+  ShiftedBase::Fit cur = evaluate(M, ctx);
+  ctx = make_context(cfg, ctx.m_um, ctx.t_s, cur);
+  int it = 0;
   for (; it < (k > 0 ? opts.max_gauss_newton : 0); ++it) {
-    const Eigen::MatrixXd m_c = corrected(M, ctx);
-    const EffectContext trial = ls_context(cfg, ctx.m_um, m_c, ctx.t_s, opts.solve);
-    const Eigen::VectorXd r = base.project_out(reduce_readings(cfg, m_c));
-    const double rss = r.squaredNorm();
-    // Step control: a step that increases the residual is halved (at most 8 times).
-    if (rss > rss_prev * (1.0 + 1e-9) && halvings < 8) {
-      step *= 0.5;
-      add_to_params(-step);
-      ++halvings;
-      continue;
-    }
-    halvings = 0;
-    rss_prev = rss;
-    ctx = trial;
+    cur = evaluate(M, ctx);  // with the rest terms (γ̂ in PE1's) of the current fit
     const Eigen::MatrixXd Jr = reduce_columns(cfg, model_jacobian(M, ctx));
     const Eigen::VectorXd p_now = concat(M);
     const ProjectedFit fit =
-        projected_fit(base, Jr, r, opts.identifiability_tol, &p_now, opts.direction_threshold);
-    const int dof = base.dof() - fit.kept;
-    const double s2 = dof > 0 ? (rss - fit.delta_rss) / dof : 0.0;
+        projected_fit(cur.Q, Jr, cur.r, opts.identifiability_tol, &p_now, opts.direction_threshold);
+    const int dof = static_cast<int>(cur.Q.rows() - cur.Q.cols()) - fit.kept;
+    const double s2 = dof > 0 ? std::max(0.0, cur.rss - fit.delta_rss) / dof : 0.0;
+    double t = 1.0;
+    bool accepted = false;
+    for (int h = 0; h <= 10; ++h, t *= 0.5) {
+      Model trial = with_step(M, t * fit.dp);
+      ShiftedBase::Fit tf = evaluate(trial, ctx);
+      // (Up to rounding: a move along directions no data see leaves rss unchanged and must be
+      // taken, it is what puts the estimate in the span of the determined combinations.)
+      if (tf.rss <= cur.rss * (1.0 + 1e-10)) {
+        M = std::move(trial);
+        cur = std::move(tf);
+        accepted = true;
+        break;
+      }
+    }
+    if (!accepted) break;  // a minimum of rss up to the linearisation's accuracy
+    ctx = make_context(cfg, ctx.m_um, ctx.t_s, cur);
     bool converged = true;
     for (Eigen::Index j = 0; j < k; ++j) {
       const double u = std::sqrt(std::max(0.0, s2 * fit.cov_unit(j, j)));
       const double scale = std::max({u, 1e-9 * std::abs(p_now(j)), 1e-300});
-      if (std::abs(fit.dp(j)) > opts.gauss_newton_tolerance * scale) converged = false;
+      if (std::abs(t * fit.dp(j)) > opts.gauss_newton_tolerance * scale) converged = false;
     }
-    step = fit.dp;
-    add_to_params(step);
     if (converged) {
       ++it;
       break;
     }
   }
+  cur = evaluate(M, ctx);
   Solved out{ctx, {}, ResidualSpace(cfg), 0.0, it, {}, {}, 0.0};
   out.m_c = corrected(M, ctx);
-  out.ctx = ls_context(cfg, ctx.m_um, out.m_c, ctx.t_s, opts.solve);
-  const Eigen::MatrixXd Jr = reduce_columns(cfg, model_jacobian(M, out.ctx));
-  const Eigen::VectorXd r = base.project_out(reduce_readings(cfg, out.m_c));
+  const Eigen::MatrixXd Jr = reduce_columns(cfg, model_jacobian(M, ctx));
   const Eigen::VectorXd p_now = concat(M);
-  const ProjectedFit fit =
-      projected_fit(base, Jr, r, opts.identifiability_tol, &p_now, opts.direction_threshold);
-  out.space.add(Jr * fit.directions, opts.identifiability_tol);
+  out.last =
+      projected_fit(cur.Q, Jr, cur.r, opts.identifiability_tol, &p_now, opts.direction_threshold);
+  // The model's column space for the residual, its analysis and the next round's scores: the
+  // base model and the effects' linearised columns along what the data determine.
+  out.space.add(Jr * out.last.column_directions, opts.identifiability_tol);
   out.rss = out.space.project_out(reduce_readings(cfg, out.m_c)).squaredNorm();
-  const double s2 = out.space.dof() > 0 ? out.rss / out.space.dof() : 0.0;
-  out.last = fit;
-  out.s2 = s2;
+  out.s2 = out.space.dof() > 0 ? out.rss / out.space.dof() : 0.0;
   Eigen::Index c = 0;
   for (const auto& p : M.p) {
     Eigen::VectorXd u(p.size());
     for (Eigen::Index j = 0; j < p.size(); ++j)
-      u(j) = std::sqrt(std::max(0.0, s2 * fit.cov_unit(c + j, c + j)));
+      u(j) = std::sqrt(std::max(0.0, out.s2 * out.last.cov_unit(c + j, c + j)));
     out.u.push_back(u);
     c += p.size();
   }
@@ -322,7 +497,7 @@ std::vector<Scored> score_candidates(const FourSensorConfig& cfg, const Solved& 
     for (auto& v : eff->variants(cur.ctx)) {
       const Eigen::VectorXd p0 = Eigen::VectorXd::Zero(v->parameter_count());
       const Eigen::MatrixXd Jr = reduce_columns(cfg, v->jacobian(p0, cur.ctx));
-      const ProjectedFit fit = projected_fit(cur.space, Jr, r, opts.identifiability_tol);
+      const ProjectedFit fit = projected_fit(cur.space.basis(), Jr, r, opts.identifiability_tol);
       const int dof = cur.space.dof() - fit.identifiable;
       if (fit.identifiable == 0 || dof <= 0) continue;
       const double F = (fit.delta_rss / fit.identifiable) / ((rss - fit.delta_rss) / dof);
@@ -403,8 +578,14 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
   res.alpha_per_candidate = opts.alpha / static_cast<double>(library.size());
   res.alpha_residual = opts.residual.alpha;
 
+  const ShiftedBase sb(cfg);
+  EffectContext raw;  // the readings and times; solve_model fits the rest
+  raw.cfg = cfg;
+  raw.m_um = m_um;
+  raw.t_s = t_s;
   Model M;
-  Solved cur = solve_model(cfg, M, ls_context(cfg, m_um, m_um, t_s, opts.solve), opts);
+  Solved cur = solve_model(sb, M, raw, opts);
+  const EffectContext base_ctx = cur.ctx;  // the base model fitted to the raw readings
   res.before = separate_four_sensor(cfg, m_um, opts.solve);
   FourSensorResult current_sep = res.before;
   auto analyse = [&](const Solved& s) {
@@ -481,7 +662,22 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
       const std::vector<Eigen::VectorXd> p_saved = M.p;  // the joint re-solve moves them all
       M.effects.push_back(best->variant);
       M.p.push_back(best->p0);
-      Solved next = solve_model(cfg, M, cur.ctx, opts);
+      Solved next = solve_model(sb, M, cur.ctx, opts);
+      if (M.effects.size() >= 2) {
+        // A second start for the joint re-solve: every effect from zero, linearised at the base
+        // model of the raw readings.  An effect added alone may have absorbed the signature of
+        // one still missing (PE1 fitted alone to PE1 plus a periodic positioning error: dD4 of
+        // 8 mm instead of 0.6); continuing from there can end in a local minimum of the joint
+        // problem that the joint linearisation at zero does not share.  The better end counts.
+        Model M0 = M;
+        for (auto& p : M0.p)
+          p.setZero();
+        Solved alt = solve_model(sb, M0, base_ctx, opts);
+        if (alt.rss < next.rss) {
+          M = std::move(M0);
+          next = std::move(alt);
+        }
+      }
       if (!(next.rss < cur.rss)) {
         // The linearised score promised a reduction the non-linear re-solve did not deliver.
         M.effects.pop_back();
@@ -498,15 +694,26 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
         // The added effect's block of the joint linearisation.
         const Eigen::Index k = st.parameters.size(), c0 = M.total() - k;
         st.covariance = cur.s2 * cur.last.cov_unit.block(c0, c0, k, k);
-        // The determined combinations of this effect's parameters: the part of the joint
-        // directions' basis in its block, orthonormalised.
-        const Eigen::MatrixXd Wb = cur.last.directions.middleRows(c0, k);
-        Eigen::JacobiSVD<Eigen::MatrixXd> ws(Wb, Eigen::ComputeThinU);
-        int kid = 0;
-        for (Eigen::Index j = 0; j < ws.singularValues().size(); ++j)
-          if (ws.singularValues()(j) > 1e-8) ++kid;
-        st.identifiable_directions = ws.matrixU().leftCols(kid);
-        st.identifiable = kid;
+        // The combinations ℓᵀp of this effect's parameters alone that the data determine: ℓ
+        // (zero outside the block) in the span of the joint determined combinations, i.e.
+        // orthogonal to the block rows of their complement.
+        const Eigen::MatrixXd& Dj = cur.last.determined;
+        const Eigen::Index K = M.total(), kept = Dj.cols();
+        Eigen::MatrixXd comp = Eigen::MatrixXd::Identity(K, K);
+        if (kept > 0) {
+          Eigen::HouseholderQR<Eigen::MatrixXd> dq(Dj);
+          comp = Eigen::MatrixXd(dq.householderQ()).rightCols(K - kept);
+        }
+        if (comp.cols() == 0) {
+          st.identifiable_directions = Eigen::MatrixXd::Identity(k, k);
+        } else {
+          Eigen::JacobiSVD<Eigen::MatrixXd> cs(comp.middleRows(c0, k), Eigen::ComputeFullU);
+          Eigen::Index rank_c = 0;
+          for (Eigen::Index j = 0; j < cs.singularValues().size(); ++j)
+            if (cs.singularValues()(j) > 1e-8) ++rank_c;
+          st.identifiable_directions = cs.matrixU().rightCols(k - rank_c);
+        }
+        st.identifiable = static_cast<int>(st.identifiable_directions.cols());
       }
       st.rss_after_um2 = cur.rss;
       st.rms_after_um = std::sqrt(cur.rss / (4.0 * P));

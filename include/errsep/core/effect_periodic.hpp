@@ -17,6 +17,7 @@ class PeriodicEffect final : public ModelEffect {
   std::vector<std::string> parameter_names() const override { return {"a_cos_um", "b_sin_um"}; }
   Eigen::MatrixXd correction_um(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
   Eigen::MatrixXd jacobian(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
+  Eigen::MatrixXd f_shift_mm(const Eigen::VectorXd& p, const FourSensorConfig& cfg) const override;
   std::vector<std::unique_ptr<ModelEffect>> variants(const EffectContext& ctx) const override;
   double effective_trials(const EffectContext& ctx) const override;
   std::string implausibility(const Eigen::VectorXd& p, const EffectContext& ctx) const override;

@@ -21,6 +21,8 @@ class SensorOffsetEffect final : public ModelEffect {
   }
   Eigen::MatrixXd correction_um(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
   Eigen::MatrixXd jacobian(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
+  /// δO_i for every position of configuration i.
+  Eigen::MatrixXd f_shift_mm(const Eigen::VectorXd& p, const FourSensorConfig& cfg) const override;
   std::string implausibility(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
   std::unique_ptr<ModelEffect> clone() const override;
 };

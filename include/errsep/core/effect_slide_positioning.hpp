@@ -16,6 +16,9 @@ namespace errsep::core {
 /// Columns of J for δx = Σ_k p_k·φ_k(x_n) (φ: P × k, δx in µm), at the current δx (µm, P).
 Eigen::MatrixXd slide_positioning_jacobian(const Eigen::MatrixXd& phi, const EffectContext& ctx,
                                            const Eigen::VectorXd& dx_um);
+/// The shift of f's sampling point for δx(x_n) given per position (µm): δx/1000 in all four
+/// columns (ModelEffect::f_shift_mm).
+Eigen::MatrixXd slide_positioning_f_shift_mm(const Eigen::VectorXd& dx_um);
 /// The correction for δx(x_n) given per position (µm).
 Eigen::MatrixXd slide_positioning_correction_um(const Eigen::VectorXd& dx_um,
                                                 const EffectContext& ctx);
@@ -36,6 +39,7 @@ class SlidePositioningEffect final : public ModelEffect {
   std::vector<std::string> parameter_names() const override;
   Eigen::MatrixXd correction_um(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
   Eigen::MatrixXd jacobian(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
+  Eigen::MatrixXd f_shift_mm(const Eigen::VectorXd& p, const FourSensorConfig& cfg) const override;
   std::string implausibility(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
   std::unique_ptr<ModelEffect> clone() const override;
   /// φ_k(x_n), P × degree: Legendre P_k(2x/L − 1), k = 1..degree.

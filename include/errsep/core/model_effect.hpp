@@ -70,6 +70,14 @@ class ModelEffect {
                                         const EffectContext& ctx) const = 0;
   /// J = −∂m_c/∂p, 4P × k, row 4n + i (reading of configuration i at x_n).
   virtual Eigen::MatrixXd jacobian(const Eigen::VectorXd& p, const EffectContext& ctx) const = 0;
+  /// For an effect that moves the point where the sensor samples the reference surface (PE1,
+  /// PE2, the periodic positioning error): that shift, P × 4 mm, reading (n, i) seeing f at
+  /// x_n + O_i + shift(n, i).  correction_um must then contain f̂(y + shift) − f̂(y) (y =
+  /// x_n + O_i) plus whatever else the effect does.  The refinement fits f at the shifted points
+  /// exactly (variable projection: the design of Eq. (1) with interpolation weights at the
+  /// shifted points) instead of trusting f̂ from the previous fit, which diverges for shifts of a
+  /// few mm on a wavy f.  Empty (the default): the effect does not move the sampling point.
+  virtual Eigen::MatrixXd f_shift_mm(const Eigen::VectorXd& p, const FourSensorConfig& cfg) const;
   /// Versions of this effect to score (an effect with a structural choice such as a period
   /// returns one per choice).  Default: a copy of itself.
   virtual std::vector<std::unique_ptr<ModelEffect>> variants(const EffectContext& ctx) const;

@@ -4,12 +4,15 @@
 // the most significant one, re-solve, and stop when nothing is significant.
 //
 // Fitting.  Inside the loop the base model is the ordinary least-squares fit (λ = 0, whitened
-// rows: the BLUE for white sensor noise), because only an unregularised fit has a residual whose
-// distribution is known.  Effects enter as corrections of the readings (model_effect.hpp); their
-// parameters p are found by Gauss–Newton with f, S, γ, e eliminated (variable projection): each
-// iteration corrects the readings with the current p, re-solves the base model, linearises the
-// effects at the new f̂, Ŝ, γ̂, and takes the least-squares step of the projected residual on the
-// projected Jacobian.
+// rows: the BLUE for white sensor noise, gauge f(x_0) = f(x_{N−1}) = 0, f ⟂ bow), because only an
+// unregularised fit has a residual whose distribution is known.  Effects enter as corrections of
+// the readings (model_effect.hpp); PE1, PE2 and the periodic error move the point where f is
+// sampled, and for them the fit samples f there through its cubic spline (exact, linear in f).
+// Their parameters p are found by Gauss–Newton with f, S, γ, e eliminated (variable projection):
+// the residual of that exact fit is the objective, the effects' Jacobians at its f̂, Ŝ, γ̂ give
+// the step, and a step is taken only if it lowers the residual.  When an effect joins others,
+// the joint re-solve also starts from zero for all of them and keeps the better end (an effect
+// added alone may have absorbed the signature of one still missing).
 //
 // Scoring.  A candidate's columns are projected onto the complement of everything the model
 // already has (base unknowns and the effects added so far); directions that vanish there are not
@@ -22,7 +25,8 @@
 //
 // Reporting.  Every step carries the effect, its parameters with standard uncertainties (k = 1,
 // from σ̂ of the augmented model; for a parameter set with non-identifiable directions the
-// minimum-norm estimate, i.e. the identifiable part), the residual RMS before and after, the
+// estimate with no component along them, i.e. in the span of the combinations the data
+// determine, and the covariance of that estimate), the residual RMS before and after, the
 // whiteness of the residual after it, and, when the truth is known, the error of S, γ and f
 // before and after (separations with the caller's solver options on raw and corrected readings).
 #include <Eigen/Core>
@@ -88,11 +92,15 @@ struct RefineStep {
   std::vector<std::string> parameter_names;
   Eigen::VectorXd parameters, u_parameters;  ///< of the added effect, after the joint re-solve
   int identifiable = 0;  ///< directions determined (structurally and above direction_threshold)
-  /// k × identifiable orthonormal parameter directions the data determine (the estimate lies in
-  /// their span), and the relative singular values of the projected columns when scored.
+  /// k × identifiable, orthonormal in parameter units: the combinations wᵀp of this effect's
+  /// parameters the data determine in the joint model (wᵀp̂ estimates wᵀp whatever the part of
+  /// the truth no scan can see; with all directions identifiable, the identity).  Also the
+  /// relative singular values of the projected columns when scored.
   Eigen::MatrixXd identifiable_directions;
   Eigen::VectorXd relative_sv;
-  /// Covariance of the added effect's parameters (µ², k × k), rank `identifiable`.
+  /// Covariance of the added effect's estimate p̂ (parameter units², k × k, from σ̂ and the final
+  /// linearisation): u(wᵀp̂) = sqrt(wᵀ·covariance·w) for every w above; u_parameters is its
+  /// diagonal.
   Eigen::MatrixXd covariance;
   double F = 0, p_value = 1;
   double rss_before_um2 = 0, rss_after_um2 = 0;
