@@ -38,7 +38,7 @@ int main(int argc, char** argv) {
   int keep_scans = 0;
   double max_age_days = 0;
   double schedule_s = 0;
-  int check_ms = 500, stop_timeout_ms = 5000, gpio_debounce_ms = 20;
+  int check_ms = 500, stop_timeout_ms = 5000, gpio_debounce_ms = 20, checkpoint_ms = 1000;
   double min_free_mb = 1.0;
   bool no_separate = false, no_register_map = false;
   app.add_option("-c,--config", config_path, "machine config (TOML); re-read on SIGHUP")
@@ -71,6 +71,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--stop-timeout-ms", stop_timeout_ms, "SIGTERM: exit within this bound")
       ->capture_default_str();
+  app.add_option("--checkpoint-ms", checkpoint_ms,
+                 "during a scan, write the raw data measured so far (raw-incomplete) this often")
+      ->capture_default_str()
+      ->check(CLI::Range(50, 600000));
   app.add_option("--min-free-mb", min_free_mb, "refuse to write with less free disk space")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
@@ -91,6 +95,7 @@ int main(int argc, char** argv) {
     opts.check_interval = std::chrono::milliseconds(check_ms);
     opts.gpio_debounce = std::chrono::milliseconds(gpio_debounce_ms);
     opts.stop_timeout = std::chrono::milliseconds(stop_timeout_ms);
+    opts.checkpoint_interval = std::chrono::milliseconds(checkpoint_ms);
     opts.separate = !no_separate;
 
     // Reads the file again on every call: SIGHUP picks up an edited config.

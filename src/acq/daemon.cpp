@@ -171,6 +171,9 @@ bool DaemonOptions::is_valid(std::string* why) const {
   if (gpio_debounce.count() < 0 || gpio_debounce.count() > 10000)
     return bad("gpio_debounce = " + std::to_string(gpio_debounce.count()) +
                " ms: must be in [0, 10000]");
+  if (checkpoint_interval.count() < 50 || checkpoint_interval.count() > 600000)
+    return bad("checkpoint_interval = " + std::to_string(checkpoint_interval.count()) +
+               " ms: must be in [50, 600000]");
   return true;
 }
 
@@ -412,6 +415,10 @@ void Daemon::start_scan(TriggerSource src) {
   scan_start_ = std::chrono::system_clock::now();
   scan_source_ = src;
   scan_stem_ = io::ResultsStore::stem(scan_start_, id);
+  next_checkpoint_ = std::chrono::steady_clock::now() + opts_.checkpoint_interval;
+  checkpoint_points_ = 0;
+  checkpoint_on_disk_ = false;
+  checkpoint_error_logged_ = false;
   abort_.store(false);
   scan_done_.store(false);
   {
@@ -438,20 +445,65 @@ void Daemon::start_scan(TriggerSource src) {
   });
 }
 
+std::vector<std::pair<std::string, std::string>> Daemon::scan_metadata(
+    const std::string& outcome, const std::string& reason) const {
+  std::vector<std::pair<std::string, std::string>> meta = {
+      {"scan_id", std::to_string(ctx_->scan_id())},
+      {"trigger", to_string(scan_source_)},
+      {"started_utc", utc_iso(scan_start_)}};
+  if (outcome == "in_progress")
+    meta.emplace_back("checkpoint_utc", utc_iso(std::chrono::system_clock::now()));
+  else
+    meta.emplace_back("ended_utc", utc_iso(std::chrono::system_clock::now()));
+  meta.emplace_back("outcome", outcome);
+  if (!reason.empty()) meta.emplace_back("outcome_reason", reason);
+  return meta;
+}
+
+void Daemon::write_checkpoint() {
+  using clock = std::chrono::steady_clock;
+  const auto t0 = clock::now();
+  next_checkpoint_ = t0 + opts_.checkpoint_interval;
+  // The copy is taken under the context's mutex, which the scan worker holds only to store one
+  // point: the sampling threads never see it.
+  io::RawFourSensorScan raw = ctx_->snapshot();
+  std::size_t measured = 0;
+  for (const auto& col : raw.m_um)
+    for (double v : col)
+      measured += std::isfinite(v) ? 1 : 0;
+  if (raw.x_mm.empty() || measured == 0 || measured == checkpoint_points_) return;
+  raw.complete = false;
+  auto meta = scan_metadata("in_progress",
+                            "checkpoint of a running scan: if this file is still here and named "
+                            "raw-incomplete, the daemon stopped before the scan ended");
+  meta.emplace_back("points_measured",
+                    std::to_string(measured) + "/" + std::to_string(ctx_->points_total()));
+  raw.metadata.insert(raw.metadata.begin(), meta.begin(), meta.end());
+  try {
+    store_.write(scan_stem_, "raw-incomplete", io::format_csv(io::to_csv_table(raw), 12));
+    checkpoint_points_ = static_cast<std::uint32_t>(measured);
+    checkpoint_on_disk_ = true;
+  } catch (const std::exception& e) {
+    // Measuring goes on: the space may come back before the scan ends.  Reported once a scan.
+    if (!checkpoint_error_logged_)
+      log(kErr, "scan " + std::to_string(ctx_->scan_id()) +
+                    ": checkpoint not written: " + e.what() + " (the scan goes on)");
+    checkpoint_error_logged_ = true;
+  }
+  // Never spend more than ~10 % of the main loop on checkpoints (long scans, slow disks).
+  const auto cost = clock::now() - t0;
+  next_checkpoint_ = std::max(next_checkpoint_, clock::now() + 10 * cost);
+}
+
 void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd& end) {
   io::RawFourSensorScan raw = raw_in;
   raw.complete = end.outcome == ScanOutcome::complete;
   const std::uint64_t id = ctx_->scan_id();
-  std::vector<std::pair<std::string, std::string>> meta = {
-      {"scan_id", std::to_string(id)},
-      {"trigger", to_string(scan_source_)},
-      {"started_utc", utc_iso(scan_start_)},
-      {"ended_utc", utc_iso(std::chrono::system_clock::now())},
-      {"outcome", to_string(end.outcome)}};
-  if (!end.message.empty()) meta.emplace_back("outcome_reason", end.message);
+  auto meta = scan_metadata(to_string(end.outcome), end.message);
   meta.emplace_back("points_measured", std::to_string(ctx_->points_done()) + "/" +
                                            std::to_string(ctx_->points_total()));
   raw.metadata.insert(raw.metadata.begin(), meta.begin(), meta.end());
+  last_write_error_.clear();
 
   ScanOutcome outcome = end.outcome;
   std::string last_file;
@@ -462,6 +514,16 @@ void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd
     last_file = store_.write(scan_stem_, kind, io::format_csv(io::to_csv_table(raw), 12)).string();
     log(raw.complete ? kInfo : kWarning,
         "scan " + std::to_string(id) + " " + to_string(end.outcome) + ": wrote " + last_file);
+    // The complete raw file supersedes the checkpoint (an incomplete one replaced it already).
+    if (raw.complete && checkpoint_on_disk_) {
+      try {
+        store_.remove(scan_stem_, "raw-incomplete");
+      } catch (const std::exception& e) {
+        log(kWarning, "scan " + std::to_string(id) + ": " + e.what() +
+                          " (removed at the next start: the raw file supersedes it)");
+      }
+    }
+    checkpoint_on_disk_ = false;
     if (raw.complete && opts_.separate && raw.geometry) {
       try {
         Eigen::MatrixXd m(static_cast<Eigen::Index>(raw.positions()), 4);
@@ -522,11 +584,18 @@ void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd
     }
   } catch (const io::DiskFullError& e) {
     outcome = ScanOutcome::write_failed;
-    log(kErr, std::string("scan ") + std::to_string(id) + ": " + e.what());
+    last_write_error_ = "disk full";
+    log(kErr, std::string("scan ") + std::to_string(id) +
+                  ": disk full, results not written: " + e.what());
   } catch (const std::exception& e) {
     outcome = ScanOutcome::write_failed;
+    last_write_error_ = e.what();
     log(kErr, std::string("scan ") + std::to_string(id) + ": results not written: " + e.what());
   }
+  if (outcome == ScanOutcome::write_failed && checkpoint_on_disk_)
+    log(kWarning, "scan " + std::to_string(id) + ": its last checkpoint (" +
+                      std::to_string(checkpoint_points_) + " points) stays on disk as " +
+                      store_.path(scan_stem_, "raw-incomplete").string());
   std::lock_guard<std::mutex> lock(mu_);
   status_.last_scan_id = id;
   status_.last_outcome = outcome;
@@ -563,6 +632,7 @@ void Daemon::finish_scan(bool stopping) {
   else
     set_state(DaemonState::idle,
               "last scan " + std::to_string(id) + " " + to_string(st.last_outcome) +
+                  (last_write_error_.empty() ? std::string() : " (" + last_write_error_ + ")") +
                   (std::isnan(st.last_straightness_um)
                        ? std::string()
                        : ", straightness " + fmt(st.last_straightness_um) + " um"));
@@ -603,6 +673,10 @@ int Daemon::run() {
   if (stale > 0)
     log(kWarning, "removed " + std::to_string(stale) +
                       " temporary files left by an interrupted write in " + store_.dir().string());
+  const int superseded = store_.remove_superseded();
+  if (superseded > 0)
+    log(kWarning, "removed " + std::to_string(superseded) +
+                      " checkpoints whose complete raw file was written before the daemon stopped");
   next_scan_id_ = store_.next_scan_id();
   log(kInfo, "results in " + store_.dir().string() + ", next scan id " +
                  std::to_string(next_scan_id_) +
@@ -626,7 +700,16 @@ int Daemon::run() {
       finish_scan(false);
       next_check = now + interval;
     }
-    if (reload_.load() && !worker_.joinable()) do_reload();
+    if (reload_.load() && !worker_.joinable()) {
+      reload_deferred_logged_ = false;
+      do_reload();
+    } else if (reload_.load() && !reload_deferred_logged_) {
+      reload_deferred_logged_ = true;
+      const std::string m = "SIGHUP: reload deferred until scan " +
+                            std::to_string(ctx_ ? ctx_->scan_id() : 0) + " ends (not dropped)";
+      log(kInfo, m);
+      notify_.status("scanning: " + m);
+    }
 
     // Schedule tick: an ordinary trigger, so while a scan runs (or in fault) it is refused with
     // its reason and skipped; ticks missed meanwhile are not made up (no back-to-back scans).
@@ -655,12 +738,18 @@ int Daemon::run() {
         if (ok) {
           set_state(DaemonState::idle,
                     st == DaemonState::starting ? "devices answer, ready" : "devices answer again");
-          if (!ready_sent_) {
-            notify_.ready();
-            ready_sent_ = true;
-          }
           pending_.store(false);
           fails = 0;
+        }
+        // Up and reporting, whether the devices answer or not (see the header): a machine
+        // powered off at boot is a fault the service reports and leaves, not a start timeout.
+        if (!ready_sent_) {
+          notify_.ready();
+          ready_sent_ = true;
+          if (!ok)
+            log(kWarning,
+                "ready, in fault until the devices answer (register map and STATUS= "
+                "report it)");
         }
       }
     } else if (st == DaemonState::idle) {
@@ -681,18 +770,21 @@ int Daemon::run() {
           fails = 0;
         }
       }
-    } else if (st == DaemonState::scanning && now >= next_status) {
-      next_status = now + std::chrono::seconds(1);
-      const DaemonStatus s = status();
-      notify_.status("scanning: scan " + std::to_string(s.scan_id) + ", " +
-                     std::to_string(s.points_done) + "/" + std::to_string(s.points_total) +
-                     " points");
+    } else if (st == DaemonState::scanning) {
+      if (now >= next_status) {
+        next_status = now + std::chrono::seconds(1);
+        const DaemonStatus s = status();
+        notify_.status("scanning: scan " + std::to_string(s.scan_id) + ", " +
+                       std::to_string(s.points_done) + "/" + std::to_string(s.points_total) +
+                       " points");
+      }
+      if (worker_.joinable() && !scan_done_.load() && now >= next_checkpoint_) write_checkpoint();
     }
 
     // Sleep until woken (signal, trigger, end of scan) or the next periodic duty.
     auto until = next_check;
     if (sched.count() > 0) until = std::min(until, next_schedule);
-    if (worker_.joinable()) until = std::min(until, next_status);
+    if (worker_.joinable()) until = std::min({until, next_status, next_checkpoint_});
     auto wait = std::chrono::duration_cast<std::chrono::milliseconds>(until - clock::now());
     const auto wd = notify_.watchdog_interval();
     if (wd.count() > 0)

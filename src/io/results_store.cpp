@@ -1,5 +1,6 @@
 #include "errsep/io/results_store.hpp"
 
+#include <fcntl.h>
 #include <sys/statvfs.h>
 #include <unistd.h>
 
@@ -92,6 +93,21 @@ fs::path ResultsStore::write(std::string_view stem_, std::string_view kind,
   return p;
 }
 
+bool ResultsStore::remove(std::string_view stem_, std::string_view kind) {
+  const fs::path p = path(stem_, kind);
+  if (::unlink(p.c_str()) != 0) {
+    if (errno == ENOENT) return false;
+    throw std::runtime_error("cannot remove '" + p.string() + "': " + std::strerror(errno));
+  }
+  // The removal is durable only once the directory is on disk (as for the rename of a write).
+  const int dfd = ::open(opts_.dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dfd >= 0) {
+    ::fsync(dfd);
+    ::close(dfd);
+  }
+  return true;
+}
+
 std::optional<StoredFile> parse_store_name(const fs::path& file) {
   const std::string name = file.filename().string();
   // <8 digits>T<6 digits>Z_scan<digits>.<kind>.csv
@@ -150,6 +166,17 @@ int ResultsStore::clean_stale_temporaries() {
       if (fs::remove(e.path(), ec)) ++n;
     }
   }
+  return n;
+}
+
+int ResultsStore::remove_superseded() {
+  std::set<std::string> complete;
+  const std::vector<StoredFile> files = list();
+  for (const auto& f : files)
+    if (f.kind == "raw") complete.insert(f.stem);
+  int n = 0;
+  for (const auto& f : files)
+    if (f.kind == "raw-incomplete" && complete.count(f.stem) && remove(f.stem, f.kind)) ++n;
   return n;
 }
 

@@ -1,14 +1,32 @@
-// SIGKILL at random points of many scans (moving, averaging, writing): every result file present
-// afterwards parses completely -- whole or absent, never truncated -- and a restarted daemon
-// removes the temporary files a killed writer left and does not reuse a scan id on disk.
+// SIGKILL of errsep-daemon, against the device simulator:
+//  - many lives, each killed at a point aimed in turn at: the end of its scan as the register
+//    map shows it (every point measured, then 0-50 ms), the end-of-scan writes as inotify shows
+//    them (the raw file's temporary created, then 0-3 ms: inside the raw file's write and
+//    rename, the checkpoint's removal, the separation, the result's write and rename), a
+//    checkpoint's write (its temporary created, then 0-3 ms), a random time of the scan.  After
+//    every kill each store file present is whole: a raw file complete with one row per
+//    position, a checkpoint marked incomplete with as many readings as it says, a result with
+//    one row per position of its raw file, every file ending with its newline -- never
+//    truncated or half-written.  The checks are shown to refuse every truncation of such files,
+//    and the kills to land in the end-of-scan writes.  A restarted daemon removes the
+//    temporaries a killed writer left and the checkpoints a complete raw file superseded, and
+//    does not reuse a scan id on disk;
+//  - mid-scan: the checkpoint written while the scan ran is on disk, parses, and is marked
+//    incomplete (outcome in_progress) with the points measured up to it.
+#include <poll.h>
 #include <signal.h>
+#include <sys/inotify.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <random>
 #include <set>
+#include <stdexcept>
 #include <thread>
 
 #include "errsep/io/csv.hpp"
@@ -18,85 +36,391 @@
 
 using namespace errsep;
 using namespace std::chrono_literals;
+using clk = std::chrono::steady_clock;
 using test::DaemonRig;
 
-TEST_CASE("SIGKILL at random points of many scans leaves only whole result files") {
+namespace {
+
+bool is_temporary(const std::string& name) {
+  return name.size() > 1 && name[0] == '.' && name.find(".tmp.") != std::string::npos;
+}
+
+/// Checks every file of the store ("" = all whole); counts them by kind.
+std::string check_store(const std::filesystem::path& dir, std::map<std::string, int>& kinds) {
+  kinds.clear();
+  std::map<std::uint64_t, std::map<std::string, std::filesystem::path>> scans;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    const std::string name = e.path().filename().string();
+    if (is_temporary(name)) {
+      ++kinds["temporary"];  // a killed writer's temporary file: not a result, removed at start
+      continue;
+    }
+    const auto f = io::parse_store_name(e.path());
+    if (!f) return name + ": not a store file";
+    scans[f->scan_id][f->kind] = e.path();
+    ++kinds[f->kind];
+  }
+  for (const auto& [id, files] : scans) {
+    io::RawFourSensorScan raw;
+    bool have_raw = false;
+    for (const auto& [kind, path] : files) {
+      std::string why;
+      if (kind == "raw") {
+        why = test::check_raw_file(path, &raw);
+        have_raw = why.empty();
+      } else if (kind == "raw-incomplete") {
+        io::RawFourSensorScan cp;
+        why = test::check_checkpoint_file(path, &cp);
+        // No clean stop happened: every incomplete file is a checkpoint of a running scan.
+        if (why.empty() && cp.meta("outcome") != std::optional<std::string>("in_progress"))
+          why = "outcome " + cp.meta("outcome").value_or("(none)") + ", not in_progress";
+      } else if (kind != "result") {
+        why = "unexpected kind '" + kind + "' (no clean stop happened)";
+      }
+      if (!why.empty()) return path.filename().string() + ": " + why;
+    }
+    if (const auto r = files.find("result"); r != files.end()) {
+      // A result is written after its raw file.
+      if (!have_raw) return r->second.filename().string() + ": no complete raw file beside it";
+      const std::string why = test::check_result_file(r->second, raw);
+      if (!why.empty()) return r->second.filename().string() + ": " + why;
+    }
+  }
+  return {};
+}
+
+/// Where a kill landed, from the files of its scan.
+std::string landed(const std::filesystem::path& dir, std::uint64_t id) {
+  std::set<std::string> kinds;
+  std::string temporary;  // kind of the file whose write was cut
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    const std::string name = e.path().filename().string();
+    if (is_temporary(name)) {
+      const auto f = io::parse_store_name(name.substr(1, name.find(".tmp.") - 1));
+      if (f && f->scan_id == id) temporary = f->kind;
+      continue;
+    }
+    const auto f = io::parse_store_name(e.path());
+    if (f && f->scan_id == id) kinds.insert(f->kind);
+  }
+  if (temporary == "raw-incomplete") return "inside a checkpoint's write (temporary left)";
+  if (!temporary.empty()) return "inside the " + temporary + " file's write (temporary left)";
+  if (kinds.count("result")) return "after the result file";
+  if (kinds.count("raw") && kinds.count("raw-incomplete"))
+    return "between the raw file and the checkpoint's removal";
+  if (kinds.count("raw")) return "between the raw and the result file";
+  if (kinds.count("raw-incomplete")) return "before the raw file (checkpoint on disk)";
+  return "before the first checkpoint";
+}
+
+/// inotify on the results directory: the moment the daemon creates a file.
+class DirWatch {
+ public:
+  explicit DirWatch(const std::filesystem::path& dir)
+      : fd_(::inotify_init1(IN_CLOEXEC | IN_NONBLOCK)) {
+    if (fd_ < 0 || ::inotify_add_watch(fd_, dir.c_str(), IN_CREATE) < 0)
+      throw std::runtime_error("inotify on " + dir.string() + " failed");
+  }
+  ~DirWatch() { ::close(fd_); }
+  DirWatch(const DirWatch&) = delete;
+  DirWatch& operator=(const DirWatch&) = delete;
+  /// Waits for the n-th file created whose name contains `needle` (or the first containing
+  /// `or_needle`, when given); false at the timeout.
+  bool wait_create(const std::string& needle, int n, std::chrono::milliseconds timeout,
+                   const std::string& or_needle = {}) {
+    const auto until = clk::now() + timeout;
+    int seen = 0;
+    alignas(inotify_event) char buf[8192];
+    while (clk::now() < until) {
+      pollfd pfd{fd_, POLLIN, 0};
+      if (::poll(&pfd, 1, 100) <= 0) continue;
+      const ssize_t len = ::read(fd_, buf, sizeof buf);
+      for (ssize_t off = 0; off < len;) {
+        const auto* ev = reinterpret_cast<const inotify_event*>(buf + off);
+        off += static_cast<ssize_t>(sizeof(inotify_event) + ev->len);
+        const std::string name = ev->len > 0 ? ev->name : "";
+        if (name.find(needle) != std::string::npos && ++seen == n) return true;
+        if (!or_needle.empty() && name.find(or_needle) != std::string::npos) return true;
+      }
+    }
+    return false;
+  }
+
+ private:
+  int fd_;
+};
+
+/// Truncations of `file` that `check` accepts (0 expected): cut at every line boundary and one
+/// byte either side of it, at every byte of the last line, and at every 7th byte elsewhere.
+template <class Check>
+int truncations_accepted(const std::filesystem::path& file, const std::filesystem::path& scratch,
+                         Check check, int* tried) {
+  std::ifstream in(file, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::filesystem::create_directories(scratch);
+  const auto cut = scratch / file.filename();
+  const std::size_t last_line = bytes.size() < 2 ? 0 : bytes.rfind('\n', bytes.size() - 2);
+  int accepted = 0;
+  for (std::size_t k = 0; k < bytes.size(); ++k) {
+    const bool boundary = (k > 0 && bytes[k - 1] == '\n') || bytes[k] == '\n' ||
+                          (k + 1 < bytes.size() && bytes[k + 1] == '\n');
+    if (!boundary && k < last_line && k % 7 != 0) continue;
+    ++*tried;
+    { std::ofstream(cut, std::ios::binary | std::ios::trunc) << bytes.substr(0, k); }
+    if (check(cut).empty()) {
+      ++accepted;
+      UNSCOPED_INFO(file.filename().string()
+                    << " cut at " << k << " of " << bytes.size() << " bytes passes the check");
+    }
+  }
+  return accepted;
+}
+
+}  // namespace
+
+TEST_CASE("SIGKILL at the end of scans and mid-scan leaves only whole files") {
   DaemonRig rig;
+  // The same machine made quick (stages 10x faster, no settle time, K = 2): more scans, so more
+  // kills, in the time budget.  The files are written exactly as with the slow machine.
+  {
+    std::ifstream in(rig.config);
+    std::string cfg((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    for (const auto& [from, to] : std::vector<std::pair<std::string, std::string>>{
+             {"speed_mm_s = 400.0", "speed_mm_s = 4000.0"},
+             {"\naverages = 5", "\naverages = 2"},
+             {"\nsettle_ms = 2", "\nsettle_ms = 0"}}) {
+      for (auto p = cfg.find(from); p != std::string::npos; p = cfg.find(from, p + to.size()))
+        cfg.replace(p, from.size(), to);
+    }
+    rig.config = rig.tmp / "machine-fast.toml";
+    std::ofstream(rig.config) << cfg;
+  }
   rig.devsim.start(rig.config, rig.tmp / "devsim.log");
-  const unsigned seed = 20261123;
+  const unsigned seed = 20261124;
   std::mt19937 rng(seed);
-  std::uniform_int_distribution<int> delay_ms(0, 2500);
-  const int kills = 10;
-  for (int k = 0; k < kills; ++k) {
-    rig.start_daemon();
+  std::uniform_int_distribution<int> end_delay_ms(0, 50), mid_delay_ms(0, 300);
+  std::uniform_int_distribution<int> write_delay_us(0, 3000), checkpoint_n(1, 4);
+  // Kinds of kill, in turn:
+  //  points:     the register map shows every point measured, then 0-50 ms (files being
+  //              written -- or, as often as not, already written: the end phase is ~2 ms);
+  //  write:      inotify shows the temporary of the raw file created, then 0-3 ms: inside the
+  //              raw file's write, its rename, the checkpoint's removal, the separation, the
+  //              result's write and rename;
+  //  checkpoint: inotify shows the n-th checkpoint's temporary created, then 0-3 ms;
+  //  random:     0-300 ms after the trigger (moving, averaging, checkpoints).
+  const char* kinds_of_kill[] = {"points", "write", "checkpoint", "write",
+                                 "points", "write", "random",     "write"};
+  constexpr int kMinKills = 8, kMaxKills = 60;
+  const auto budget = 10s;
+  std::map<std::string, std::map<std::string, int>> where;  // kind of kill -> where it landed
+  int end_window = 0;  // end-aimed kills that landed before the result file was on disk
+  int cut_writes = 0;  // kills between a file's creation and its rename (temporary left)
+  const auto t_start = clk::now();
+  int k = 0;
+  for (; k < kMaxKills && (k < kMinKills || clk::now() - t_start < budget); ++k) {
+    // Checkpoints every 50 ms, so that kills meet checkpoint writes too.
+    rig.start_daemon({"--checkpoint-ms", "50"});
     REQUIRE(rig.notify->wait_for("READY=1", 15s));
+    // The daemon continues after the highest scan id on disk: this life's scan.
+    const std::uint64_t id = io::ResultsStore({rig.results, 0, {}}).next_scan_id();
+    const std::string kind = kinds_of_kill[k % 8];
+    DirWatch watch(rig.results);
     REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1) == 0);
-    if (k == kills - 1) {
-      // The last life: kill right after a scan completed, so at least one is on disk.
-      const auto r = rig.wait_regs(
-          [](const std::vector<long>& x) { return x[test::reg_scans_completed] >= 1; }, 20s);
+    long delay = 0;  // us
+    if (kind == "points") {
+      // As fast as mbpoll answers (~20 ms a read): every point measured, files being written.
+      const auto until = clk::now() + 20s;
+      std::vector<long> r;
+      while (clk::now() < until) {
+        r = rig.registers();
+        if (r.size() == test::kRegisterCount &&
+            ((r[test::reg_state] == 2 && r[test::reg_points_total] > 0 &&
+              r[test::reg_points_done] == r[test::reg_points_total]) ||
+             (r[test::reg_state] == 1 &&
+              static_cast<std::uint64_t>(r[test::reg_last_scan_id]) == (id & 0xFFFF))))
+          break;
+      }
       REQUIRE(r.size() == test::kRegisterCount);
+      delay = 1000L * end_delay_ms(rng);
+    } else if (kind == "write") {
+      REQUIRE(watch.wait_create(".raw.csv.tmp.", 1, 20s));
+      delay = write_delay_us(rng);
+    } else if (kind == "checkpoint") {
+      // A quick scan may end before its n-th checkpoint: then the raw file's write is the aim.
+      REQUIRE(
+          watch.wait_create(".raw-incomplete.csv.tmp.", checkpoint_n(rng), 20s, ".raw.csv.tmp."));
+      delay = write_delay_us(rng);
     } else {
-      const int d = delay_ms(rng);
-      INFO("seed " << seed << ", kill " << k << " after " << d << " ms");
-      std::this_thread::sleep_for(std::chrono::milliseconds(d));
+      delay = 1000L * mid_delay_ms(rng);
+    }
+    const auto t_kill = clk::now() + std::chrono::microseconds(delay);
+    while (clk::now() < t_kill) {
+      // spin: sub-millisecond aim
     }
     rig.daemon->signal(SIGKILL);
     REQUIRE(rig.daemon->wait(5s));
     rig.daemon.reset();
+    const std::string w = landed(rig.results, id);
+    ++where[kind][w];
+    if ((kind == "points" || kind == "write") && w != "after the result file") ++end_window;
+    if (w.find("temporary left") != std::string::npos) ++cut_writes;
+    // Checked after every kill, before a restart cleans anything up.
+    std::map<std::string, int> kinds;
+    const std::string why = check_store(rig.results, kinds);
+    INFO("seed " << seed << ", kill " << k << " (" << kind << ", scan " << id << ", +" << delay
+                 << " us): " << w);
+    REQUIRE(why == "");
     // A fresh notify socket per life: messages of the killed daemon are not READY of the next.
     rig.notify = std::make_unique<test::NotifyListener>(rig.tmp / ("notify" + std::to_string(k)));
   }
+  const double wall_s = std::chrono::duration<double>(clk::now() - t_start).count();
 
-  // Every store file present parses completely.
-  int raws = 0, results = 0, temporaries = 0;
-  std::set<std::uint64_t> ids;
-  for (const auto& e : std::filesystem::directory_iterator(rig.results)) {
-    const std::string name = e.path().filename().string();
-    if (name.rfind('.', 0) == 0 && name.find(".tmp.") != std::string::npos) {
-      ++temporaries;  // a killed writer's temporary file: not a result, removed at restart
-      continue;
-    }
-    const auto f = io::parse_store_name(e.path());
-    INFO(name);
-    REQUIRE(f);
-    ids.insert(f->scan_id);
-    if (f->kind == "raw") {
-      const auto scan = io::read_raw_four_sensor_csv(e.path());  // complete, every cell a number
-      CHECK(scan.complete);
-      REQUIRE(scan.geometry);
-      CHECK(scan.positions() == static_cast<std::size_t>(scan.geometry->positions()));
-      ++raws;
-    } else if (f->kind == "result") {
-      const io::CsvTable t = io::read_csv(e.path());
-      CHECK(t.meta("straightness_minimum_zone_um"));
-      CHECK(t.meta("straightness_least_squares_um"));
-      CHECK(t.rows.size() == t.column("S_um").size());
-      CHECK(t.rows.size() > 1);
-      // A result is written after its raw file, so the raw file is there too.
-      CHECK(rig.find_file(f->scan_id, "raw"));
-      ++results;
-    } else {
-      FAIL("unexpected file kind '" << f->kind << "' after SIGKILL (no clean stop happened)");
-    }
+  std::map<std::string, int> kinds;
+  REQUIRE(check_store(rig.results, kinds) == "");
+  std::string summary;
+  for (const auto& [kind, n] : kinds)
+    summary += " " + std::to_string(n) + " " + kind + ",";
+  std::string hist;
+  for (const auto& [kind, h] : where) {
+    hist += "\n  " + kind + ":";
+    for (const auto& [w, n] : h)
+      hist += "\n    " + std::to_string(n) + " x " + w;
   }
-  WARN(kills << " SIGKILLs (seed " << seed << "): " << raws << " complete raw files, " << results
-             << " result files, " << temporaries << " temporaries left by killed writers");
-  CHECK(raws >= 1);
+  WARN(k << " SIGKILLs in " << wall_s << " s (seed " << seed << "); files:" << summary << "\n  "
+         << end_window
+         << " kills aimed at the end of a scan landed before its result file was on disk, "
+         << cut_writes << " between a file's creation and its rename" << hist);
+  // The aim works: kills do land while the files of a scan's end are written, and between
+  // writing a file and renaming it.
+  CHECK(end_window >= 1);
+  CHECK(cut_writes >= 1);
+  CHECK(kinds["raw"] >= 1);
+  CHECK(kinds["result"] >= 1);
+  CHECK(kinds["raw-incomplete"] >= 1);
 
-  // A restart removes the temporaries and continues the scan ids after those on disk.  One is
-  // planted, as a kill inside write_file_atomic leaves it (a kill rarely lands in that window).
+  // The checks refuse truncations of a result, a raw file and a checkpoint.
+  int tried = 0;
+  const auto cut_dir = rig.tmp / "cut";
+  for (const auto& f : io::ResultsStore({rig.results, 0, {}}).list()) {
+    if (f.kind != "result") continue;
+    const auto raw_path = rig.find_file(f.scan_id, "raw");
+    REQUIRE(raw_path);
+    io::RawFourSensorScan raw;
+    REQUIRE(test::check_raw_file(*raw_path, &raw) == "");
+    CHECK(truncations_accepted(
+              f.path, cut_dir,
+              [&](const std::filesystem::path& p) { return test::check_result_file(p, raw); },
+              &tried) == 0);
+    CHECK(truncations_accepted(
+              *raw_path, cut_dir,
+              [](const std::filesystem::path& p) { return test::check_raw_file(p); }, &tried) == 0);
+    break;
+  }
+  for (const auto& f : io::ResultsStore({rig.results, 0, {}}).list()) {
+    if (f.kind != "raw-incomplete") continue;
+    CHECK(truncations_accepted(
+              f.path, cut_dir,
+              [](const std::filesystem::path& p) { return test::check_checkpoint_file(p); },
+              &tried) == 0);
+    break;
+  }
+  WARN(tried << " truncations of a result, a raw file and a checkpoint: all refused");
+  CHECK(tried > 300);
+
+  // A restart removes the temporaries and superseded checkpoints and continues the scan ids
+  // after those on disk.  A temporary is planted, as a kill inside write_file_atomic leaves one.
+  std::set<std::uint64_t> ids;
+  for (const auto& f : io::ResultsStore({rig.results, 0, {}}).list())
+    ids.insert(f.scan_id);
+  REQUIRE_FALSE(ids.empty());
   const auto planted = rig.results / ".20261123T000000Z_scan000999.raw.csv.tmp.Ab12Cd";
   { std::ofstream(planted) << "# format: errsep raw four-sensor scan\n# complete: tr"; }
   rig.start_daemon();
   REQUIRE(rig.notify->wait_for("READY=1", 15s));
-  for (const auto& e : std::filesystem::directory_iterator(rig.results))
-    CHECK(e.path().filename().string().find(".tmp.") == std::string::npos);
+  std::set<std::string> raw_stems;
+  for (const auto& f : io::ResultsStore({rig.results, 0, {}}).list())
+    if (f.kind == "raw") raw_stems.insert(f.stem);
+  for (const auto& e : std::filesystem::directory_iterator(rig.results)) {
+    const std::string name = e.path().filename().string();
+    INFO(name);
+    CHECK_FALSE(is_temporary(name));
+    const auto f = io::parse_store_name(e.path());
+    if (f && f->kind == "raw-incomplete") CHECK(raw_stems.count(f->stem) == 0);
+  }
   CHECK_FALSE(std::filesystem::exists(planted));
   REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1) == 0);
-  const auto r =
-      rig.wait_regs([](const std::vector<long>& x) { return x[test::reg_state] == 2; }, 20s);
+  // The quick machine may finish the scan between two reads: its id is then the last scan id.
+  const auto r = rig.wait_regs(
+      [](const std::vector<long>& x) {
+        return x[test::reg_scan_id] > 0 || x[test::reg_last_scan_id] > 0;
+      },
+      20s);
   REQUIRE(r.size() == test::kRegisterCount);
-  CHECK(ids.count(static_cast<std::uint64_t>(r[test::reg_scan_id])) == 0);
-  CHECK(static_cast<std::uint64_t>(r[test::reg_scan_id]) > *ids.rbegin());
+  const auto new_id = static_cast<std::uint64_t>(
+      r[test::reg_scan_id] > 0 ? r[test::reg_scan_id] : r[test::reg_last_scan_id]);
+  CHECK(ids.count(new_id) == 0);
+  CHECK(new_id > *ids.rbegin());
+}
+
+TEST_CASE("SIGKILL mid-scan: the checkpoint is on disk, parses and is marked incomplete") {
+  DaemonRig rig;
+  rig.devsim.start(rig.config, rig.tmp / "devsim.log");
+  rig.start_daemon({"--checkpoint-ms", "200"});
+  REQUIRE(rig.notify->wait_for("READY=1", 15s));
+  REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1) == 0);
+  // Wait for a checkpoint with some points, while the scan is still far from its end.
+  std::optional<std::filesystem::path> cp;
+  auto r = rig.wait_regs(
+      [&](const std::vector<long>& x) {
+        cp = rig.find_file(1, "raw-incomplete");
+        return cp && x[test::reg_state] == 2 && x[test::reg_points_done] >= 8;
+      },
+      20s);
+  REQUIRE(cp);
+  REQUIRE(r[test::reg_state] == 2);
+  const auto total = static_cast<std::size_t>(r[test::reg_points_total]);
+  REQUIRE(static_cast<std::size_t>(r[test::reg_points_done]) < total);
+  rig.daemon->signal(SIGKILL);
+  REQUIRE(rig.daemon->wait(5s));
+  const auto done_at_kill = static_cast<std::size_t>(r[test::reg_points_done]);
+
+  CHECK_FALSE(rig.find_file(1, "raw"));
+  CHECK_FALSE(rig.find_file(1, "result"));
+  cp = rig.find_file(1, "raw-incomplete");
+  REQUIRE(cp);
+  // Refused as a scan to separate, readable as an incomplete one.
+  CHECK_THROWS_AS(io::read_raw_four_sensor_csv(*cp), io::CsvError);
+  io::RawFourSensorScan scan;
+  REQUIRE(test::check_checkpoint_file(*cp, &scan) == "");
+  CHECK_FALSE(scan.complete);
+  CHECK(scan.meta("outcome") == std::optional<std::string>("in_progress"));
+  CHECK(scan.meta("scan_id") == std::optional<std::string>("1"));
+  CHECK(scan.meta("checkpoint_utc"));
+  std::size_t measured = 0;
+  for (const auto& col : scan.m_um)
+    for (double v : col)
+      measured += std::isfinite(v) ? 1 : 0;
+  WARN("checkpoint after SIGKILL: " << measured << " of " << total << " points ("
+                                    << *scan.meta("points_measured") << "); " << done_at_kill
+                                    << "+ measured when the kill was sent");
+  CHECK(measured >= 1);
+  CHECK(measured < total);
+  CHECK(4 * scan.positions() == total);
+  // Configuration 1 is measured first, position by position: the checkpoint holds a prefix.
+  std::size_t k = 0;
+  bool prefix = true;
+  for (std::size_t i = 0; i < 4; ++i)
+    for (std::size_t n = 0; n < scan.positions(); ++n, ++k)
+      prefix = prefix && (std::isfinite(scan.m_um[i][n]) == (k < measured));
+  CHECK(prefix);
+
+  // A restart keeps it (no complete raw file supersedes it) and does not reuse its scan id.
+  rig.notify = std::make_unique<test::NotifyListener>(rig.tmp / "notify2");
+  rig.start_daemon();
+  REQUIRE(rig.notify->wait_for("READY=1", 15s));
+  CHECK(std::filesystem::exists(*cp));
+  REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1) == 0);
+  r = rig.wait_regs([](const std::vector<long>& x) { return x[test::reg_state] == 2; }, 20s);
+  REQUIRE(r.size() == test::kRegisterCount);
+  CHECK(r[test::reg_scan_id] == 2);
 }

@@ -13,6 +13,8 @@
 //    230-1 figure (minimum zone and least squares) is c L^2 / 4, not max - min of S.
 // Registered separately (SKIP_RETURN_CODE 77): the same GPIO path on a real gpiochip, skipped
 // with a message where there is none.
+#include <sys/stat.h>
+
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
@@ -376,6 +378,81 @@ TEST_CASE("schedule: scans started by it, a tick during a scan is refused, not q
     CHECK(t.meta("trigger") == std::optional<std::string>("schedule"));
     CHECK(t.meta("outcome") == std::optional<std::string>("complete"));
   }
+}
+
+TEST_CASE("checkpoints: written while a scan runs, only when new points came, then superseded") {
+  test::TempDir tmp;
+  Script s;
+  const acq::SdNotifier quiet("", 0us);
+  auto opts = options(tmp / "r");
+  opts.checkpoint_interval = 50ms;
+  acq::Daemon d(
+      opts, [&] { return std::make_unique<ScriptedBackend>(s, Gpio{}); }, quiet);
+  io::ResultsStore store(opts.results);
+  Running run(d);
+  REQUIRE(wait_until(d, idle));
+
+  auto checkpoint = [&](std::uint64_t id) -> std::optional<std::filesystem::path> {
+    for (const auto& f : store.list())
+      if (f.scan_id == id && f.kind == "raw-incomplete") return f.path;
+    return std::nullopt;
+  };
+  auto inode = [](const std::filesystem::path& p) {
+    struct stat st {};
+    return ::stat(p.c_str(), &st) == 0 ? st.st_ino : 0;
+  };
+
+  // Scan 1 holds at its 10th point: a checkpoint with exactly those 10 readings appears.
+  s.hold = true;
+  REQUIRE(d.trigger(acq::TriggerSource::command) == acq::TriggerReply::accepted);
+  REQUIRE(wait_until(d, [](auto x) { return x.points_done == 10; }));
+  const auto until = clk::now() + 2s;
+  std::optional<std::filesystem::path> cp;
+  while (clk::now() < until && !(cp = checkpoint(1)))
+    std::this_thread::sleep_for(5ms);
+  REQUIRE(cp);
+  std::this_thread::sleep_for(200ms);  // several checkpoint periods without new points
+  io::RawFourSensorScan c;
+  REQUIRE(test::check_checkpoint_file(*cp, &c) == "");
+  CHECK_FALSE(c.complete);
+  CHECK(c.meta("outcome") == std::optional<std::string>("in_progress"));
+  CHECK(c.meta("points_measured") == std::optional<std::string>("10/52"));
+  CHECK(c.meta("trigger") == std::optional<std::string>("command"));
+  // The readings recorded so far, to the digits written (12 significant).
+  for (std::size_t n = 0; n < 10; ++n)
+    CHECK(c.m_um[0][n] == Approx(std::sin(c.x_mm[n] / 20.0)).epsilon(1e-11));
+  // No new points: no new write (each atomic write makes a new inode).
+  const auto ino = inode(*cp);
+  std::this_thread::sleep_for(200ms);
+  CHECK(inode(*cp) == ino);
+
+  // Released: the complete raw file supersedes the checkpoint, which is removed.
+  s.hold = false;
+  REQUIRE(wait_until(d, [](auto x) { return x.last_scan_id == 1 && idle(x); }));
+  CHECK_FALSE(checkpoint(1));
+  std::size_t raws = 0;
+  for (const auto& f : store.list())
+    raws += f.scan_id == 1 && f.kind == "raw" ? 1 : 0;
+  CHECK(raws == 1);
+
+  // Scan 2, aborted at its hold: the final incomplete file replaces the checkpoint in place.
+  s.hold = true;
+  REQUIRE(d.trigger(acq::TriggerSource::command) == acq::TriggerReply::accepted);
+  REQUIRE(wait_until(d, [](auto x) { return x.scan_id == 2 && x.points_done == 10; }));
+  const auto until2 = clk::now() + 2s;
+  while (clk::now() < until2 && !(cp = checkpoint(2)))
+    std::this_thread::sleep_for(5ms);
+  REQUIRE(cp);
+  CHECK(d.abort_scan());
+  s.hold = false;
+  REQUIRE(wait_until(d, [](auto x) { return x.last_scan_id == 2 && idle(x); }));
+  CHECK(d.status().last_outcome == acq::ScanOutcome::aborted);
+  REQUIRE(checkpoint(2) == cp);
+  REQUIRE(test::check_checkpoint_file(*cp, &c) == "");
+  CHECK(c.meta("outcome") == std::optional<std::string>("aborted"));
+  CHECK(c.meta("points_measured") == std::optional<std::string>("10/52"));
+  CHECK(c.meta("ended_utc"));
+  CHECK_FALSE(c.meta("checkpoint_utc"));
 }
 
 TEST_CASE("straightness of a known S: ISO 230-1 about a reference line, not max - min") {

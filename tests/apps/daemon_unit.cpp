@@ -37,6 +37,16 @@ TEST_CASE("the systemd unit has the hardening the issue asks for") {
   }
   // The sampler may use SCHED_FIFO: the unit must not forbid it (NOTES.md).
   CHECK(u.find("RestrictRealtime=yes") == std::string::npos);
+  // READY=1 does not wait for the devices (daemon_fault: within 5 s with the machine off), so a
+  // finite start timeout well above that bounds a hung start without restarting a daemon that
+  // only waits for its machine.
+  const auto ts = u.find("\nTimeoutStartSec=");
+  REQUIRE(ts != std::string::npos);
+  const std::string v = u.substr(ts + 17, u.find('\n', ts + 1) - ts - 17);
+  INFO("TimeoutStartSec=" << v);
+  REQUIRE(v.find_first_not_of("0123456789") == std::string::npos);
+  CHECK(std::stoi(v) >= 30);
+  CHECK(u.find("Restart=on-failure") != std::string::npos);
 }
 
 TEST_CASE("systemd-analyze verify config/errsep.service") {

@@ -67,6 +67,27 @@ TEST_CASE("writes, next scan id, stale temporaries") {
   CHECK(count_files(o.dir) == 2);
 }
 
+TEST_CASE("checkpoints: removed once superseded by the complete raw file, kept otherwise") {
+  test::TempDir tmp;
+  io::ResultsStoreOptions o;
+  o.dir = tmp / "results";
+  o.min_free_bytes = 0;
+  io::ResultsStore store(o);
+  const auto a = io::ResultsStore::stem(utc(2026, 1, 2, 3, 4, 5), 1);
+  const auto b = io::ResultsStore::stem(utc(2026, 1, 2, 3, 5, 0), 2);
+  store.write(a, "raw-incomplete", "x\n1\n");  // checkpoint of scan 1...
+  store.write(a, "raw", "x\n1\n2\n");          // ...whose complete raw file made it to disk
+  store.write(b, "raw-incomplete", "x\n1\n");  // scan 2 was killed: its checkpoint stays
+  CHECK(store.remove_superseded() == 1);
+  CHECK_FALSE(std::filesystem::exists(store.path(a, "raw-incomplete")));
+  CHECK(std::filesystem::exists(store.path(a, "raw")));
+  CHECK(std::filesystem::exists(store.path(b, "raw-incomplete")));
+  CHECK(store.remove_superseded() == 0);
+  CHECK(store.remove(b, "raw-incomplete"));
+  CHECK_FALSE(store.remove(b, "raw-incomplete"));  // already gone
+  CHECK(count_files(o.dir) == 1);
+}
+
 TEST_CASE("disk full: a clear error and nothing written") {
   test::TempDir tmp;
   io::ResultsStoreOptions o;

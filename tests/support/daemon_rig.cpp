@@ -8,6 +8,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <exception>
@@ -18,6 +19,7 @@
 #include <thread>
 
 #include "errsep/drivers/daemon_register_server.hpp"
+#include "errsep/io/csv.hpp"
 #include "errsep/io/results_store.hpp"
 
 extern char** environ;
@@ -279,6 +281,118 @@ std::optional<std::filesystem::path> DaemonRig::find_file(std::uint64_t id,
     if (f && f->scan_id == id && f->kind == kind) return e.path();
   }
   return std::nullopt;
+}
+
+namespace {
+
+std::string slurp_file(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+/// "a/b" of points_measured; false when absent or malformed.
+bool points_measured(const io::RawFourSensorScan& s, std::size_t& a, std::size_t& b) {
+  const auto v = s.meta("points_measured");
+  unsigned long x = 0, y = 0;
+  char rest = 0;
+  if (!v || std::sscanf(v->c_str(), "%lu/%lu%c", &x, &y, &rest) != 2) return false;
+  a = x;
+  b = y;
+  return true;
+}
+
+/// The checks shared by raw and raw-incomplete; "" when fine.
+std::string check_raw_common(const std::filesystem::path& p, bool complete,
+                             io::RawFourSensorScan& s) {
+  const std::string bytes = slurp_file(p);
+  if (bytes.empty() || bytes.back() != '\n') return "does not end with a newline";
+  io::RawReadOptions ro;
+  ro.require_complete = complete;
+  try {
+    s = io::read_raw_four_sensor_csv(p, ro);
+  } catch (const std::exception& e) {
+    return std::string("does not parse: ") + e.what();
+  }
+  if (s.complete != complete) return complete ? "not marked complete" : "marked complete";
+  if (!s.geometry) return "no geometry";
+  const auto P = static_cast<std::size_t>(s.geometry->positions());
+  if (s.positions() != P)
+    return std::to_string(s.positions()) + " rows, the geometry has " + std::to_string(P) +
+           " positions";
+  if (!s.t_s) return "no t_i_s columns";
+  return {};
+}
+
+}  // namespace
+
+std::string check_raw_file(const std::filesystem::path& p, io::RawFourSensorScan* out) {
+  io::RawFourSensorScan s;
+  if (auto e = check_raw_common(p, true, s); !e.empty()) return e;
+  for (std::size_t i = 0; i < 4; ++i)
+    for (std::size_t n = 0; n < s.positions(); ++n)
+      if (!std::isfinite(s.m_um[i][n]) || !std::isfinite((*s.t_s)[i][n]))
+        return "non-finite cell in configuration " + std::to_string(i + 1);
+  std::size_t a = 0, b = 0;
+  if (!points_measured(s, a, b)) return "no points_measured";
+  if (a != 4 * s.positions() || b != a)
+    return "points_measured " + *s.meta("points_measured") + " in a complete scan of " +
+           std::to_string(s.positions()) + " positions";
+  if (out) *out = std::move(s);
+  return {};
+}
+
+std::string check_checkpoint_file(const std::filesystem::path& p, io::RawFourSensorScan* out) {
+  io::RawFourSensorScan s;
+  if (auto e = check_raw_common(p, false, s); !e.empty()) return e;
+  std::size_t finite = 0, bad_t = 0;
+  for (std::size_t i = 0; i < 4; ++i)
+    for (std::size_t n = 0; n < s.positions(); ++n) {
+      const bool m = std::isfinite(s.m_um[i][n]);
+      finite += m ? 1 : 0;
+      bad_t += m != std::isfinite((*s.t_s)[i][n]) ? 1 : 0;  // a reading has its time
+    }
+  std::size_t a = 0, b = 0;
+  if (!points_measured(s, a, b)) return "no points_measured";
+  if (b != 4 * s.positions())
+    return "points_measured " + *s.meta("points_measured") + " of " +
+           std::to_string(s.positions()) + " positions";
+  if (finite != a || finite == 0)
+    return std::to_string(finite) + " finite readings, points_measured " +
+           *s.meta("points_measured");
+  if (bad_t > 0) return std::to_string(bad_t) + " readings without a time (or times without one)";
+  if (out) *out = std::move(s);
+  return {};
+}
+
+std::string check_result_file(const std::filesystem::path& p, const io::RawFourSensorScan& raw) {
+  const std::string bytes = slurp_file(p);
+  if (bytes.empty() || bytes.back() != '\n') return "does not end with a newline";
+  io::CsvTable t;
+  try {
+    t = io::read_csv(p);  // every row as wide as the header, every cell a finite number
+  } catch (const std::exception& e) {
+    return std::string("does not parse: ") + e.what();
+  }
+  const std::vector<std::string> cols = {"x_mm", "S_um", "gamma_urad", "u_S_um"};
+  if (t.columns != cols) return "columns are not x_mm,S_um,gamma_urad,u_S_um";
+  if (t.rows.size() != raw.positions())
+    return std::to_string(t.rows.size()) + " rows, its raw file has " +
+           std::to_string(raw.positions()) + " positions";
+  for (std::size_t n = 0; n < t.rows.size(); ++n) {
+    if (t.rows[n].size() != cols.size()) return "row " + std::to_string(n) + " is short";
+    for (double v : t.rows[n])
+      if (!std::isfinite(v)) return "row " + std::to_string(n) + " has a non-finite cell";
+    if (std::abs(t.rows[n][0] - raw.x_mm[n]) > 1e-9)
+      return "row " + std::to_string(n) + ": x_mm differs from the raw file's";
+  }
+  if (t.meta("outcome") != std::optional<std::string>("complete")) return "outcome not complete";
+  if (!t.meta("straightness_minimum_zone_um") || !t.meta("straightness_least_squares_um"))
+    return "no straightness metadata";
+  return {};
+}
+
+std::vector<long> devsim_inputs(int port, int start, int count) {
+  return mbpoll_read_inputs(port, start, count);
 }
 
 DaemonRig::~DaemonRig() {

@@ -15,6 +15,7 @@
 #include <thread>
 #include <vector>
 
+#include "errsep/io/raw_scan_csv.hpp"
 #include "support/support.hpp"
 
 namespace errsep::test {
@@ -148,5 +149,24 @@ enum Reg : int {
 
 /// An int32 nm pair of registers (high word first) in um; NaN for INT32_MIN (no value).
 double nm_registers_um(const std::vector<long>& r, int hi);
+
+/// Reads a store file as a consumer would and says what is wrong with it ("" = whole).  Each
+/// check can fail on a truncated or half-written file: the file must end with a newline (a cut
+/// inside a line loses it) and have exactly one row per slide position of the scan geometry (a
+/// cut at a line boundary loses rows).
+///  raw:            "# complete: true", every cell a finite number, positions = geometry,
+///                  points_measured = 4P/4P;
+///  raw-incomplete: "# complete: false", positions = geometry, as many finite readings as its
+///                  points_measured says (at least one), NaN elsewhere;
+///  result:         x_mm,S_um,gamma_urad,u_S_um, every cell a finite number, one row per
+///                  position of `raw` (its raw file) at the same x, outcome complete.
+/// `out`, when given, receives the parsed raw scan.
+std::string check_raw_file(const std::filesystem::path& p, io::RawFourSensorScan* out = nullptr);
+std::string check_checkpoint_file(const std::filesystem::path& p,
+                                  io::RawFourSensorScan* out = nullptr);
+std::string check_result_file(const std::filesystem::path& p, const io::RawFourSensorScan& raw);
+
+/// Input registers of errsep-devsim (the simulated machine), e.g. a stage's status word.
+std::vector<long> devsim_inputs(int port, int start, int count);
 
 }  // namespace errsep::test

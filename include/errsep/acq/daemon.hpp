@@ -5,6 +5,7 @@
 //      │  ▲                       │  ▲                │
 //      ▼  │ open fails / retry    ▼  │ check ok       ▼ device stops answering
 //     fault ◀────────────────── check fails        fault (raw data kept, marked incomplete)
+//   READY=1 after the first open attempt, into idle or fault alike (see "Readiness" below).
 //   SIGTERM in any state ─▶ stopping: abort the scan, stop the stages, write what was measured,
 //   exit within DaemonOptions::stop_timeout.
 //
@@ -17,6 +18,22 @@
 // records its trigger source (metadata "trigger").  SIGHUP reloads the machine config between
 // scans: during a scan the reload waits for the scan to end, so no scan is dropped; a config with
 // errors is reported and the old one kept.
+//
+// Readiness (sd_notify READY=1) means "the service is up and reports": it is sent once the
+// config is loaded, the results directory is usable, the register map listens (it is started
+// before run()) and the first attempt to open the devices has ended -- whatever its outcome.  A
+// machine that is powered off at boot thus gives a started service in the fault state (STATUS=,
+// register map, journal) that leaves the fault when the devices answer, instead of a start
+// timeout and a restart loop.  Errors that no waiting can cure (a config with errors, an unusable
+// results directory, a register map that cannot bind) end the process before READY=1.
+//
+// Checkpoints: while a scan runs, the main loop writes the raw data measured so far as the scan's
+// raw-incomplete file (complete: false, outcome: in_progress) every checkpoint_interval (and
+// never more often than ten times its own write time, so that long scans do not spend the main
+// loop on it), atomically like every other file.  The final file replaces it (raw-incomplete) or
+// makes it superfluous (raw: the checkpoint is then removed), so a SIGKILL or power cut mid-scan
+// leaves the points measured up to the last checkpoint.  The sampling threads are not involved:
+// the checkpoint is a copy of the ScanContext taken under its mutex by the main loop.
 //
 // The main loop sleeps in poll() on a wake-up pipe (signals, triggers and the end of a scan write
 // to it) with a timeout of at most the health-check / watchdog period: it never spins.  The scan
@@ -31,6 +48,8 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <utility>
+#include <vector>
 
 #include "errsep/acq/digital_io.hpp"
 #include "errsep/acq/sd_notify.hpp"
@@ -162,6 +181,9 @@ struct DaemonOptions {
   /// GPIO start input: rising edges closer than this (kernel timestamps) to the previous one are
   /// contact bounce and ignored.
   std::chrono::milliseconds gpio_debounce{20};
+  /// A running scan's raw data is written as a checkpoint (raw-incomplete) this often (and no
+  /// more often than 10 times the last checkpoint's write time).
+  std::chrono::milliseconds checkpoint_interval{1000};
   bool separate = true;  ///< compute and write the four-sensor result after a scan
 
   bool is_valid(std::string* why = nullptr) const;
@@ -220,6 +242,11 @@ class Daemon {
   void start_scan(TriggerSource src);
   void finish_scan(bool stopping);
   void write_scan_files(const io::RawFourSensorScan& raw, const ScanEnd& end);
+  /// Metadata of the scan's raw/result files (scan id, trigger, times, outcome, points).
+  std::vector<std::pair<std::string, std::string>> scan_metadata(const std::string& outcome,
+                                                                 const std::string& reason) const;
+  /// Main loop, during a scan: the raw data measured so far as the raw-incomplete file.
+  void write_checkpoint();
   void do_reload();
   void ping_watchdog(std::int64_t now_ns);
   /// GPIO start input of the open backend: a thread waiting for its edges.
@@ -249,6 +276,13 @@ class Daemon {
   TriggerSource scan_source_ = TriggerSource::command;
   std::string scan_stem_;
   bool stop_during_scan_ = false;
+  // Checkpoints of the running scan.
+  std::chrono::steady_clock::time_point next_checkpoint_{};
+  std::uint32_t checkpoint_points_ = 0;  ///< points in the last checkpoint written
+  bool checkpoint_on_disk_ = false;
+  bool checkpoint_error_logged_ = false;
+  bool reload_deferred_logged_ = false;
+  std::string last_write_error_;  ///< of the last scan's files ("" = written)
 
   StartInput gpio_;
   std::thread gpio_thread_;

@@ -7,11 +7,16 @@
 // so that a directory listing sorts by time and a name says which scan it belongs to.  Kinds:
 //   raw            the raw scan, "# complete: true"
 //   raw-incomplete the raw data of an interrupted/failed scan, "# complete: false", NaN where not
-//                  measured; the different name keeps it out of tools that glob *.raw.csv
+//                  measured; the different name keeps it out of tools that glob *.raw.csv.  The
+//                  daemon also writes it as a checkpoint while a scan runs (replaced atomically
+//                  by each newer checkpoint, by the final raw-incomplete file, or removed once the
+//                  complete raw file is on disk), so a SIGKILL or power cut mid-scan leaves the
+//                  points measured up to the last checkpoint
 //   result         the separated profiles
 // Every file is written with write_file_atomic (temp file, fsync, rename, directory fsync): a
 // power cut or SIGKILL leaves the whole file or none.  Stray temporary files of a killed writer
-// (".<name>.tmp.XXXXXX") are removed by clean_stale_temporaries() at start.
+// (".<name>.tmp.XXXXXX") are removed by clean_stale_temporaries() at start, and a checkpoint
+// whose complete raw file made it to disk (a kill between the two) by remove_superseded().
 //
 // The disk filling up is a DiskFullError (a std::runtime_error that says so and names the file),
 // raised before anything is written when the free space is below min_free_bytes, or from the
@@ -77,6 +82,10 @@ class ResultsStore {
   std::filesystem::path write(std::string_view stem, std::string_view kind,
                               std::string_view content);
 
+  /// Removes dir/<stem>.<kind>.csv durably (unlink, directory fsync).  False when there was no
+  /// such file; throws std::runtime_error when it exists and cannot be removed.
+  bool remove(std::string_view stem, std::string_view kind);
+
   /// Every file named like a store file, oldest first (by name).
   std::vector<StoredFile> list() const;
   /// One more than the highest scan id present (1 for an empty store), so ids never repeat
@@ -84,6 +93,10 @@ class ResultsStore {
   std::uint64_t next_scan_id() const;
   /// Removes temporary files left by a killed writer.  Returns how many.
   int clean_stale_temporaries();
+  /// Removes every raw-incomplete file (a checkpoint) of a scan whose complete raw file is
+  /// present: the daemon was stopped between writing the one and removing the other.  Returns
+  /// how many.
+  int remove_superseded();
   /// Applies the retention setting (no-op when not enabled): removes every file of the scans
   /// beyond the newest keep_scans, and of the scans started before now − max_age_days.
   /// Returns the number of files deleted.
