@@ -246,6 +246,7 @@ void DaemonRig::start_daemon(const std::vector<std::string>& extra) {
                                    "--check-ms",
                                    "200"};
   argv.insert(argv.end(), extra.begin(), extra.end());
+  argv.insert(argv.begin(), prefix.begin(), prefix.end());
   std::vector<std::string> e = env;
   e.push_back("NOTIFY_SOCKET=" + notify->path().string());
   daemon = std::make_unique<Child>(argv, e, tmp / "daemon.log");

@@ -95,6 +95,9 @@ struct DaemonRig {
   std::unique_ptr<Child> daemon;
   int modbus_port = 0;
   std::vector<std::string> env;  ///< extra environment of the daemon ("KEY=value")
+  /// Command the daemon is started through (argv[0] a path, e.g. unshare ... sh -c '... exec
+  /// "$@"' sh); it must exec the daemon in the same process.  Empty: the daemon itself.
+  std::vector<std::string> prefix;
 
   DaemonRig();
   /// Starts the daemon (devsim must run, or `device_port` be given); reads its register-map
