@@ -120,6 +120,12 @@ TEST_CASE("scan through the register map, then SIGTERM during a second scan") {
   WARN(pings << " watchdog pings so far");
   CHECK(pings >= 2);
 
+  // A completed scan leaves its stages where it sent them, in position (no stop command): the
+  // status words below tell a stopped stage from one that was not.
+  const StageBits done = stage_bits(rig.devsim.port);
+  CHECK(done.slide == 1);
+  CHECK(done.sensor_stage == 1);
+
   // Scan 2: SIGTERM once it is well under way.
   REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1, &out) == 0);
   r = rig.wait_regs(
