@@ -1,5 +1,6 @@
 #include "errsep/core/effect_periodic.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -29,30 +30,38 @@ std::string PeriodicEffect::description() const {
   return buf;
 }
 
-Eigen::MatrixXd PeriodicEffect::basis(const FourSensorConfig& cfg) const {
+double PeriodicEffect::period_mm(const Eigen::VectorXd& p) const {
+  return std::max(period_mm_ + (p.size() > 2 ? p(2) : 0.0), 0.5 * period_mm_);
+}
+
+Eigen::MatrixXd PeriodicEffect::basis(const FourSensorConfig& cfg, const Eigen::VectorXd& p) const {
   const int P = cfg.positions();
-  Eigen::MatrixXd phi(P, 2);
+  const double l = period_mm(p);
+  const double a = p.size() > 0 ? p(0) : 0.0, b = p.size() > 1 ? p(1) : 0.0;
+  Eigen::MatrixXd phi(P, 3);
   for (int n = 0; n < P; ++n) {
-    const double w = 2.0 * std::numbers::pi * n * cfg.dx_mm / period_mm_;
+    const double x = n * cfg.dx_mm, w = 2.0 * std::numbers::pi * x / l;
     phi(n, 0) = std::cos(w);
     phi(n, 1) = std::sin(w);
+    // ∂/∂λ of a·cos(2πx/λ) + b·sin(2πx/λ) = (2πx/λ²)·(a·sin − b·cos).
+    phi(n, 2) = 2.0 * std::numbers::pi * x / (l * l) * (a * std::sin(w) - b * std::cos(w));
   }
   return phi;
 }
 
 Eigen::MatrixXd PeriodicEffect::correction_um(const Eigen::VectorXd& p,
                                               const EffectContext& ctx) const {
-  return slide_positioning_correction_um(basis(ctx.cfg) * p, ctx);
+  return slide_positioning_correction_um(basis(ctx.cfg, p).leftCols(2) * p.head(2), ctx);
 }
 
 Eigen::MatrixXd PeriodicEffect::jacobian(const Eigen::VectorXd& p, const EffectContext& ctx) const {
-  const Eigen::MatrixXd phi = basis(ctx.cfg);
-  return slide_positioning_jacobian(phi, ctx, phi * p);
+  const Eigen::MatrixXd phi = basis(ctx.cfg, p);
+  return slide_positioning_jacobian(phi, ctx, phi.leftCols(2) * p.head(2));
 }
 
 Eigen::MatrixXd PeriodicEffect::f_shift_mm(const Eigen::VectorXd& p,
                                            const FourSensorConfig& cfg) const {
-  return slide_positioning_f_shift_mm(basis(cfg) * p);
+  return slide_positioning_f_shift_mm(basis(cfg, p).leftCols(2) * p.head(2));
 }
 
 std::vector<std::unique_ptr<ModelEffect>> PeriodicEffect::variants(const EffectContext& ctx) const {
@@ -93,7 +102,7 @@ std::unique_ptr<ModelEffect> PeriodicEffect::clone() const {
 std::string PeriodicEffect::implausibility(const Eigen::VectorXd& p,
                                            const EffectContext& ctx) const {
   // A periodic positioning error is a slide positioning error: the same bound.
-  return slide_positioning_implausibility(basis(ctx.cfg) * p, ctx.cfg);
+  return slide_positioning_implausibility(basis(ctx.cfg, p).leftCols(2) * p.head(2), ctx.cfg);
 }
 
 }  // namespace errsep::core

@@ -61,6 +61,11 @@ Eigen::MatrixXd SensorOffsetEffect::f_shift_mm(const Eigen::VectorXd& p,
   return s;
 }
 
+Eigen::Vector4d SensorOffsetEffect::lever_arm_error_mm(const Eigen::VectorXd& p) const {
+  const auto dO = offsets_error(p);
+  return Eigen::Vector4d(dO[0], dO[1], dO[2], dO[3]);
+}
+
 std::unique_ptr<ModelEffect> SensorOffsetEffect::clone() const {
   return std::make_unique<SensorOffsetEffect>(*this);
 }

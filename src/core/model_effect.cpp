@@ -58,16 +58,96 @@ double spline_eval(const Eigen::VectorXd& v, const Eigen::VectorXd& m2, double h
          (3.0 * b * b - 1.0) / 6.0 * h * m2(j + 1);
 }
 
+namespace {
+constexpr int kLagrangePoints = 8;
+
+// Lagrange weights (value or derivative in units of the grid step) at t for nodes s..s+m-1.
+void lagrange_weights(int s, int m, double t, bool deriv, double* w) {
+  for (int k = 0; k < m; ++k) {
+    const double tk = s + k;
+    if (!deriv) {
+      double v = 1.0;
+      for (int l = 0; l < m; ++l)
+        if (l != k) v *= (t - (s + l)) / (tk - (s + l));
+      w[k] = v;
+    } else {
+      double d = 0.0;  // Σ_l [1/(t_k − t_l)]·Π_{q ≠ k, l} (t − t_q)/(t_k − t_q)
+      for (int l = 0; l < m; ++l) {
+        if (l == k) continue;
+        double v = 1.0 / (tk - (s + l));
+        for (int q = 0; q < m; ++q)
+          if (q != k && q != l) v *= (t - (s + q)) / (tk - (s + q));
+        d += v;
+      }
+      w[k] = d;
+    }
+  }
+}
+}  // namespace
+
+Eigen::RowVectorXd reference_interpolation_weights(int N, double h, double y, bool deriv) {
+  Eigen::RowVectorXd w = Eigen::RowVectorXd::Zero(N);
+  if (N <= 0) return w;
+  if (N == 1) {
+    if (!deriv) w(0) = 1.0;
+    return w;
+  }
+  const int m = std::min(kLagrangePoints, N);
+  double buf[kLagrangePoints];
+  const double t = y / h, tmax = N - 1;
+  if (t < 0 || t > tmax) {  // linear extrapolation from the end's value and slope
+    const bool lo = t < 0;
+    const double te = lo ? 0.0 : tmax;
+    const int s = lo ? 0 : N - m;
+    lagrange_weights(s, m, te, true, buf);
+    for (int k = 0; k < m; ++k)
+      w(s + k) = buf[k] * (deriv ? 1.0 / h : (t - te));
+    if (!deriv) w(lo ? 0 : N - 1) += 1.0;
+    return w;
+  }
+  const int j = std::min(static_cast<int>(t), N - 2);
+  const int s = std::clamp(j - (m / 2 - 1), 0, N - m);
+  lagrange_weights(s, m, t, deriv, buf);
+  for (int k = 0; k < m; ++k)
+    w(s + k) = deriv ? buf[k] / h : buf[k];
+  return w;
+}
+
+double reference_interpolate(const Eigen::VectorXd& f, double h, double y, bool deriv) {
+  const int N = static_cast<int>(f.size());
+  if (N == 0) return 0.0;
+  if (N == 1) return deriv ? 0.0 : f(0);
+  const int m = std::min(kLagrangePoints, N);
+  double buf[kLagrangePoints];
+  const double t = y / h, tmax = N - 1;
+  if (t < 0 || t > tmax) {
+    const bool lo = t < 0;
+    const double te = lo ? 0.0 : tmax;
+    const int s = lo ? 0 : N - m;
+    lagrange_weights(s, m, te, true, buf);
+    double slope = 0;  // per grid step
+    for (int k = 0; k < m; ++k)
+      slope += buf[k] * f(s + k);
+    return deriv ? slope / h : f(lo ? 0 : N - 1) + (t - te) * slope;
+  }
+  const int j = std::min(static_cast<int>(t), N - 2);
+  const int s = std::clamp(j - (m / 2 - 1), 0, N - m);
+  lagrange_weights(s, m, t, deriv, buf);
+  double v = 0;
+  for (int k = 0; k < m; ++k)
+    v += buf[k] * f(s + k);
+  return deriv ? v / h : v;
+}
+
 void EffectContext::prepare() {
-  f_m2_ = spline_second_derivatives(f_um, cfg.dx_mm);
   S_m2_ = spline_second_derivatives(S_um, cfg.dx_mm);
   g_m2_ = spline_second_derivatives(gamma_rad, cfg.dx_mm);
 }
 double EffectContext::f_at(double y) const {
-  return spline_eval(f_um, f_m2_, cfg.dx_mm, y, false);
+  return reference_interpolate(f_um, cfg.dx_mm, y, false);
 }
 double EffectContext::f_slope_at(double y) const {
-  return spline_eval(f_um, f_m2_, cfg.dx_mm, y, true);
+  return reference_interpolate(f_um, cfg.dx_mm, y, true);
 }
 double EffectContext::S_at(double x) const {
   return spline_eval(S_um, S_m2_, cfg.dx_mm, x, false);
@@ -84,6 +164,10 @@ double EffectContext::gamma_slope_at(double x) const {
 
 Eigen::MatrixXd ModelEffect::f_shift_mm(const Eigen::VectorXd&, const FourSensorConfig&) const {
   return {};
+}
+
+Eigen::Vector4d ModelEffect::lever_arm_error_mm(const Eigen::VectorXd&) const {
+  return Eigen::Vector4d::Zero();
 }
 
 std::vector<std::unique_ptr<ModelEffect>> ModelEffect::variants(const EffectContext&) const {

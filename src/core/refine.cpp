@@ -62,7 +62,7 @@ double p_value_F(double F, int k, int dof) {
 // source of the residual; the reported separations use the caller's solver options.
 class ShiftedBase {
  public:
-  explicit ShiftedBase(const FourSensorConfig& cfg) : cfg_(cfg), V_(residual_basis(cfg)) {
+  explicit ShiftedBase(const FourSensorConfig& cfg) : cfg_(cfg) {
     const int N = cfg.N;
     Eigen::MatrixXd C = Eigen::MatrixXd::Zero(3, N);
     C(0, 0) = 1.0;
@@ -70,52 +70,30 @@ class ShiftedBase {
     C.row(2) = reference_bow(cfg).transpose();
     Eigen::JacobiSVD<Eigen::MatrixXd> svd(C, Eigen::ComputeFullV);
     B_ = svd.matrixV().rightCols(N - 3);
-    M2_.resize(N, N);
-    for (int j = 0; j < N; ++j)
-      M2_.col(j) = spline_second_derivatives(Eigen::VectorXd::Unit(N, j), cfg.dx_mm);
   }
 
   struct Fit {
     Eigen::VectorXd r;  ///< reduced residual, 2P
     double rss = 0;
     Eigen::MatrixXd Q;  ///< orthonormal basis of the design's column space, 2P × (N − 1)
+    Eigen::Matrix<double, 4, 2> V;  ///< the reduction used (complement of span{1, O + δO})
     Eigen::VectorXd f_um, S_um, gamma_rad;
     Eigen::Vector4d e_um = Eigen::Vector4d::Zero();
   };
 
-  /// Interpolation weights of the spline at y (mm): f(y) = w·f(x_0..x_{N−1}).  The same
-  /// formula as spline_eval (model_effect.cpp), linear extrapolation outside the grid.
-  Eigen::RowVectorXd weights(double y) const {
-    const int N = cfg_.N;
-    const double h = cfg_.dx_mm, xmax = (N - 1) * h;
-    Eigen::RowVectorXd w = Eigen::RowVectorXd::Zero(N);
-    if (y <= 0) {
-      w = -h * (2.0 * M2_.row(0) + M2_.row(1)) / 6.0 * y;
-      w(0) += 1.0 - y / h;
-      w(1) += y / h;
-      return w;
-    }
-    if (y >= xmax) {
-      const double d = y - xmax;
-      w = h * (M2_.row(N - 2) + 2.0 * M2_.row(N - 1)) / 6.0 * d;
-      w(N - 1) += 1.0 + d / h;
-      w(N - 2) -= d / h;
-      return w;
-    }
-    const int j = std::min(static_cast<int>(y / h), N - 2);
-    const double a = ((j + 1) * h - y) / h, b = 1.0 - a;
-    w = ((a * a * a - a) * M2_.row(j) + (b * b * b - b) * M2_.row(j + 1)) * (h * h / 6.0);
-    w(j) += a;
-    w(j + 1) += b;
-    return w;
-  }
-
   /// Least-squares fit of Eq. (1) to readings m (P × 4) with f sampled at x_n + O_i + δ_ni
-  /// (δ: P × 4 mm, or empty for none).
-  Fit fit(const Eigen::MatrixXd& m_um, const Eigen::MatrixXd& shift_mm) const {
+  /// (δ: P × 4 mm, or empty for none) and γ's lever arms O_i + dO_i.
+  Fit fit(const Eigen::MatrixXd& m_um, const Eigen::MatrixXd& shift_mm,
+          const Eigen::Vector4d& dO_mm = Eigen::Vector4d::Zero()) const {
     const int N = cfg_.N, P = cfg_.positions(), nf = N - 3;
     const auto k = cfg_.offsets_samples();
     const auto O = cfg_.offsets_mm();
+    // Per position S and γ absorb everything in span{1, O + δO}: V spans its complement.
+    Eigen::Matrix<double, 4, 2> A;
+    for (int i = 0; i < 4; ++i)
+      A(i, 0) = 1.0, A(i, 1) = O[static_cast<std::size_t>(i)] + dO_mm(i);
+    const Eigen::Matrix4d Qa = Eigen::HouseholderQR<Eigen::Matrix<double, 4, 2>>(A).householderQ();
+    const Eigen::Matrix<double, 4, 2> V = Qa.rightCols<2>();
     Eigen::MatrixXd W(4 * P, N);  // f(y_ni) = W.row(4n + i)·f
     for (int n = 0; n < P; ++n)
       for (int i = 0; i < 4; ++i) {
@@ -123,18 +101,22 @@ class ShiftedBase {
         if (shift_mm.size() == 0)
           W.row(4 * n + i) = Eigen::RowVectorXd::Unit(N, n + k[si]);
         else
-          W.row(4 * n + i) = weights(n * cfg_.dx_mm + O[si] + shift_mm(n, i));
+          W.row(4 * n + i) = reference_interpolation_weights(
+              N, cfg_.dx_mm, n * cfg_.dx_mm + O[si] + shift_mm(n, i), false);
       }
     const Eigen::MatrixXd WB = W * B_;
     Eigen::MatrixXd G(2 * P, nf + 2);
     for (int n = 0; n < P; ++n) {
-      G.block(2 * n, 0, 2, nf) = V_.transpose() * WB.middleRows(4 * n, 4);
-      G.block(2 * n, nf, 2, 2) = V_.middleRows(1, 2).transpose();  // e_2, e_3
+      G.block(2 * n, 0, 2, nf) = V.transpose() * WB.middleRows(4 * n, 4);
+      G.block(2 * n, nf, 2, 2) = V.middleRows(1, 2).transpose();  // e_2, e_3
     }
-    const Eigen::VectorXd y = reduce_readings(cfg_, m_um);
+    Eigen::VectorXd y(2 * P);
+    for (int n = 0; n < P; ++n)
+      y.segment<2>(2 * n) = V.transpose() * m_um.row(n).transpose();
     Eigen::HouseholderQR<Eigen::MatrixXd> qr(G);
     const Eigen::VectorXd z = qr.solve(y);
     Fit out;
+    out.V = V;
     out.r = y - G * z;
     out.rss = out.r.squaredNorm();
     out.Q = qr.householderQ() * Eigen::MatrixXd::Identity(2 * P, nf + 2);
@@ -142,9 +124,6 @@ class ShiftedBase {
     out.e_um << 0.0, z(nf), z(nf + 1), 0.0;
     // S and γ per position: least squares of what is left of the four readings on (1, O_i).
     const Eigen::VectorXd fy = W * out.f_um;
-    Eigen::Matrix<double, 4, 2> A;
-    for (int i = 0; i < 4; ++i)
-      A(i, 0) = 1.0, A(i, 1) = O[static_cast<std::size_t>(i)];
     const auto Aqr = A.colPivHouseholderQr();
     out.S_um.resize(P);
     out.gamma_rad.resize(P);
@@ -159,13 +138,20 @@ class ShiftedBase {
     return out;
   }
 
+  /// Reading-space columns (4P × k) reduced as `fit` reduced the readings.
+  static Eigen::MatrixXd reduce(const Fit& fit, const Eigen::MatrixXd& J) {
+    const Eigen::Index P = J.rows() / 4;
+    Eigen::MatrixXd out(2 * P, J.cols());
+    for (Eigen::Index n = 0; n < P; ++n)
+      out.middleRows(2 * n, 2) = fit.V.transpose() * J.middleRows(4 * n, 4);
+    return out;
+  }
+
   const FourSensorConfig& config() const { return cfg_; }
 
  private:
   FourSensorConfig cfg_;
-  Eigen::Matrix<double, 4, 2> V_;
-  Eigen::MatrixXd B_;   // N × (N − 3), orthonormal basis of the gauge subspace of f
-  Eigen::MatrixXd M2_;  // N × N, spline second derivatives per unit sample
+  Eigen::MatrixXd B_;  // N × (N − 3), orthonormal basis of the gauge subspace of f
 };
 
 EffectContext make_context(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
@@ -178,7 +164,9 @@ EffectContext make_context(const FourSensorConfig& cfg, const Eigen::MatrixXd& m
   ctx.S_um = fit.S_um;
   ctx.gamma_rad = fit.gamma_rad;
   ctx.e_um = fit.e_um;
-  ctx.residual_um = expand_residual(cfg, fit.r);
+  ctx.residual_um.resize(cfg.positions(), 4);
+  for (int n = 0; n < cfg.positions(); ++n)
+    ctx.residual_um.row(n) = (fit.V * fit.r.segment<2>(2 * n)).transpose();
   ctx.prepare();
   return ctx;
 }
@@ -218,13 +206,17 @@ Eigen::MatrixXd f_shift_part(const EffectContext& ctx, const Eigen::MatrixXd& sh
 
 // The readings split for the exact fit: `rest` = m minus every correction except the shift of
 // f's sampling points (f̂(y + δ) − f̂(y) of PE1, PE2, periodic), and the total shift δ.
+// The readings split for the exact fit: `rest` = m minus every correction except the shift of
+// f's sampling points (f̂(y + δ) − f̂(y) of PE1, PE2, periodic) and the change of γ's lever arm
+// (1000·δO_i·γ̂ of PE1); the total shift δ and lever-arm error δO.
 struct Split {
   Eigen::MatrixXd rest;
   Eigen::MatrixXd shift_mm;  // empty when no effect shifts f
+  Eigen::Vector4d dO_mm = Eigen::Vector4d::Zero();
 };
 
 Split split_readings(const Model& M, const EffectContext& ctx) {
-  Split s{ctx.m_um, {}};
+  Split s{ctx.m_um, {}, Eigen::Vector4d::Zero()};
   for (std::size_t j = 0; j < M.effects.size(); ++j) {
     Eigen::MatrixXd c = M.effects[j]->correction_um(M.p[j], ctx);
     const Eigen::MatrixXd sh = M.effects[j]->f_shift_mm(M.p[j], ctx.cfg);
@@ -232,6 +224,12 @@ Split split_readings(const Model& M, const EffectContext& ctx) {
       c -= f_shift_part(ctx, sh);
       if (s.shift_mm.size() == 0) s.shift_mm = Eigen::MatrixXd::Zero(sh.rows(), 4);
       s.shift_mm += sh;
+    }
+    const Eigen::Vector4d dO = M.effects[j]->lever_arm_error_mm(M.p[j]);
+    if (dO.squaredNorm() > 0) {
+      for (Eigen::Index n = 0; n < c.rows(); ++n)
+        c.row(n) -= 1000.0 * ctx.gamma_rad(n) * dO.transpose();
+      s.dO_mm += dO;
     }
     s.rest -= c;
   }
@@ -242,8 +240,11 @@ Split split_readings(const Model& M, const EffectContext& ctx) {
 // The shifts of all effects are applied together (f̂ at y + Σδ), not one correction per effect.
 Eigen::MatrixXd corrected(const Model& M, const EffectContext& ctx) {
   const Split s = split_readings(M, ctx);
-  if (s.shift_mm.size() == 0) return s.rest;
-  return s.rest - f_shift_part(ctx, s.shift_mm);
+  Eigen::MatrixXd m = s.rest;
+  if (s.shift_mm.size() != 0) m -= f_shift_part(ctx, s.shift_mm);
+  for (Eigen::Index n = 0; n < m.rows(); ++n)
+    m.row(n) -= 1000.0 * ctx.gamma_rad(n) * s.dO_mm.transpose();
+  return m;
 }
 
 Eigen::MatrixXd model_jacobian(const Model& M, const EffectContext& ctx) {
@@ -366,8 +367,12 @@ ProjectedFit projected_fit(const Eigen::MatrixXd& Q, const Eigen::MatrixXd& Jr,
   }
   if (k0 > 0) Bm -= Z * (Z.transpose() * Bm);
   out.cov_unit = Bm * Bm.transpose();
-  Eigen::HouseholderQR<Eigen::MatrixXd> lq(L);
-  out.determined = lq.householderQ() * Eigen::MatrixXd::Identity(k, out.kept);
+  if (out.kept == k) {
+    out.determined = Eigen::MatrixXd::Identity(k, k);  // every parameter on its own
+  } else {
+    Eigen::HouseholderQR<Eigen::MatrixXd> lq(L);
+    out.determined = lq.householderQ() * Eigen::MatrixXd::Identity(k, out.kept);
+  }
   Eigen::HouseholderQR<Eigen::MatrixXd> cq(Cd);
   out.column_directions = cq.householderQ() * Eigen::MatrixXd::Identity(k, out.kept);
   return out;
@@ -396,7 +401,7 @@ Solved solve_model(const ShiftedBase& sb, Model& M, EffectContext ctx, const Ref
   const int k = M.total();
   auto evaluate = [&](const Model& model, const EffectContext& c) {
     const Split s = split_readings(model, c);
-    return sb.fit(s.rest, s.shift_mm);
+    return sb.fit(s.rest, s.shift_mm, s.dO_mm);
   };
   auto with_step = [](const Model& from, const Eigen::VectorXd& d) {
     Model to = from;
@@ -411,8 +416,8 @@ Solved solve_model(const ShiftedBase& sb, Model& M, EffectContext ctx, const Ref
   ctx = make_context(cfg, ctx.m_um, ctx.t_s, cur);
   int it = 0;
   for (; it < (k > 0 ? opts.max_gauss_newton : 0); ++it) {
-    cur = evaluate(M, ctx);  // with the rest terms (γ̂ in PE1's) of the current fit
-    const Eigen::MatrixXd Jr = reduce_columns(cfg, model_jacobian(M, ctx));
+    cur = evaluate(M, ctx);  // with the rest terms of the current fit
+    const Eigen::MatrixXd Jr = ShiftedBase::reduce(cur, model_jacobian(M, ctx));
     const Eigen::VectorXd p_now = concat(M);
     const ProjectedFit fit =
         projected_fit(cur.Q, Jr, cur.r, opts.identifiability_tol, &p_now, opts.direction_threshold);
@@ -448,13 +453,14 @@ Solved solve_model(const ShiftedBase& sb, Model& M, EffectContext ctx, const Ref
   cur = evaluate(M, ctx);
   Solved out{ctx, {}, ResidualSpace(cfg), 0.0, it, {}, {}, 0.0};
   out.m_c = corrected(M, ctx);
-  const Eigen::MatrixXd Jr = reduce_columns(cfg, model_jacobian(M, ctx));
+  const Eigen::MatrixXd J = model_jacobian(M, ctx);
   const Eigen::VectorXd p_now = concat(M);
-  out.last =
-      projected_fit(cur.Q, Jr, cur.r, opts.identifiability_tol, &p_now, opts.direction_threshold);
+  out.last = projected_fit(cur.Q, ShiftedBase::reduce(cur, J), cur.r, opts.identifiability_tol,
+                           &p_now, opts.direction_threshold);
   // The model's column space for the residual, its analysis and the next round's scores: the
-  // base model and the effects' linearised columns along what the data determine.
-  out.space.add(Jr * out.last.column_directions, opts.identifiability_tol);
+  // base model and the effects' linearised columns along what the data determine (the corrected
+  // readings obey Eq. (1) with the nominal offsets, so the nominal reduction).
+  out.space.add(reduce_columns(cfg, J) * out.last.column_directions, opts.identifiability_tol);
   out.rss = out.space.project_out(reduce_readings(cfg, out.m_c)).squaredNorm();
   out.s2 = out.space.dof() > 0 ? out.rss / out.space.dof() : 0.0;
   Eigen::Index c = 0;
@@ -554,6 +560,50 @@ std::string RefineResult::brief_report() const {
   return out;
 }
 
+EffectFit fit_effects(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
+                      const Eigen::MatrixXd& t_s_in,
+                      const std::vector<std::shared_ptr<const ModelEffect>>& effects,
+                      const std::vector<Eigen::VectorXd>& start, const RefineOptions& opts) {
+  std::string why;
+  if (!cfg.is_valid(&why)) throw std::invalid_argument("invalid configuration: " + why);
+  if (!opts.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
+  const int P = cfg.positions();
+  if (m_um.rows() != P || m_um.cols() != 4)
+    throw std::invalid_argument("readings must be P x 4 = " + std::to_string(P) + " x 4");
+  const Eigen::MatrixXd t_s =
+      t_s_in.size() == 0 ? scan_order_times_s(cfg, opts.speed_mm_per_s) : t_s_in;
+  if (!start.empty() && start.size() != effects.size())
+    throw std::invalid_argument("fit_effects: one start vector per effect");
+  const ShiftedBase sb(cfg);
+  EffectContext raw;
+  raw.cfg = cfg;
+  raw.m_um = m_um;
+  raw.t_s = t_s;
+  Model M;
+  for (std::size_t j = 0; j < effects.size(); ++j) {
+    M.effects.push_back(effects[j]);
+    const Eigen::VectorXd p0 =
+        start.empty() ? Eigen::VectorXd::Zero(effects[j]->parameter_count()) : start[j];
+    if (p0.size() != effects[j]->parameter_count())
+      throw std::invalid_argument("fit_effects: start vector of the wrong size");
+    M.p.push_back(p0);
+  }
+  Model M0;
+  const Solved base = solve_model(sb, M0, raw, opts);
+  const Solved s = solve_model(sb, M, base.ctx, opts);
+  EffectFit out;
+  out.parameters = M.p;
+  out.u_parameters = s.u;
+  out.covariance = s.s2 * s.last.cov_unit;
+  out.determined = s.last.determined;
+  out.rss_um2 = s.rss;
+  out.dof = s.space.dof();
+  out.sigma_um = std::sqrt(s.s2);
+  out.iterations = s.iterations;
+  out.m_corrected_um = s.m_c;
+  return out;
+}
+
 RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
                                 const Eigen::MatrixXd& t_s_in, const RefineOptions& opts,
                                 const RefineTruth* truth,
@@ -612,6 +662,15 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
   // the verdict is on the parameters of the joint model when the loop stops.  If an effect is
   // still implausible then, the loop goes back to the last model whose effects were all
   // plausible, records the implausible ones as rejected, and continues without them.
+  //
+  // The verdict allows for the estimate's uncertainty: an effect is implausible if its
+  // parameters are out of range even when each is moved 2 u toward zero (the data demand an
+  // out-of-range value), or if the estimate itself is beyond three times the range whatever its
+  // uncertainty (the correction is applied at the estimate, and one that far out does more harm
+  // than the effect it would stand for: a gain of 2.4 ± 1.2 fitted to a bump).  At σ = 0.2 µm a
+  // true 5 % gain of configuration 3 is fitted as g4 = 0.21 ± 0.11 (configuration 4's gain is
+  // poorly determined); judged on the estimate alone it was rejected, and PE1 plus a 0.5 µm/s
+  // drift stood in for it (S error 1.5 -> 91 µm).
   struct Snapshot {
     Model M;
     Solved cur;
@@ -620,8 +679,17 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
     ResidualAnalysis residual;
     std::string model_name;
   };
-  auto implausibility_of = [&](const Model& model, const EffectContext& ctx, std::size_t e) {
-    return model.effects[e]->implausibility(model.p[e], ctx);
+  auto implausibility_of = [&](const Model& model, const Solved& s, std::size_t e) {
+    const Eigen::VectorXd& p = model.p[e];
+    const Eigen::VectorXd& u = s.u[e];
+    Eigen::VectorXd q(p.size());
+    for (Eigen::Index j = 0; j < p.size(); ++j)
+      q(j) = std::copysign(std::max(0.0, std::abs(p(j)) - 2.0 * u(j)), p(j));
+    std::string reason = model.effects[e]->implausibility(q, s.ctx);
+    if (!reason.empty()) return reason + " with every parameter moved 2 u toward zero";
+    reason = model.effects[e]->implausibility(p / 3.0, s.ctx);
+    if (!reason.empty()) return reason + " at a third of the estimate (beyond 3x the range)";
+    return reason;
   };
   Snapshot plausible{M, cur, res.steps.size(), current_sep, res.residual, res.model_name};
   std::vector<std::string> excluded;  // rejected as implausible: not scored again
@@ -733,14 +801,14 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
       res.steps.push_back(std::move(st));
       bool all_plausible = true;
       for (std::size_t e = 0; e < M.effects.size(); ++e)
-        all_plausible = all_plausible && implausibility_of(M, cur.ctx, e).empty();
+        all_plausible = all_plausible && implausibility_of(M, cur, e).empty();
       if (all_plausible)
         plausible = Snapshot{M, cur, res.steps.size(), current_sep, res.residual, res.model_name};
     }
     // The verdict on the joint model's parameters.
     std::vector<std::size_t> bad;
     for (std::size_t e = 0; e < M.effects.size(); ++e)
-      if (!implausibility_of(M, cur.ctx, e).empty()) bad.push_back(e);
+      if (!implausibility_of(M, cur, e).empty()) bad.push_back(e);
     if (bad.empty()) break;
     if (res.stop_reason == "maximum number of effects reached") {
       // The caller capped the model below what the data need: the effects in it stand in for the
@@ -748,7 +816,7 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
       // "incomplete".
       for (std::size_t e : bad)
         res.implausible_kept.push_back(M.effects[e]->name() + ": implausible parameters (" +
-                                       implausibility_of(M, cur.ctx, e) +
+                                       implausibility_of(M, cur, e) +
                                        "), kept because the loop was capped at max_effects");
       break;
     }
@@ -769,7 +837,7 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
         rc.F = res.steps[si].F;
         rc.p_value = res.steps[si].p_value;
       }
-      rc.reason = "rejected: implausible parameters (" + implausibility_of(M, cur.ctx, e) + ")";
+      rc.reason = "rejected: implausible parameters (" + implausibility_of(M, cur, e) + ")";
       res.rejected.push_back(std::move(rc));
       excluded.push_back(M.effects[e]->name());
     }
@@ -791,6 +859,8 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
   res.effects = M.effects;
   res.parameters = M.p;
   res.u_parameters = cur.u;
+  res.covariance = cur.s2 * cur.last.cov_unit;
+  res.determined = cur.last.determined;
   res.m_corrected_um = cur.m_c;
   res.after = M.effects.empty() ? res.before : current_sep;
   return res;

@@ -11,6 +11,7 @@
 #include <string>
 
 #include "errsep/core/effect_drift.hpp"
+#include "errsep/core/effect_periodic.hpp"
 #include "errsep/core/refine.hpp"
 #include "support/refine_cases.hpp"
 
@@ -204,5 +205,12 @@ TEST_CASE("periodic: a lead-screw-like periodic positioning error, period from t
   REQUIRE(std::sscanf(desc.c_str(), "periodic slide positioning error, period %lf", &est_period) ==
           1);
   CHECK(std::abs(1.0 / est_period - 1.0 / period) <= 0.5 * dfreq + 1e-12);
-  check_identified(r, "periodic", Eigen::Vector2d(A * std::sin(phase), A * std::cos(phase)));
+  // The period is refined with a and b: the truth in the model's parameters is (a, b, 23 mm − the
+  // grid period).
+  const auto& per = dynamic_cast<const PeriodicEffect&>(*r.effects.front());
+  check_identified(
+      r, "periodic",
+      Eigen::Vector3d(A * std::sin(phase), A * std::cos(phase), period - per.period_mm()));
+  std::printf("  period %.4f +- %.4f mm (truth %g)\n", per.period_mm(r.parameters.front()),
+              r.u_parameters.front()(2), period);
 }

@@ -23,6 +23,8 @@ class SensorOffsetEffect final : public ModelEffect {
   Eigen::MatrixXd jacobian(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
   /// δO_i for every position of configuration i.
   Eigen::MatrixXd f_shift_mm(const Eigen::VectorXd& p, const FourSensorConfig& cfg) const override;
+  /// δO_i: the sensor moved, so did the lever arm of γ.
+  Eigen::Vector4d lever_arm_error_mm(const Eigen::VectorXd& p) const override;
   std::string implausibility(const Eigen::VectorXd& p, const EffectContext& ctx) const override;
   std::unique_ptr<ModelEffect> clone() const override;
 };

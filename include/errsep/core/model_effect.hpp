@@ -28,9 +28,9 @@ struct EffectContext {
   Eigen::Vector4d e_um = Eigen::Vector4d::Zero();
   Eigen::MatrixXd residual_um;  ///< P × 4 reading residual of the current model (for searches)
 
-  /// Natural cubic splines through f̂ (over the reference grid), Ŝ and γ̂ (over the slide
-  /// positions): the shifted samples PE1 and PE2 need.  Call prepare() after setting the
-  /// profiles; linear extrapolation outside the grid.
+  /// Interpolants through f̂ (reference_interpolation_weights), Ŝ and γ̂ (natural cubic splines
+  /// over the slide positions): the shifted samples PE1 and PE2 need.  Call prepare() after
+  /// setting the profiles; linear extrapolation outside the grid.
   void prepare();
   double f_at(double y_mm) const;
   double f_slope_at(double y_mm) const;  ///< µm/mm
@@ -43,8 +43,19 @@ struct EffectContext {
   double f_slope(int j) const { return f_slope_at(j * cfg.dx_mm); }
 
  private:
-  Eigen::VectorXd f_m2_, S_m2_, g_m2_;  // spline second derivatives
+  Eigen::VectorXd S_m2_, g_m2_;  // spline second derivatives
 };
+
+/// How f between its samples is modelled (PE1, PE2 and the periodic error sample it there): the
+/// 8-point Lagrange interpolant (degree 7) on the nearest samples, the stencil moved inward at the
+/// ends, and linear extrapolation from the end value and slope outside [0, (N − 1)·h].  Weights w
+/// (N, mostly zero) with f(y) = w·f (deriv: f′(y) = w·f, per mm).  Why not the natural cubic
+/// spline: its interpolation error, (5/384)·h⁴·|f⁗|, is 0.05 µm for the 34 mm component of
+/// Zhao 2019 Eq. (24) at Δx = 5 mm, twice a 0.02 µm noise, and it biased PE1's dD2 by 0.8 of its
+/// standard uncertainty; the 8-point interpolant's error there is ~0.003 µm.
+Eigen::RowVectorXd reference_interpolation_weights(int N, double h, double y, bool deriv);
+/// The same as a value: w·f for samples f.
+double reference_interpolate(const Eigen::VectorXd& f, double h, double y, bool deriv);
 
 /// Natural cubic spline through v sampled every h from 0: second derivatives at the knots.
 Eigen::VectorXd spline_second_derivatives(const Eigen::VectorXd& v, double h);
@@ -78,6 +89,11 @@ class ModelEffect {
   /// shifted points) instead of trusting f̂ from the previous fit, which diverges for shifts of a
   /// few mm on a wavy f.  Empty (the default): the effect does not move the sampling point.
   virtual Eigen::MatrixXd f_shift_mm(const Eigen::VectorXd& p, const FourSensorConfig& cfg) const;
+  /// For an effect that moves the sensor (PE1): the error δO_i of the offsets by which γ enters
+  /// Eq. (1) (the reading is S + (O_i + δO_i)·γ + …); correction_um must then contain
+  /// 1000·δO_i·γ̂(x_n).  The refinement eliminates S and γ per position with the actual offsets.
+  /// Default: zero.
+  virtual Eigen::Vector4d lever_arm_error_mm(const Eigen::VectorXd& p) const;
   /// Versions of this effect to score (an effect with a structural choice such as a period
   /// returns one per choice).  Default: a copy of itself.
   virtual std::vector<std::unique_ptr<ModelEffect>> variants(const EffectContext& ctx) const;

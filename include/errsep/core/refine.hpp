@@ -137,9 +137,12 @@ struct RefineResult {
   std::string model_name;  ///< "zhao2019-eq1" plus "+effect" for each addition
   std::vector<std::shared_ptr<const ModelEffect>> effects;  ///< added, in order
   std::vector<Eigen::VectorXd> parameters, u_parameters;    ///< per added effect (final)
-  ResidualAnalysis residual;                                ///< of the final model
-  FourSensorResult before;  ///< separation of the raw readings (caller's options)
-  FourSensorResult after;   ///< separation of the corrected readings
+  /// Covariance of all added effects' parameters (effect-major, as `parameters` concatenated)
+  /// and the orthonormal combinations of them the data determine, from the final joint fit.
+  Eigen::MatrixXd covariance, determined;
+  ResidualAnalysis residual;  ///< of the final model
+  FourSensorResult before;    ///< separation of the raw readings (caller's options)
+  FourSensorResult after;     ///< separation of the corrected readings
   Eigen::MatrixXd m_corrected_um;
   Eigen::MatrixXd t_s;  ///< reading times used
   double alpha_per_candidate = 0;
@@ -162,5 +165,24 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
                                 const Eigen::MatrixXd& t_s = {}, const RefineOptions& opts = {},
                                 const RefineTruth* truth = nullptr,
                                 std::vector<std::unique_ptr<ModelEffect>> library = {});
+
+/// The joint fit of given effects without any selection (what one step of the loop does for
+/// the model it has chosen): Gauss–Newton from `start` (one vector per effect; empty = zeros).
+struct EffectFit {
+  std::vector<Eigen::VectorXd> parameters, u_parameters;  ///< per effect
+  /// Covariance of all parameters (effect-major, parameter units²) and the orthonormal
+  /// combinations the data determine (columns); see RefineStep.
+  Eigen::MatrixXd covariance, determined;
+  double rss_um2 = 0;
+  double sigma_um = 0;
+  int dof = 0;
+  int iterations = 0;
+  Eigen::MatrixXd m_corrected_um;
+};
+EffectFit fit_effects(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
+                      const Eigen::MatrixXd& t_s,
+                      const std::vector<std::shared_ptr<const ModelEffect>>& effects,
+                      const std::vector<Eigen::VectorXd>& start = {},
+                      const RefineOptions& opts = {});
 
 }  // namespace errsep::core
