@@ -1,14 +1,25 @@
 // The refinement loop (core/refine.hpp) on simulated four-sensor scans (Zhao 2019 Example 1/2
 // geometry, N = 69, Δx = 5 mm) with one effect of the library injected into the readings and not
 // declared: the loop must pick that effect, recover its parameters within the stated standard
-// uncertainty along every direction the data determine, and at least halve the error of S and f
-// against the truth.
+// uncertainty along every direction the data determine, and at least halve the error of S, γ and
+// f.  PE1, PE2 and the periodic error are injected through the simulator (actual spacings, the
+// slide at x + δx), gain and drift by their physical formula on the readings.
+//  - σ = 0.02 µm, one scan each: the effect far above the noise, errors against the truth.
+//  - σ = 0.1 µm (the paper's smallest noise), four seeds: the sizes that matter there; the error
+//    the effect causes (the separation of the scan minus that of the same noise without the
+//    effect) must halve over the seeds (RMS), because against the truth the noise floor of the
+//    separation itself (S: 0.36 µm RMS at 0.1 µm, 0.72 at 0.2, 1.0 at 0.3) is comparable to what
+//    a plausible effect does and no refinement can remove it.  At σ = 0.2-0.3 µm the effects at
+//    these sizes are still found, but the uncertainty of their parameters (PE1's dD4 ±1.3 mm,
+//    gain g4 ±0.1) carried into S is as large as the effect's own error: see the report.
 #include <Eigen/Dense>
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
 #include <string>
+#include <vector>
 
 #include "errsep/core/effect_drift.hpp"
 #include "errsep/core/effect_periodic.hpp"
@@ -21,39 +32,29 @@ using errsep::test::RefineCase;
 
 namespace {
 
-void print_steps(const char* title, const RefineResult& r) {
-  std::printf("%s\n  %s\n", title, r.brief_report().c_str());
-  for (const auto& s : r.steps) {
-    std::printf("  step %d %-8s rms %.4f -> %.4f um, whiteness p = %.3g", s.index, s.effect.c_str(),
-                s.rms_before_um, s.rms_after_um, s.whiteness_after.p_value);
-    if (s.error_before && s.error_after)
-      std::printf(", error S %.4f -> %.4f um, gamma %.3f -> %.3f urad, f %.4f -> %.4f um",
-                  s.error_before->S_um, s.error_after->S_um, s.error_before->gamma_urad,
-                  s.error_after->gamma_urad, s.error_before->f_um, s.error_after->f_um);
-    std::printf("\n");
-    for (Eigen::Index j = 0; j < s.parameters.size(); ++j)
-      std::printf("      %-12s = %.6g +- %.3g\n",
-                  s.parameter_names[static_cast<std::size_t>(j)].c_str(), s.parameters(j),
-                  s.u_parameters(j));
-  }
-}
+using errsep::test::print_steps;
 
-// Along every determined direction w of the step: |wᵀ(p − p_true)| < 3·sqrt(wᵀCw).
+// Along every determined direction w of the step: z = wᵀ(p − p_true)/sqrt(wᵀCw), none beyond 4;
+// of the decorrelated errors at most as many beyond 2 as a calibrated uncertainty gives in 99 %
+// of cases (refine_cases.hpp).
 void check_parameters(const RefineStep& s, const Eigen::VectorXd& p_true) {
   REQUIRE(s.parameters.size() == p_true.size());
   REQUIRE(s.identifiable >= 1);
-  for (Eigen::Index j = 0; j < s.identifiable_directions.cols(); ++j) {
-    const Eigen::VectorXd w = s.identifiable_directions.col(j);
-    const double d = w.dot(s.parameters - p_true);
-    const double u = std::sqrt(w.dot(s.covariance * w));
-    INFO("direction " << j << ": w'(p - p_true) = " << d << ", u = " << u);
-    CHECK(u > 0);
-    CHECK(std::abs(d) < 3.0 * u);
+  const auto z = errsep::test::standardised_errors(s.identifiable_directions, s.covariance,
+                                                   s.parameters, p_true);
+  const auto zd = errsep::test::decorrelated_errors(s.identifiable_directions, s.covariance,
+                                                    s.parameters, p_true);
+  int beyond = 0;
+  for (std::size_t j = 0; j < z.size(); ++j) {
+    std::printf("      direction %zu: z = %.2f (decorrelated %.2f)\n", j, z[j], zd[j]);
+    CHECK(std::abs(z[j]) < 4.0);
+    if (std::abs(zd[j]) > 2.0) ++beyond;
   }
+  CHECK(beyond <= errsep::test::allowed_beyond_2u(z.size()));
 }
 
 void check_identified(const RefineResult& r, const std::string& effect,
-                      const Eigen::VectorXd& p_true, bool error_must_halve = true) {
+                      const Eigen::VectorXd& p_true) {
   REQUIRE(r.steps.size() >= 2);
   const RefineStep& s = r.steps[1];
   CHECK(s.effect == effect);
@@ -61,14 +62,77 @@ void check_identified(const RefineResult& r, const std::string& effect,
   check_parameters(s, p_true);
   REQUIRE(s.error_before);
   REQUIRE(s.error_after);
-  if (error_must_halve) {
-    CHECK(s.error_after->S_um < 0.5 * s.error_before->S_um);
-    CHECK(s.error_after->f_um < 0.5 * s.error_before->f_um);
-  }
+  CHECK(s.error_after->S_um < 0.5 * s.error_before->S_um);
+  CHECK(s.error_after->gamma_urad < 0.5 * s.error_before->gamma_urad);
+  CHECK(s.error_after->f_um < 0.5 * s.error_before->f_um);
   CHECK(s.rms_after_um < s.rms_before_um);
   // Nothing else of the library is added, and what is left is noise.
   CHECK(r.steps.size() == 2);
   CHECK(r.residual_white());
+}
+
+// The errors of a separation against another one (the same noise without the effect): what the
+// effect does to S, γ, f.
+ProfileErrors errors_against(const FourSensorResult& r, const FourSensorResult& ref) {
+  return profile_errors(r, RefineTruth{ref.f_um, ref.S_um, ref.gamma_rad});
+}
+
+// Realistic noise: `seeds` scans with the effect; each must have the effect added first (p <
+// 1e-4), its parameters within their uncertainty (none beyond 4 u, the decorrelated z beyond 2
+// counted over all seeds against the 99 % allowance), and over the seeds
+// the RMS of the error the effect causes in S, γ and f must at least halve.
+template <class MakeCase, class Truth>
+void check_realistic(const char* title, const std::string& effect, double sigma, int seeds,
+                     int example2_k, MakeCase make_case, Truth p_true) {
+  std::printf("%s, sigma %.2f um\n", title, sigma);
+  std::vector<double> zs;
+  double b2[3] = {0, 0, 0}, a2[3] = {0, 0, 0};
+  for (int seed = 1; seed <= seeds; ++seed) {
+    const auto c = make_case(sigma, static_cast<std::uint64_t>(seed));
+    const auto c0 = make_refine_case(sigma, static_cast<std::uint64_t>(seed), {}, {}, example2_k);
+    const auto r = refine_four_sensor(c.cfg, c.sim.m_um, Eigen::MatrixXd(), {}, &c.truth);
+    const FourSensorResult clean = separate_four_sensor(c0.cfg, c0.sim.m_um);
+    INFO("seed " << seed << ": " << r.brief_report());
+    REQUIRE(r.steps.size() >= 2);
+    CHECK(r.steps[1].effect == effect);
+    CHECK(r.steps[1].p_value < 1e-4);
+    if (r.steps[1].effect != effect) continue;
+    const Eigen::VectorXd pt = p_true(*r.effects.front());
+    const RefineStep& s1 = r.steps[1];
+    const auto z = errsep::test::standardised_errors(s1.identifiable_directions, s1.covariance,
+                                                     s1.parameters, pt);
+    const auto zd = errsep::test::decorrelated_errors(s1.identifiable_directions, s1.covariance,
+                                                      s1.parameters, pt);
+    zs.insert(zs.end(), zd.begin(), zd.end());
+    for (double v : z)
+      CHECK(std::abs(v) < 4.0);
+    const ProfileErrors eb = errors_against(r.before, clean), ea = errors_against(r.after, clean);
+    const ProfileErrors& tb = *r.steps.front().error_before;
+    const ProfileErrors& ta = *r.steps.back().error_after;
+    std::printf(
+        "  seed %d: %s; caused by the effect: S %.3f -> %.3f um, gamma %.2f -> %.2f urad, f "
+        "%.3f -> %.3f um; against the truth: S %.3f -> %.3f, gamma %.2f -> %.2f, f %.3f -> "
+        "%.3f\n   z (decorrelated):",
+        seed, r.model_name.c_str(), eb.S_um, ea.S_um, eb.gamma_urad, ea.gamma_urad, eb.f_um,
+        ea.f_um, tb.S_um, ta.S_um, tb.gamma_urad, ta.gamma_urad, tb.f_um, ta.f_um);
+    for (std::size_t j = 0; j < z.size(); ++j)
+      std::printf(" %.2f (%.2f)", z[j], zd[j]);
+    std::printf("\n");
+    b2[0] += eb.S_um * eb.S_um, a2[0] += ea.S_um * ea.S_um;
+    b2[1] += eb.gamma_urad * eb.gamma_urad, a2[1] += ea.gamma_urad * ea.gamma_urad;
+    b2[2] += eb.f_um * eb.f_um, a2[2] += ea.f_um * ea.f_um;
+  }
+  const auto beyond = std::count_if(zs.begin(), zs.end(), [](double v) { return std::abs(v) > 2; });
+  std::printf(
+      "  over %d seeds, RMS of the error caused: S %.3f -> %.3f um, gamma %.2f -> %.2f urad, f "
+      "%.3f -> %.3f um; %zu of %zu z beyond 2 (allowed %d)\n",
+      seeds, std::sqrt(b2[0] / seeds), std::sqrt(a2[0] / seeds), std::sqrt(b2[1] / seeds),
+      std::sqrt(a2[1] / seeds), std::sqrt(b2[2] / seeds), std::sqrt(a2[2] / seeds),
+      static_cast<std::size_t>(beyond), zs.size(), errsep::test::allowed_beyond_2u(zs.size()));
+  CHECK(a2[0] < 0.25 * b2[0]);
+  CHECK(a2[1] < 0.25 * b2[1]);
+  CHECK(a2[2] < 0.25 * b2[2]);
+  CHECK(beyond <= errsep::test::allowed_beyond_2u(zs.size()));
 }
 
 RefineResult run(const RefineCase& c, const RefineOptions& o = {}) {
@@ -133,18 +197,28 @@ TEST_CASE("drift: only one combination of the four drift rates is identifiable")
   CHECK(check_identifiability(ResidualSpace(c0.cfg), Jb).identifiable == 1);
 }
 
+namespace {
+// Orthonormal basis of the drift rates no scan can see (scan-order times).
+Eigen::MatrixXd drift_null_basis(const FourSensorConfig& cfg, const Eigen::MatrixXd& m) {
+  EffectContext ctx;
+  ctx.cfg = cfg;
+  ctx.m_um = m;
+  ctx.t_s = scan_order_times_s(cfg);
+  const Eigen::MatrixXd Jr =
+      reduce_columns(cfg, DriftEffect().jacobian(Eigen::Vector4d::Zero(), ctx));
+  const Identifiability id = check_identifiability(ResidualSpace(cfg), Jr);
+  return Eigen::HouseholderQR<Eigen::MatrixXd>(id.null_directions).householderQ() *
+         Eigen::MatrixXd::Identity(4, id.null_directions.cols());
+}
+}  // namespace
+
+// The identifiable combination alone (configuration 3 drifting at 0.02 um/s less its part in the
+// null space): it is not only residual, much of it looks like f, S and gamma (its column is mostly
+// inside the base model), so it biases them, and removing it must halve their errors.
 TEST_CASE("drift: the identifiable drift combination is found and removed") {
   const auto c0 = make_refine_case(0.02, 13);
-  EffectContext ctx;
-  ctx.cfg = c0.cfg;
-  ctx.m_um = c0.sim.m_um;
-  ctx.t_s = scan_order_times_s(c0.cfg);
-  const Eigen::MatrixXd Jr =
-      reduce_columns(c0.cfg, DriftEffect().jacobian(Eigen::Vector4d::Zero(), ctx));
-  const Identifiability id = check_identifiability(ResidualSpace(c0.cfg), Jr);
-  REQUIRE(id.identifiable == 1);
-  Eigen::MatrixXd Z = Eigen::HouseholderQR<Eigen::MatrixXd>(id.null_directions).householderQ() *
-                      Eigen::MatrixXd::Identity(4, id.null_directions.cols());
+  const Eigen::MatrixXd Z = drift_null_basis(c0.cfg, c0.sim.m_um);
+  REQUIRE(Z.cols() == 3);
   Eigen::Vector4d a(0.0, 0.0, 0.02, 0.0);  // µm/s on configuration 3 ...
   a -= Z * (Z.transpose() * a);            // ... less what no scan can see
   std::printf("drift rates injected: %g %g %g %g um/s\n", a(0), a(1), a(2), a(3));
@@ -154,16 +228,68 @@ TEST_CASE("drift: the identifiable drift combination is found and removed") {
   });
   const auto r = run(c);
   print_steps("drift (identifiable combination), sigma 0.02 um", r);
-  // That combination is by construction invisible to S, γ and f (it is what they cannot absorb),
-  // so it biases the readings' residual, not the profiles: the error cannot fall by half; it must
-  // end at the level of the same scan without drift.
-  check_identified(r, "drift", a, false);
-  const auto clean = run(c0);
-  REQUIRE(clean.steps.front().error_after);
-  std::printf("  same seed without drift: error S %.4f um, f %.4f um\n",
-              clean.steps.front().error_after->S_um, clean.steps.front().error_after->f_um);
-  CHECK(r.steps[1].error_after->S_um < 1.5 * clean.steps.front().error_after->S_um);
-  CHECK(r.steps[1].error_after->f_um < 1.5 * clean.steps.front().error_after->f_um);
+  check_identified(r, "drift", a);
+}
+
+// A realistic drift: the sensor, re-clamped for configuration 3, creeps at 0.02 um/s during that
+// traverse and after (m_3 += a*t), the other configurations do not.  Of the four rates one
+// combination is identifiable; three are not (drift: only one combination ...): a drift common to
+// all configurations (e takes its constant per traverse, S the common x/v part: a line in S, which
+// the alignment removes), one proportional to the offset O_i (gamma takes x/v: a linear error of
+// gamma) and one proportional to O_i^2 (f(x + O) = ... + 3c·x·O^2 + ... for a cubic f: a cubic in f
+// and S, a quadratic in gamma).  The loop finds the drift and removes the identifiable part (its
+// errors halve, the test above); what the invisible part does to S, gamma and f no refinement of
+// this scan can undo.  Here that part dominates: S 1.4 um of error, of which the invisible part
+// alone causes more than all of it (the two parts partly cancel).  So the test asserts what is
+// true: the drift is found, its determined combination recovered within its uncertainty, and
+// after the refinement the errors are those of a scan carrying only the invisible part (within
+// the noise of the separation), not that they halve.
+TEST_CASE("drift: one configuration drifting; the part no scan can see stays in S, gamma, f") {
+  const double sigma = 0.1, rate = 0.02;  // µm, µm/s
+  const auto c0 = make_refine_case(sigma, 16);
+  const Eigen::MatrixXd Z = drift_null_basis(c0.cfg, c0.sim.m_um);
+  const Eigen::Vector4d a(0.0, 0.0, rate, 0.0);
+  const Eigen::Vector4d a_null = Z * (Z.transpose() * a);
+  auto inject = [](const Eigen::Vector4d& rates) {
+    return [rates](Eigen::MatrixXd& m, const Eigen::MatrixXd& t) {
+      for (int i = 0; i < 4; ++i)
+        m.col(i) += rates(i) * t.col(i);
+    };
+  };
+  const auto c = make_refine_case(sigma, 16, {}, inject(a));
+  const auto r = run(c);
+  print_steps("drift of configuration 3 alone, 0.02 um/s, sigma 0.1 um", r);
+  REQUIRE(r.steps.size() >= 2);
+  const RefineStep& s = r.steps[1];
+  CHECK(s.effect == "drift");
+  CHECK(s.p_value < 1e-6);
+  // The determined combination wᵀa is estimable whatever the invisible part: within 2 u.
+  REQUIRE(s.identifiable == 1);
+  const auto z =
+      errsep::test::standardised_errors(s.identifiable_directions, s.covariance, s.parameters, a);
+  std::printf("  determined combination: z = %.2f\n", z[0]);
+  CHECK(std::abs(z[0]) < 2.0);
+  // The same noise with only the invisible part of the drift, and with none.
+  const auto c_null = make_refine_case(sigma, 16, {}, inject(a_null));
+  const ProfileErrors e_null =
+      profile_errors(separate_four_sensor(c_null.cfg, c_null.sim.m_um), c_null.truth);
+  const ProfileErrors e_clean = profile_errors(separate_four_sensor(c0.cfg, c0.sim.m_um), c0.truth);
+  const ProfileErrors& e0 = *s.error_before;
+  const ProfileErrors& e1 = *r.steps.back().error_after;
+  std::printf(
+      "  invisible part %.4f %.4f %.4f %.4f um/s; errors S / gamma / f: before %.3f / %.2f / %.3f, "
+      "after %.3f / %.2f / %.3f, invisible part alone %.3f / %.2f / %.3f, no drift %.3f / %.2f / "
+      "%.3f\n",
+      a_null(0), a_null(1), a_null(2), a_null(3), e0.S_um, e0.gamma_urad, e0.f_um, e1.S_um,
+      e1.gamma_urad, e1.f_um, e_null.S_um, e_null.gamma_urad, e_null.f_um, e_clean.S_um,
+      e_clean.gamma_urad, e_clean.f_um);
+  // The drift matters: its errors are well above those of the same noise without it.
+  CHECK(e0.S_um > 3.0 * e_clean.S_um);
+  // After the refinement: the errors of the invisible part alone, within the separation's noise
+  // (the no-drift errors).
+  CHECK(std::abs(e1.S_um - e_null.S_um) < e_clean.S_um);
+  CHECK(std::abs(e1.gamma_urad - e_null.gamma_urad) < e_clean.gamma_urad);
+  CHECK(std::abs(e1.f_um - e_null.f_um) < e_clean.f_um);
 }
 
 TEST_CASE("PE2: a smooth slide positioning error is found and corrected") {
@@ -213,4 +339,52 @@ TEST_CASE("periodic: a lead-screw-like periodic positioning error, period from t
       Eigen::Vector3d(A * std::sin(phase), A * std::cos(phase), period - per.period_mm()));
   std::printf("  period %.4f +- %.4f mm (truth %g)\n", per.period_mm(r.parameters.front()),
               r.u_parameters.front()(2), period);
+}
+
+TEST_CASE("realistic noise: PE1 (0.8, -0.6, 0.6) mm at sigma 0.1 um over four seeds") {
+  const Eigen::Vector3d dD(0.8, -0.6, 0.6);
+  check_realistic(
+      "PE1, Example 2 (k = 3)", "pe1", 0.1, 4, 3,
+      [&](double sigma, std::uint64_t seed) {
+        return make_refine_case(
+            sigma, seed,
+            [&](FourSensorSimOptions& so) {
+              so.actual_spacing_mm = std::array<double, 3>{5.0 + dD(0), 5.0 + dD(1), 25.0 + dD(2)};
+            },
+            {}, 3);
+      },
+      [&](const ModelEffect&) { return Eigen::VectorXd(dD); });
+}
+
+TEST_CASE("realistic noise: periodic positioning error 600 um / 23 mm at sigma 0.1 um") {
+  const double A = 600.0, pitch = 23.0, phase = 0.3;
+  check_realistic(
+      "periodic, Example 2 (k = 3)", "periodic", 0.1, 4, 3,
+      [&](double sigma, std::uint64_t seed) {
+        return make_refine_case(
+            sigma, seed,
+            [&](FourSensorSimOptions& so) {
+              so.positioning_error_um = [=](double x) {
+                return A * std::sin(2.0 * std::numbers::pi * x / pitch + phase);
+              };
+            },
+            {}, 3);
+      },
+      [&](const ModelEffect& e) {
+        const auto& per = dynamic_cast<const PeriodicEffect&>(e);
+        return Eigen::VectorXd(
+            Eigen::Vector3d(A * std::sin(phase), A * std::cos(phase), pitch - per.period_mm()));
+      });
+}
+
+TEST_CASE("realistic noise: an 8 % gain error of configuration 3 at sigma 0.1 um") {
+  const Eigen::Vector3d g(0.0, 0.08, 0.0);
+  check_realistic(
+      "gain, Example 2 (k = 3)", "gain", 0.1, 4, 3,
+      [&](double sigma, std::uint64_t seed) {
+        return make_refine_case(
+            sigma, seed, {},
+            [&](Eigen::MatrixXd& m, const Eigen::MatrixXd&) { m.col(2) *= 1.0 + g(1); }, 3);
+      },
+      [&](const ModelEffect&) { return Eigen::VectorXd(g); });
 }
