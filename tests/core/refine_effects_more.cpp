@@ -14,6 +14,7 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <string>
 #include <tuple>
 
@@ -30,23 +31,8 @@ using errsep::test::RefineCase;
 
 namespace {
 
-void print_steps(const char* title, const RefineResult& r) {
-  std::printf("%s\n  %s\n", title, r.brief_report().c_str());
-  for (const auto& s : r.steps) {
-    std::printf("  step %d %-8s rms %.4f -> %.4f um, whiteness p = %.3g", s.index, s.effect.c_str(),
-                s.rms_before_um, s.rms_after_um, s.whiteness_after.p_value);
-    if (s.error_before && s.error_after)
-      std::printf(", error S %.4f -> %.4f um, gamma %.3f -> %.3f urad, f %.4f -> %.4f um",
-                  s.error_before->S_um, s.error_after->S_um, s.error_before->gamma_urad,
-                  s.error_after->gamma_urad, s.error_before->f_um, s.error_after->f_um);
-    std::printf("\n");
-    if (s.index > 0) std::printf("      %s\n", s.description.c_str());
-    for (Eigen::Index j = 0; j < s.parameters.size(); ++j)
-      std::printf("      %-14s = %.6g +- %.3g\n",
-                  s.parameter_names[static_cast<std::size_t>(j)].c_str(), s.parameters(j),
-                  s.u_parameters(j));
-  }
-}
+using errsep::test::check_identified;
+using errsep::test::print_steps;
 
 EffectContext scan_context(const RefineCase& c) {
   EffectContext ctx;
@@ -56,42 +42,30 @@ EffectContext scan_context(const RefineCase& c) {
   return ctx;
 }
 
+// Adds h_i(x_n) = Σ_k c_ik·P_k(2x_n/L − 1) (k = 1..4, Legendre, written out here rather than taken
+// from TraverseEffect) to the readings of traverse i; c configuration-major as the effect's
+// parameters.
+std::function<void(Eigen::MatrixXd&, const Eigen::MatrixXd&)> add_traverse_polynomials(
+    const Eigen::VectorXd& c) {
+  return [c](Eigen::MatrixXd& m, const Eigen::MatrixXd&) {
+    const Eigen::Index P = m.rows();
+    for (Eigen::Index n = 0; n < P; ++n) {
+      const double u = 2.0 * static_cast<double>(n) / static_cast<double>(P - 1) - 1.0;
+      const double Pk[4] = {u, 0.5 * (3 * u * u - 1), 0.5 * (5 * u * u * u - 3 * u),
+                            (35 * u * u * u * u - 30 * u * u + 3) / 8.0};
+      for (int i = 0; i < 4; ++i)
+        for (int k = 0; k < 4; ++k)
+          m(n, i) += c(4 * i + k) * Pk[k];
+    }
+  };
+}
+
 // Orthonormal basis (parameter units) of the directions no scan can determine.
 Eigen::MatrixXd null_basis(const Identifiability& id) {
   const Eigen::Index k = id.null_directions.rows(), k0 = id.null_directions.cols();
   if (k0 == 0) return Eigen::MatrixXd(k, 0);
   return Eigen::HouseholderQR<Eigen::MatrixXd>(id.null_directions).householderQ() *
          Eigen::MatrixXd::Identity(k, k0);
-}
-
-// Along every determined direction w of the step: |wᵀ(p − p_true)| < 3·sqrt(wᵀCw).
-void check_parameters(const RefineStep& s, const Eigen::VectorXd& p_true) {
-  REQUIRE(s.parameters.size() == p_true.size());
-  REQUIRE(s.identifiable >= 1);
-  for (Eigen::Index j = 0; j < s.identifiable_directions.cols(); ++j) {
-    const Eigen::VectorXd w = s.identifiable_directions.col(j);
-    const double d = w.dot(s.parameters - p_true);
-    const double u = std::sqrt(w.dot(s.covariance * w));
-    INFO("direction " << j << ": w'(p - p_true) = " << d << ", u = " << u);
-    CHECK(u > 0);
-    CHECK(std::abs(d) < 3.0 * u);
-  }
-}
-
-void check_identified(const RefineResult& r, const std::string& effect,
-                      const Eigen::VectorXd& p_true) {
-  REQUIRE(r.steps.size() >= 2);
-  const RefineStep& s = r.steps[1];
-  CHECK(s.effect == effect);
-  CHECK(s.p_value < 1e-6);
-  check_parameters(s, p_true);
-  REQUIRE(s.error_before);
-  REQUIRE(s.error_after);
-  CHECK(s.error_after->S_um < 0.5 * s.error_before->S_um);
-  CHECK(s.error_after->f_um < 0.5 * s.error_before->f_um);
-  CHECK(s.rms_after_um < s.rms_before_um);
-  CHECK(r.steps.size() == 2);
-  CHECK(r.residual_white());
 }
 
 RefineResult run(const RefineCase& c, const RefineOptions& o = {}) {
@@ -231,7 +205,7 @@ TEST_CASE("thermal drift: the identifiable combination is found, tau refined, er
   std::printf("  Gauss-Newton iterations %d\n", r.steps[1].gauss_newton_iterations);
   std::printf("  tau = %.3f +- %.3f s (truth %g s)\n", tau_hat, r.u_parameters.front()(4), tau);
   check_identified(r, "thermal", p_true);
-  CHECK(std::abs(th->tau_s(r.parameters.front()) - tau) < 3.0 * r.u_parameters.front()(4));
+  CHECK(std::abs(th->tau_s(r.parameters.front()) - tau) < 2.0 * r.u_parameters.front()(4));
 }
 
 TEST_CASE("traverse: per-traverse S of degree 1..K leaves K directions, K-1 after linear drift") {
@@ -294,9 +268,7 @@ TEST_CASE("traverse: S not repeating between traverses is found and corrected") 
   for (Eigen::Index j = 0; j < p.size(); ++j)
     std::printf(" %.3f", p(j));
   std::printf(" um\n");
-  const auto c = make_refine_case(0.02, sd, {}, [&](Eigen::MatrixXd& m, const Eigen::MatrixXd&) {
-    m += tr.correction_um(p, ctx);
-  });
+  const auto c = make_refine_case(0.02, sd, {}, add_traverse_polynomials(p));
   const auto r = run(c);
   print_steps("non-repeating S (identifiable part), sigma 0.02 um", r);
   check_identified(r, "traverse", p);
@@ -434,4 +406,36 @@ TEST_CASE("yaw (two axes): a constant yaw is the lateral pair's zero offset, not
   CHECK_FALSE(r.yaw_added);
   // The base model (g, e_y, zero offset) explains the readings down to the noise.
   CHECK(r.sigma_before_um < 1.1 * so.eddy_sensor.noise_sigma_um);
+}
+
+// The identifiable part of the non-repeating S above at the paper's noise levels, four seeds each:
+// the error it causes in S, γ, f must halve over the seeds (against the truth the noise floor of
+// the separation dominates at 0.3 µm: S 0.9 -> 0.8-1.6 µm, the 16 parameters' uncertainty carried
+// into S as large as what the effect did).
+//
+// Not here, because it does not hold: the thermal drift (identifiable part, τ = 25 s) at σ = 0.1
+// µm is found in 4 of 4 seeds, but the error it causes in S does not halve over them (RMS 1.56 ->
+// 1.53 µm; γ 95.6 -> 50.0 µrad) and τ's standardised error reaches -3.7; at 0.3 µm one seed takes
+// the linear drift instead and one ends with S 1.7 -> 5.2 µm.  τ is weakly determined at that noise
+// (relative singular value of the amplitude direction 0.21) and the loop has no guard against a
+// correction whose uncertainty exceeds the error it removes.
+TEST_CASE("realistic noise: non-repeating S at sigma 0.1 and 0.3 um") {
+  const auto c0 = make_refine_case(0.1, 1);
+  const EffectContext ctx = scan_context(c0);
+  const TraverseEffect tr;
+  const Eigen::MatrixXd J =
+      reduce_columns(c0.cfg, tr.jacobian(Eigen::VectorXd::Zero(tr.parameter_count()), ctx));
+  const Eigen::MatrixXd Z = null_basis(check_identifiability(ResidualSpace(c0.cfg), J));
+  Eigen::VectorXd p = Eigen::VectorXd::Zero(tr.parameter_count());
+  p(2 * 4 + 1) = 2.0;
+  p(2 * 4 + 2) = 1.0;
+  p -= Z * (Z.transpose() * p);
+  for (double sigma : {0.1, 0.3})
+    errsep::test::check_realistic(
+        "non-repeating S (identifiable part of a 2 um P2 + 1 um P3 on traverse 3)", "traverse",
+        sigma, 4, 0,
+        [&](double sg, std::uint64_t seed) {
+          return make_refine_case(sg, seed, {}, add_traverse_polynomials(p));
+        },
+        [&](const ModelEffect&) { return p; });
 }
