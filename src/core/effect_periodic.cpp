@@ -34,6 +34,15 @@ double PeriodicEffect::period_mm(const Eigen::VectorXd& p) const {
   return std::max(period_mm_ + (p.size() > 2 ? p(2) : 0.0), 0.5 * period_mm_);
 }
 
+std::string PeriodicEffect::description(const Eigen::VectorXd& p) const {
+  char buf[200];
+  std::snprintf(buf, sizeof buf,
+                "periodic slide positioning error, period %.5g mm (refined from %.4g mm): dx = a "
+                "cos(2pi x/l) + b sin(2pi x/l)",
+                period_mm(p), period_mm_);
+  return buf;
+}
+
 Eigen::MatrixXd PeriodicEffect::basis(const FourSensorConfig& cfg, const Eigen::VectorXd& p) const {
   const int P = cfg.positions();
   const double l = period_mm(p);

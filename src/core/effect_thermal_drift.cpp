@@ -19,6 +19,15 @@ std::string ThermalDriftEffect::description() const {
   return buf;
 }
 
+std::string ThermalDriftEffect::description(const Eigen::VectorXd& p) const {
+  char buf[200];
+  std::snprintf(buf, sizeof buf,
+                "first-order thermal drift per configuration, tau = %.4g s (refined from %.4g s): "
+                "m_i -> m_i - a_i*(1 - exp(-t/tau))",
+                tau_s(p), tau0_s_);
+  return buf;
+}
+
 double ThermalDriftEffect::tau_s(const Eigen::VectorXd& p) const {
   // A Gauss–Newton step may overshoot; τ stays positive (the step control then halves it).
   return std::max(tau0_s_ + (p.size() > 4 ? p(4) : 0.0), 0.05 * tau0_s_);

@@ -162,6 +162,10 @@ double EffectContext::gamma_slope_at(double x) const {
   return spline_eval(gamma_rad, g_m2_, cfg.dx_mm, x, true);
 }
 
+std::string ModelEffect::description(const Eigen::VectorXd&) const {
+  return description();
+}
+
 Eigen::MatrixXd ModelEffect::f_shift_mm(const Eigen::VectorXd&, const FourSensorConfig&) const {
   return {};
 }

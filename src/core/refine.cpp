@@ -757,6 +757,7 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
       cur = std::move(next);
       st.gauss_newton_iterations = cur.iterations;
       st.parameters = M.p.back();
+      st.description = M.effects.back()->description(st.parameters);
       st.u_parameters = cur.u.back();
       {
         // The added effect's block of the joint linearisation.

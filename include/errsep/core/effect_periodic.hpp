@@ -18,6 +18,7 @@ class PeriodicEffect final : public ModelEffect {
   explicit PeriodicEffect(double period_mm = 0.0) : period_mm_(period_mm) {}
   std::string name() const override { return "periodic"; }
   std::string description() const override;
+  std::string description(const Eigen::VectorXd& p) const override;
   std::vector<std::string> parameter_names() const override {
     return {"a_cos_um", "b_sin_um", "dperiod_mm"};
   }

@@ -40,6 +40,7 @@ class ThermalDriftEffect final : public ModelEffect {
   explicit ThermalDriftEffect(double tau0_s = 0.0) : tau0_s_(tau0_s) {}
   std::string name() const override { return "thermal"; }
   std::string description() const override;
+  std::string description(const Eigen::VectorXd& p) const override;
   std::vector<std::string> parameter_names() const override {
     return {"a1_um", "a2_um", "a3_um", "a4_um", "dtau_s"};
   }

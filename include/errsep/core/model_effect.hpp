@@ -73,6 +73,9 @@ class ModelEffect {
   virtual std::string name() const = 0;
   /// One line for the report.
   virtual std::string description() const = 0;
+  /// The same for fitted parameters p, where a structural value was refined (the periodic error's
+  /// period, the thermal drift's τ).  Default: description().
+  virtual std::string description(const Eigen::VectorXd& p) const;
   /// Parameter names with unit suffix, e.g. "dD2_mm".  Their number is the effect's k.
   virtual std::vector<std::string> parameter_names() const = 0;
   int parameter_count() const { return static_cast<int>(parameter_names().size()); }
