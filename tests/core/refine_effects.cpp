@@ -58,6 +58,13 @@ TEST_CASE("PE1: sensor spacings off by about a mm are found and corrected") {
   const auto r = run(c);
   print_steps("PE1 dD = (0.8, -0.6, 0.6) mm, Example 2 (k = 3), sigma 0.02 um", r);
   check_identified(r, "pe1", dD);
+  // fit_effects, the joint fit of a given model, from zero: the same minimum as the loop's.
+  REQUIRE(r.effects.size() == 1);
+  const EffectFit f = fit_effects(c.cfg, c.sim.m_um, {}, r.effects);
+  REQUIRE(f.parameters.size() == 1);
+  for (Eigen::Index j = 0; j < 3; ++j)
+    CHECK(std::abs(f.parameters[0](j) - r.parameters[0](j)) < 0.01 * r.u_parameters[0](j));
+  CHECK(f.rss_um2 == Approx(r.steps.back().rss_after_um2).epsilon(1e-6));
 }
 
 TEST_CASE("gain: a 5 % gain error of configuration 3 is found and corrected") {
