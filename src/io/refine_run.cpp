@@ -1,7 +1,5 @@
 #include "errsep/io/refine_run.hpp"
 
-#include <unistd.h>
-
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -13,6 +11,7 @@
 #include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/reference_csv.hpp"
 #include "errsep/io/refine_report.hpp"
+#include "errsep/io/staged_directory.hpp"
 
 namespace errsep::io {
 
@@ -79,48 +78,6 @@ namespace {
 Eigen::VectorXd vec(const std::vector<double>& v) {
   return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()));
 }
-
-// Staging directory next to the output: the files appear in DIR only when all are written.
-class Staging {
- public:
-  explicit Staging(const fs::path& out) : out_(out.lexically_normal()) {
-    if (!out_.has_filename()) out_ = out_.parent_path();
-    fs::path parent = out_.parent_path();
-    if (parent.empty()) parent = ".";
-    fs::create_directories(parent);
-    dir_ =
-        parent / ("." + out_.filename().string() + ".refine-partial-" + std::to_string(::getpid()));
-    fs::remove_all(dir_);
-    fs::create_directory(dir_);
-  }
-  Staging(const Staging&) = delete;
-  Staging& operator=(const Staging&) = delete;
-  ~Staging() {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);  // after commit() it is gone already; on an error nothing stays
-  }
-  const fs::path& dir() const { return dir_; }
-  /// Moves the staged files into the output directory (created if needed).
-  std::vector<fs::path> commit() {
-    std::vector<fs::path> names;
-    for (const auto& e : fs::directory_iterator(dir_))
-      names.push_back(e.path().filename());
-    if (!fs::exists(out_)) {
-      fs::rename(dir_, out_);
-    } else {
-      for (const auto& n : names)
-        fs::rename(dir_ / n, out_ / n);
-      fs::remove(dir_);
-    }
-    std::vector<fs::path> files;
-    for (const auto& n : names)
-      files.push_back(out_ / n);
-    return files;
-  }
-
- private:
-  fs::path out_, dir_;
-};
 
 void add_comparison(CsvTable& t, double code, const core::ReferenceComparison& b,
                     const core::ReferenceComparison& a) {
@@ -211,7 +168,7 @@ RefineRunResult run_refine(const FourSensorInputs& in, const fs::path& out_dir,
   out.text = format_refine_text(r);
   if (out.reference) out.text += format_reference_text(*out.reference);
 
-  Staging stage(out_dir);
+  StagedDirectory stage(out_dir, "refine");  // the files appear in DIR only when all are written
   CsvTable steps = refine_csv(r);
   steps.set_meta("source", opts.source);
   write_csv(stage.dir() / "refine_steps.csv", steps);
