@@ -81,8 +81,9 @@ void separate_four_sensor(const io::RawFourSensorScan& raw, const fs::path& raw_
   const auto res = core::separate_four_sensor(g, m, opts);
   io::write_four_sensor_result(out, res, {raw_file.string(), "X", "Y", {}});
   std::cout << "separation: " << res.brief_report() << "\n";
-  if (res.rule == core::LambdaRule::lcurve && res.lcurve.at_edge)
-    std::cerr << "warning: the L-curve corner is at the edge of the lambda range\n";
+  if (res.lambda_fallback == core::LambdaFallback::discrepancy)
+    std::cerr << "warning: the L-curve has no corner inside the lambda range; lambda was chosen "
+                 "by the discrepancy principle instead\n";
 }
 
 void separate_displacement(const io::RawDisplacementScan& raw) {
