@@ -7,12 +7,17 @@
 #include <cmath>
 #include <cstdio>
 #include <exception>
+#include <filesystem>
 #include <iostream>
 #include <optional>
+#include <string>
+#include <vector>
 
 #include "errsep/core/displacement_method.hpp"
+#include "errsep/core/displacement_residuals.hpp"
 #include "errsep/core/three_point_method.hpp"
 #include "errsep/core/two_axis_displacement.hpp"
+#include "errsep/core/two_axis_yaw.hpp"
 #include "errsep/io/displacement_csv.hpp"
 #include "errsep/version.hpp"
 
@@ -23,23 +28,72 @@ constexpr const char* kColumns =
 sN_scanK_um = sensor N, scan K, as in the raw-scan CSV that errsep-scan records):
   one-axis     a raw displacement scan ("# format: errsep raw displacement scan", "# d_mm: d"),
                or any CSV with x_mm, s1_scan1_um, s2_scan1_um, s2_scan2_um [+ "# d_mm: d"]
+               [+ s1_scan2_um: the workpiece sensor during scan 2, makes Eq. (1) redundant]
                s1 = workpiece sensor, s2 = reference sensor; scan 2 after the reference piece is
                traversed by d.  x uniform and increasing.  d: --d-mm, else d_mm, else dx.
   two-axis     x_mm, y_mm, s0_scan1_um, s1_scan1_um, s1_scan2_um, s2_scan1_um, s2_scan2_um,
                s3_scan1_um, s3_scan2_um, s4_scan1_um, s4_scan2_um   (one row per grid point,
                any order, every point of a uniform x-y grid exactly once)
+               optional: s0_scan2_um (sensor 0 during scan 2), t_scan1_s (time order of the
+               residuals; default x fastest, then y), and the lateral sensor pair on the side
+               face of reference X, sa_scan1_um, sa_scan2_um, sb_scan1_um, sb_scan2_um (all
+               four): with them the yaw of the x table is diagnosed (--no-yaw to skip)
   three-point  x_mm, m1_um, m2_um, m3_um   (sensors at 0, s1*dx, (s1+s2)*dx on the carriage)
+  -i may be given several times (one-axis, two-axis): repeated runs of the same measurement on
+  the same grid; the separation uses their mean, and the repeats are a residual of their own.
 Output CSV:
   one-axis     x_mm, r_um, m_um, w_um
   two-axis     x_mm, y_mm, w_um, m_w_um, m1x_um, m2x_um, m3y_um, m4y_um, m_wxe_um, m_wye_um,
-               r1x_um, r2x_um, r3y_um, r4y_um   (x fastest)
+               r1x_um, r2x_um, r3y_um, r4y_um   (x fastest); with the yaw diagnosis also
+               yaw_urad and w_before_yaw_um (w_um is then corrected for a significant yaw)
   three-point  x_mm, f_um; with --motion-out also x_mm, S_um, gamma_urad
-d must be an integer multiple of the sampling interval.  Exit status 0 on success, 1 on bad input
-(message "file:line: problem"), nothing written on failure.)";
+  residuals    (one-axis, two-axis; --residuals-out, default <out>.residuals.csv beside the
+               result) one row per redundant equation: family, sensor, scan, run, order, x_mm,
+               [y_mm,] value_um, residual_um; the noise level sigma_hat (dof, 95 % interval)
+               and the whiteness verdict in the metadata.  What is redundant: two axes, Eq. (4)
+               on every row (sensors 1, 2) and column (3, 4), the reference pieces being functions
+               of one coordinate; sensor 0 / sensor 1 read in both scans; repeated runs.  One axis
+               with only Eqs. (1)-(3) is exactly determined: the file then says so.
+d must be an integer multiple of the sampling interval.  Exit status 0 on success (also when the
+residual is not white: that is reported), 1 on bad input (message "file:line: problem"), nothing
+written on failure.)";
 
 errsep::core::ChainJoin chain_join_from(const std::string& s) {
   return s == "given" ? errsep::core::ChainJoin::given_initial_values
                       : errsep::core::ChainJoin::least_roughness;
+}
+
+/// Default residual file: beside the result, <stem>.residuals.csv.
+std::string residuals_path(const std::string& output, const std::string& given) {
+  if (!given.empty()) return given;
+  std::filesystem::path p(output);
+  return (p.parent_path() / (p.stem().string() + ".residuals.csv")).string();
+}
+
+bool same_axis(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
+  if (a.size() != b.size()) return false;
+  for (Eigen::Index k = 0; k < a.size(); ++k)
+    if (std::abs(a(k) - b(k)) > 1e-6 * std::max(1.0, std::abs(a(k)))) return false;
+  return true;
+}
+
+std::string fmt(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.4g", v);
+  return buf;
+}
+
+/// The residual verdict in a result file's metadata.
+void residual_meta(errsep::io::CsvTable& t, const errsep::core::DisplacementResiduals& r,
+                   const std::string& path) {
+  t.set_meta("residuals", path);
+  std::string v = r.families.empty() ? std::string("nothing redundant to test")
+                                     : (r.white ? std::string("white") : std::string("NOT white"));
+  for (const auto& f : r.families)
+    if (f.dof > 0)
+      v += "; " + std::string(errsep::core::to_string(f.kind)) + " sigma_hat " + fmt(f.sigma_um) +
+           " um (dof " + std::to_string(f.dof) + "), whiteness p " + fmt(f.whiteness.p_value);
+  t.set_meta("residual_verdict", v);
 }
 
 }  // namespace
@@ -53,7 +107,12 @@ int main(int argc, char** argv) {
   app.footer(kColumns);
   app.require_subcommand(1);
 
-  std::string input, output, motion_out, chain = "least-roughness";
+  std::vector<std::string> inputs;
+  std::string output, motion_out, residuals_out, chain = "least-roughness";
+  errsep::core::DisplacementResidualOptions ropt;
+  errsep::core::YawGeometry yaw_geo;
+  int yaw_degree_x = 2, yaw_degree_y = 1;
+  bool yaw_on = false, yaw_off = false;
   std::optional<double> d_mm, d_x_mm, d_y_mm;
   double r0_um = 0;
   errsep::core::TwoAxisGeometry geo;
@@ -65,13 +124,24 @@ int main(int argc, char** argv) {
       app.add_subcommand("two-axis", "x-y stage with roll/pitch correction, Eqs. (10)-(27)");
   auto* three = app.add_subcommand("three-point", "generalised three-point method");
   for (auto* sc : {one, two, three}) {
-    sc->add_option("-i,--input", input, "recorded scans (CSV, columns in --help)")->required();
+    sc->add_option("-i,--input", inputs,
+                   "recorded scans (CSV, columns in --help); one-axis and two-axis take several "
+                   "(repeated runs)")
+        ->required();
     sc->add_option("-o,--out", output, "result CSV (written atomically)")->required();
   }
-  for (auto* sc : {one, two})
+  three->get_option("--input")->expected(1);
+  for (auto* sc : {one, two}) {
     sc->add_option("--chain-join", chain,
                    "d > dx: join the d/dx chains by least-roughness or take given initial values")
         ->check(CLI::IsMember({"least-roughness", "given"}));
+    sc->add_option("--residuals-out", residuals_out,
+                   "residuals of the redundant equations (default <out>.residuals.csv)");
+    sc->add_option("--alpha", ropt.whiteness.alpha,
+                   "significance of the whiteness test (and of the yaw F-test)")
+        ->capture_default_str()
+        ->check(CLI::Range(0.001, 0.5));
+  }
   one->add_option(
       "--d-mm", d_mm,
       "traverse d of the reference piece (default: the file's d_mm, else the sampling interval)");
@@ -91,6 +161,29 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   two->add_flag("--no-rotation-correction", no_rotation,
                 "use Eqs. (20)-(21) (m_w = m2_x + m4_y) instead of (22)-(27)");
+  two->add_flag("--yaw", yaw_on,
+                "diagnose the x table's yaw (needs the lateral pair columns sa_/sb_scanK_um; "
+                "default: whenever they are present)");
+  two->add_flag("--no-yaw", yaw_off, "do not diagnose yaw even when the lateral pair is present")
+      ->excludes("--yaw");
+  two->add_option("--lateral-a-mm", yaw_geo.lateral_a_mm,
+                  "position X_a of lateral sensor a along reference X")
+      ->capture_default_str();
+  two->add_option("--lateral-b-mm", yaw_geo.lateral_b_mm,
+                  "position X_b of lateral sensor b (X_b - X_a a non-zero multiple of dx)")
+      ->capture_default_str();
+  two->add_option("--yaw-axis-s-mm", yaw_geo.axis_s_mm,
+                  "yaw axis on the sensor line, from sensor 2 toward sensor 1")
+      ->capture_default_str();
+  two->add_option("--yaw-axis-x-mm", yaw_geo.axis_x_mm,
+                  "table position at which the yaw axis is under the sensor line")
+      ->capture_default_str();
+  two->add_option("--yaw-degree-x", yaw_degree_x, "Legendre degree of the yaw along x")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 6));
+  two->add_option("--yaw-degree-y", yaw_degree_y, "Legendre degree of the yaw along y")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 6));
   three->add_option("--s1", s1, "spacing sensor 1 -> 2 in sampling intervals")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
@@ -99,10 +192,27 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   three->add_option("--motion-out", motion_out, "also write straightness and tilt (CSV)");
   CLI11_PARSE(app, argc, argv);
+  // Enough Monte-Carlo draws that each of up to three residual families can be rejected at α/3.
+  ropt.whiteness.mc_samples =
+      std::max(999, static_cast<int>(std::ceil(6.0 / ropt.whiteness.alpha)));
 
   try {
     if (one->parsed()) {
-      const auto in = errsep::io::read_one_axis_csv(input);
+      const std::string& input = inputs.front();
+      std::vector<errsep::io::OneAxisInput> all;
+      for (const auto& file : inputs) {
+        all.push_back(errsep::io::read_one_axis_csv(file));
+        const auto& a = all.back();
+        if (!same_axis(a.x_mm, all.front().x_mm))
+          throw std::invalid_argument(file + ": the x positions differ from those of " + input +
+                                      " (repeated runs must share the grid)");
+        if (a.d_mm && all.front().d_mm &&
+            std::abs(*a.d_mm - *all.front().d_mm) > 1e-9 * std::max(1.0, *a.d_mm))
+          throw std::invalid_argument(file + ": d_mm " + std::to_string(*a.d_mm) +
+                                      " differs from " + input + "'s " +
+                                      std::to_string(*all.front().d_mm));
+      }
+      const auto& in = all.front();
       errsep::core::DisplacementOptions o;
       o.sample_interval_mm = in.dx_mm;
       if (d_mm && in.d_mm && std::abs(*d_mm - *in.d_mm) > 1e-9 * std::max(1.0, *d_mm))
@@ -113,11 +223,38 @@ int main(int argc, char** argv) {
       o.chain_join = chain_join_from(chain);
       std::string why;
       if (!o.is_valid(&why)) throw std::invalid_argument(input + ": " + why);
-      const auto res = errsep::core::separate_displacement(in.s1_1_um, in.s2_1_um, in.s2_2_um, o);
-      errsep::io::write_csv(output, errsep::io::one_axis_result_csv(in.x_mm, res));
-      std::cout << res.brief_report() << "\nwrote " << output << "\n";
+      std::vector<errsep::core::OneAxisRun> runs;
+      for (const auto& a : all)
+        runs.push_back({a.s1_1_um, a.s2_1_um, a.s2_2_um, a.s1_2_um});
+      const auto mean = errsep::core::mean_of_runs(runs);
+      const auto res =
+          errsep::core::separate_displacement(mean.s1_1_um, mean.s2_1_um, mean.s2_2_um, o);
+      const auto resid = errsep::core::displacement_residuals_one_axis(in.x_mm, runs, ropt);
+      const std::string rpath = residuals_path(output, residuals_out);
+      auto table = errsep::io::one_axis_result_csv(in.x_mm, res);
+      if (runs.size() > 1) table.set_meta("runs", std::to_string(runs.size()) + " (mean)");
+      residual_meta(table, resid, rpath);
+      const auto rtable = errsep::io::displacement_residuals_csv(resid, false);
+      errsep::io::write_csv(rpath, rtable);
+      errsep::io::write_csv(output, table);
+      std::cout << res.brief_report() << "\n"
+                << resid.brief_report() << "\nwrote " << output << " and " << rpath << "\n";
     } else if (two->parsed()) {
-      const auto in = errsep::io::read_two_axis_csv(input);
+      const std::string& input = inputs.front();
+      std::vector<errsep::io::TwoAxisInput> all;
+      for (const auto& file : inputs) {
+        all.push_back(errsep::io::read_two_axis_csv(file));
+        const auto& a = all.back();
+        if (!same_axis(a.scan.x_mm, all.front().scan.x_mm) ||
+            !same_axis(a.scan.y_mm, all.front().scan.y_mm))
+          throw std::invalid_argument(file + ": the grid differs from that of " + input +
+                                      " (repeated runs must share the grid)");
+        if (a.lateral.has_value() != all.front().lateral.has_value())
+          throw std::invalid_argument(
+              file + ": the lateral pair columns are " + (a.lateral ? "present" : "absent") +
+              " but " + (all.front().lateral ? "present" : "absent") + " in " + input);
+      }
+      const auto& in = all.front();
       errsep::core::TwoAxisOptions o;
       o.dx_mm = in.dx_mm;
       o.dy_mm = in.dy_mm;
@@ -128,11 +265,77 @@ int main(int argc, char** argv) {
       o.chain_join = chain_join_from(chain);
       std::string why;
       if (!o.is_valid(&why)) throw std::invalid_argument(input + ": " + why);
-      const auto res = errsep::core::separate_two_axis(in.scan, o);
-      errsep::io::write_csv(output, errsep::io::two_axis_result_csv(in.scan, res));
-      std::cout << res.brief_report() << "\nwrote " << output << "\n";
+      std::vector<errsep::core::TwoAxisScan> runs;
+      for (const auto& a : all)
+        runs.push_back(a.scan);
+      const auto scan = errsep::core::mean_of_runs(runs);
+      const auto resid = errsep::core::displacement_residuals_two_axis(runs, ropt, in.t_scan1_s);
+      const bool yaw = !yaw_off && (yaw_on || in.lateral.has_value());
+      if (yaw && !in.lateral)
+        throw std::invalid_argument(input +
+                                    ": --yaw needs the lateral pair columns sa_scan1_um, "
+                                    "sa_scan2_um, sb_scan1_um, sb_scan2_um");
+      auto res = errsep::core::separate_two_axis(scan, o);
+      std::optional<errsep::core::TwoAxisYawResult> yres;
+      if (yaw) {
+        errsep::core::LateralPairScan lat = *in.lateral;
+        for (std::size_t q = 1; q < all.size(); ++q) {
+          lat.ua_1_um += all[q].lateral->ua_1_um;
+          lat.ua_2_um += all[q].lateral->ua_2_um;
+          lat.ub_1_um += all[q].lateral->ub_1_um;
+          lat.ub_2_um += all[q].lateral->ub_2_um;
+        }
+        for (auto* m : {&lat.ua_1_um, &lat.ua_2_um, &lat.ub_1_um, &lat.ub_2_um})
+          *m /= static_cast<double>(all.size());
+        errsep::core::YawRefineOptions yo;
+        yo.separation = o;
+        yo.geometry = yaw_geo;
+        yo.degree_x = yaw_degree_x;
+        yo.degree_y = yaw_degree_y;
+        yo.alpha = ropt.whiteness.alpha;
+        if (!yo.is_valid(&why)) throw std::invalid_argument(input + ": yaw: " + why);
+        yres = errsep::core::refine_two_axis_yaw(scan, lat, yo);
+        res = yres->after;
+      }
+      const std::string rpath = residuals_path(output, residuals_out);
+      auto table = errsep::io::two_axis_result_csv(scan, res);
+      if (runs.size() > 1) table.set_meta("runs", std::to_string(runs.size()) + " (mean)");
+      residual_meta(table, resid, rpath);
+      if (yres) {
+        const auto& y = *yres;
+        std::string v = y.yaw_added ? "significant, scans corrected (w_um is corrected)"
+                                    : "not significant, nothing corrected";
+        v += ": F = " + fmt(y.F) + ", p = " + fmt(y.p_value) + ", lateral pair sigma_hat " +
+             fmt(y.sigma_before_um) + " -> " + fmt(y.sigma_after_um) + " um (dof " +
+             std::to_string(y.dof_before) + " -> " + std::to_string(y.dof_after) + ")";
+        table.set_meta("yaw", v);
+        std::string params;
+        for (std::size_t k = 0; k < y.parameter_names.size(); ++k)
+          params += (k ? ", " : "") + y.parameter_names[k] + " = " +
+                    fmt(y.parameters_urad(static_cast<Eigen::Index>(k))) + " +- " +
+                    fmt(y.u_parameters_urad(static_cast<Eigen::Index>(k)));
+        table.set_meta("yaw_parameters",
+                       params +
+                           " (Legendre in x and y over the grid; a constant yaw is the "
+                           "workpiece's placement and not identifiable)");
+        const Eigen::Index nx = scan.x_mm.size(), ny = scan.y_mm.size();
+        std::vector<double> yaw_col, w_before;
+        for (Eigen::Index j = 0; j < ny; ++j)
+          for (Eigen::Index i = 0; i < nx; ++i) {
+            yaw_col.push_back(1e6 * y.yaw_rad(i, j));
+            w_before.push_back(y.before.w_um(i, j));
+          }
+        table.add_column("yaw_urad", yaw_col);
+        table.add_column("w_before_yaw_um", w_before);
+      }
+      const auto rtable = errsep::io::displacement_residuals_csv(resid, true);
+      errsep::io::write_csv(rpath, rtable);
+      errsep::io::write_csv(output, table);
+      std::cout << res.brief_report() << "\n" << resid.brief_report() << "\n";
+      if (yres) std::cout << yres->brief_report() << "\n";
+      std::cout << "wrote " << output << " and " << rpath << "\n";
     } else {
-      const auto in = errsep::io::read_three_point_csv(input);
+      const auto in = errsep::io::read_three_point_csv(inputs.front());
       errsep::core::ThreePointOptions o;
       o.s1 = s1;
       o.s2 = s2;

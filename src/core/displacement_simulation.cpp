@@ -93,6 +93,13 @@ OneAxisSimData simulate_one_axis(const OneAxisTruth& truth, const OneAxisSimOpti
                    opts.reference_sensor.drift_um_per_s * t +
                    rng.normal(opts.reference_sensor.noise_sigma_um);
   }
+  d.s1_2_um.resize(n);
+  for (Eigen::Index k = 0; k < n; ++k) {
+    // Eq. (1) in scan 2, read with the reference sensor's scan-2 reading.
+    const double t = (n + k) * T + opts.timing.pause_between_scans_s;
+    d.s1_2_um(k) = d.w_um(k) + d.m_um(k) + opts.workpiece_sensor.drift_um_per_s * t +
+                   rng.normal(opts.workpiece_sensor.noise_sigma_um);
+  }
   return d;
 }
 
@@ -181,6 +188,14 @@ TwoAxisSimData simulate_two_axis(const TwoAxisTruth& tr, const TwoAxisSimOptions
       s.s3_2_um(i, j) = tr.r3y_um(y + ay) + m3(i, j) + de * t + rng.normal(se);
       s.s4_2_um(i, j) = tr.r4y_um(y + ay) + m4(i, j) + de * t + rng.normal(se);
     }
+  if (opts.record_s0_scan2) {
+    s.s0_2_um.resize(nx, ny);
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        const double t = t0 + (j * nx + i) * T;
+        s.s0_2_um(i, j) = d.w_um(i, j) + d.m_w_um(i, j) + dc * t + rng.normal(sc);
+      }
+  }
   return d;
 }
 

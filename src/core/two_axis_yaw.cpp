@@ -129,6 +129,7 @@ TwoAxisScan corrected_scan(const TwoAxisScan& scan, const TwoAxisResult& sep,
       const double dwdx = grid_derivative(wrow_x, dx, i), dwdy = grid_derivative(wcol_y, dy, j);
       const double dxi0 = ps * s0, deta0 = ps * (scan.x_mm(i) - yg.axis_x_mm);
       c.s0_1_um(i, j) -= dwdx * dxi0 + dwdy * deta0;
+      if (c.s0_2_um.size()) c.s0_2_um(i, j) -= dwdx * dxi0 + dwdy * deta0;
       // Reference slopes at x and at x + d (the last sample's slope beyond the grid).
       const Eigen::Index i2 = std::min(i + p, nx - 1);
       c.s1_1_um(i, j) -= grid_derivative(r1, dx, i) * ps * s1;
@@ -220,6 +221,8 @@ YawSimData simulate_two_axis_yaw(const TwoAxisTruth& truth, const YawTruth& yaw,
       const double dw = truth.w_um(x + dxi0, y + deta0) - truth.w_um(x, y);
       s.s0_1_um(i, j) += dw;
       d.two_axis.w_um(i, j) = truth.w_um(x, y);  // w stays the map at the nominal points
+      // Sensor 0 in scan 2, when recorded, sees the same yaw term.
+      if (s.s0_2_um.size()) s.s0_2_um(i, j) += dw;
       const double dxi1 = psi * (g.l_xs_mm - geometry.axis_s_mm);
       const double dxi2 = psi * (0.0 - geometry.axis_s_mm);
       s.s1_1_um(i, j) += truth.r1x_um(x + dxi1) - truth.r1x_um(x);

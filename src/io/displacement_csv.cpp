@@ -101,6 +101,7 @@ OneAxisInput read_one_axis_csv(const std::filesystem::path& file) {
     in.s1_1_um = to_vec(raw.s1_scan1_um);
     in.s2_1_um = to_vec(raw.s2_scan1_um);
     in.s2_2_um = to_vec(raw.s2_scan2_um);
+    in.s1_2_um = to_vec(raw.s1_scan2_um);
     in.d_mm = raw.d_mm;
   } else {
     const CsvTable strict = read_csv(file, CsvReadOptions{false, 2});  // nan -> file:line
@@ -108,6 +109,7 @@ OneAxisInput read_one_axis_csv(const std::filesystem::path& file) {
     in.s1_1_um = to_vec(strict.column("s1_scan1_um", file));
     in.s2_1_um = to_vec(strict.column("s2_scan1_um", file));
     in.s2_2_um = to_vec(strict.column("s2_scan2_um", file));
+    if (strict.find_column("s1_scan2_um")) in.s1_2_um = to_vec(strict.column("s1_scan2_um", file));
     if (const auto d = strict.meta("d_mm")) {
       double v = 0;
       const auto [p, ec] = std::from_chars(d->data(), d->data() + d->size(), v);
@@ -142,6 +144,27 @@ TwoAxisInput read_two_axis_csv(const std::filesystem::path& file) {
   std::vector<std::vector<double>> cols;
   for (const char* n : names)
     cols.push_back(t.column(n, file));
+  // Optional columns: sensor 0 in scan 2, scan 1's reading time, the lateral pair (all or none).
+  const char* lateral_names[4] = {"sa_scan1_um", "sa_scan2_um", "sb_scan1_um", "sb_scan2_um"};
+  int lateral_present = 0;
+  for (const char* n : lateral_names)
+    lateral_present += t.find_column(n) ? 1 : 0;
+  if (lateral_present > 0 && lateral_present < 4)
+    for (const char* n : lateral_names)
+      if (!t.find_column(n))
+        throw CsvError(file, 0,
+                       std::string("missing column '") + n +
+                           "': the lateral sensor pair needs all four of sa_scan1_um, "
+                           "sa_scan2_um, sb_scan1_um, sb_scan2_um");
+  std::vector<const char*> optional_names;
+  if (t.find_column("s0_scan2_um")) optional_names.push_back("s0_scan2_um");
+  if (t.find_column("t_scan1_s")) optional_names.push_back("t_scan1_s");
+  if (lateral_present == 4)
+    for (const char* n : lateral_names)
+      optional_names.push_back(n);
+  std::vector<std::vector<double>> opt_cols;
+  for (const char* n : optional_names)
+    opt_cols.push_back(t.column(n, file));
   TwoAxisInput in;
   const auto xs = grid_axis(t, x, file, "x_mm", &in.dx_mm);
   const auto ys = grid_axis(t, y, file, "y_mm", &in.dy_mm);
@@ -153,6 +176,7 @@ TwoAxisInput read_two_axis_csv(const std::filesystem::path& file) {
                               &s.s3_1_um, &s.s3_2_um, &s.s4_1_um, &s.s4_2_um};
   for (auto* m : mats)
     m->setZero(nx, ny);
+  std::vector<Eigen::MatrixXd> opt_mats(optional_names.size(), Eigen::MatrixXd::Zero(nx, ny));
   std::vector<std::size_t> seen_line(static_cast<std::size_t>(nx * ny), 0);
   for (std::size_t r = 0; r < t.rows.size(); ++r) {
     const std::size_t i = index_of(xs, x[r]), j = index_of(ys, y[r]);
@@ -164,6 +188,8 @@ TwoAxisInput read_two_axis_csv(const std::filesystem::path& file) {
     seen = line_of(t, r) ? line_of(t, r) : r + 1;
     for (int c = 0; c < 9; ++c)
       (*mats[c])(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) = cols[c][r];
+    for (std::size_t c = 0; c < opt_mats.size(); ++c)
+      opt_mats[c](static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) = opt_cols[c][r];
   }
   for (Eigen::Index j = 0; j < ny; ++j)
     for (Eigen::Index i = 0; i < nx; ++i)
@@ -174,7 +200,108 @@ TwoAxisInput read_two_axis_csv(const std::filesystem::path& file) {
                            " points, the file has " + std::to_string(t.rows.size()) +
                            "; missing (x_mm = " + num(xs[static_cast<std::size_t>(i)]) +
                            ", y_mm = " + num(ys[static_cast<std::size_t>(j)]) + ")");
+  for (std::size_t c = 0; c < optional_names.size(); ++c) {
+    const std::string n = optional_names[c];
+    if (n == "s0_scan2_um") s.s0_2_um = opt_mats[c];
+    if (n == "t_scan1_s") in.t_scan1_s = opt_mats[c];
+  }
+  if (lateral_present == 4) {
+    core::LateralPairScan lat;
+    const std::size_t first = optional_names.size() - 4;
+    lat.ua_1_um = opt_mats[first];
+    lat.ua_2_um = opt_mats[first + 1];
+    lat.ub_1_um = opt_mats[first + 2];
+    lat.ub_2_um = opt_mats[first + 3];
+    in.lateral = std::move(lat);
+  }
   return in;
+}
+
+CsvTable displacement_residuals_csv(const core::DisplacementResiduals& r, bool two_axis) {
+  CsvTable t;
+  t.set_meta("errsep",
+             "displacement method residuals (Haramiishi 2024): the redundant equations, "
+             "core/displacement_residuals.hpp");
+  t.set_meta("units", two_axis ? "x, y in mm; value and residual in um"
+                               : "x in mm; value and residual in um");
+  t.set_meta("columns",
+             "family: index of the family below; sensor: the paper's sensor number; scan: 1 or 2 "
+             "for one reading, 0 for scan 2 minus scan 1; run: 1-based in repeated runs, 0 = mean "
+             "of the runs; order: time order within the family; value: the redundant quantity; "
+             "residual: value minus the least-squares fit of its shared unknowns");
+  t.set_meta("runs", std::to_string(r.runs));
+  t.set_meta("dof", std::to_string(r.dof));
+  auto g = [](double v) {
+    std::ostringstream s;
+    s.precision(4);
+    s << v;
+    return s.str();
+  };
+  std::ostringstream verdict;
+  if (r.families.empty())
+    verdict << "nothing to test";
+  else
+    verdict << (r.white ? "white" : "not white: the displacement model lacks something")
+            << " (alpha " << g(r.alpha)
+            << (r.families.size() > 1 ? " over the families, Bonferroni)" : ")");
+  t.set_meta("verdict", verdict.str());
+  if (!r.note.empty()) t.set_meta("note", r.note);
+  std::vector<std::vector<double>> rows;
+  for (std::size_t fi = 0; fi < r.families.size(); ++fi) {
+    const auto& f = r.families[fi];
+    const std::string key = "family_" + std::to_string(fi + 1);
+    t.set_meta(key, std::string(core::to_string(f.kind)) + ": " + f.equation);
+    t.set_meta(key + "_dof",
+               std::to_string(f.dof) + " (" + std::to_string(f.equations) + " equations)");
+    if (f.dof > 0)
+      t.set_meta(key + "_sigma_um", g(f.sigma_um) + " (per reading, pooled; " + g(f.sigma_low_um) +
+                                        " to " + g(f.sigma_high_um) + " at 95 %)");
+    for (std::size_t c = 0; c < f.channels.size(); ++c) {
+      const auto& ch = f.channels[c];
+      t.set_meta(
+          key + "_sensor_" + std::to_string(ch.sensor) +
+              (ch.scan ? "_scan" + std::to_string(ch.scan) : std::string()),
+          ch.name + ": dof " + std::to_string(ch.dof) + ", sigma_hat " + g(ch.sigma_um) + " um");
+      if (f.kind == core::RedundancyKind::workpiece_repeat && ch.group_mean_um.size() == 1 &&
+          ch.dof > 0) {
+        const double u = std::sqrt(ch.rss_um2 / ch.dof / static_cast<double>(ch.value_um.size()));
+        t.set_meta(key + "_offset_um",
+                   g(ch.group_mean_um(0)) + " +- " + g(u) +
+                       " (scan 2 minus scan 1: a sensor zero shift or a table that moved)");
+      }
+    }
+    const auto& w = f.whiteness;
+    if (f.dof > 0) {
+      std::ostringstream s;
+      s << (w.white ? "white" : "not white") << ", p = " << g(w.p_value) << " (Ljung-Box "
+        << g(w.p_ljung_box) << ", periodogram peak " << g(w.p_periodogram)
+        << ", cumulative periodogram " << g(w.p_cumulative_periodogram) << ", runs " << g(w.p_runs)
+        << ", local excess " << g(w.p_local) << ")";
+      if (!w.rejected_by.empty()) s << "; rejected by " << w.rejected_by;
+      t.set_meta(key + "_whiteness", s.str());
+      std::ostringstream l;
+      l << "z = " << g(w.local_z) << " over " << f.local_instants
+        << " instants centred at x = " << g(f.local_x_mm) << " mm";
+      if (two_axis) l << ", y = " << g(f.local_y_mm) << " mm";
+      t.set_meta(key + "_local_excess", l.str());
+    }
+    for (const auto& ch : f.channels)
+      for (Eigen::Index k = 0; k < ch.value_um.size(); ++k) {
+        std::vector<double> row = {static_cast<double>(fi + 1),  static_cast<double>(ch.sensor),
+                                   static_cast<double>(ch.scan), static_cast<double>(f.run(k)),
+                                   static_cast<double>(k + 1),   f.x_mm(k)};
+        if (two_axis) row.push_back(f.y_mm(k));
+        row.push_back(ch.value_um(k));
+        row.push_back(ch.residual_um(k));
+        rows.push_back(std::move(row));
+      }
+  }
+  t.columns = {"family", "sensor", "scan", "run", "order", "x_mm"};
+  if (two_axis) t.columns.push_back("y_mm");
+  t.columns.push_back("value_um");
+  t.columns.push_back("residual_um");
+  t.rows = std::move(rows);
+  return t;
 }
 
 CsvTable one_axis_result_csv(const Eigen::VectorXd& x_mm, const core::DisplacementResult& r) {

@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "errsep/core/displacement_simulation.hpp"
+#include "errsep/core/two_axis_yaw.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "support/support.hpp"
@@ -41,30 +42,49 @@ void write_one_axis(const std::filesystem::path& p, const core::OneAxisSimData& 
 }
 
 /// Two-axis grid in long format, rows in reverse raster order (the reader must not care);
-/// `skip` drops one row, `drop_column` leaves one sensor column out.
+/// `skip` drops one row, `drop_column` leaves one sensor column out; s0_scan2_um is written when
+/// the scan has it, the lateral pair's four columns when given.
 void write_two_axis(const std::filesystem::path& p, const core::TwoAxisScan& s, int skip = -1,
-                    const std::string& drop_column = "") {
+                    const std::string& drop_column = "",
+                    const core::LateralPairScan* lateral = nullptr) {
   const Eigen::Index nx = s.x_mm.size(), ny = s.y_mm.size();
-  const std::pair<const char*, const Eigen::MatrixXd*> m[] = {
+  std::vector<std::pair<const char*, const Eigen::MatrixXd*>> m = {
       {"s0_scan1_um", &s.s0_1_um}, {"s1_scan1_um", &s.s1_1_um}, {"s1_scan2_um", &s.s1_2_um},
       {"s2_scan1_um", &s.s2_1_um}, {"s2_scan2_um", &s.s2_2_um}, {"s3_scan1_um", &s.s3_1_um},
       {"s3_scan2_um", &s.s3_2_um}, {"s4_scan1_um", &s.s4_1_um}, {"s4_scan2_um", &s.s4_2_um}};
-  std::vector<std::vector<double>> cols(11);
+  if (s.s0_2_um.size()) m.push_back({"s0_scan2_um", &s.s0_2_um});
+  if (lateral) {
+    m.push_back({"sa_scan1_um", &lateral->ua_1_um});
+    m.push_back({"sa_scan2_um", &lateral->ua_2_um});
+    m.push_back({"sb_scan1_um", &lateral->ub_1_um});
+    m.push_back({"sb_scan2_um", &lateral->ub_2_um});
+  }
+  std::vector<std::vector<double>> cols(2 + m.size());
   int row = 0;
   for (Eigen::Index j = ny - 1; j >= 0; --j)
     for (Eigen::Index i = nx - 1; i >= 0; --i, ++row) {
       if (row == skip) continue;
       cols[0].push_back(s.x_mm(i));
       cols[1].push_back(s.y_mm(j));
-      for (int c = 0; c < 9; ++c)
+      for (std::size_t c = 0; c < m.size(); ++c)
         cols[2 + c].push_back((*m[c].second)(i, j));
     }
   io::CsvTable t;
   t.add_column("x_mm", cols[0]);
   t.add_column("y_mm", cols[1]);
-  for (int c = 0; c < 9; ++c)
+  for (std::size_t c = 0; c < m.size(); ++c)
     if (drop_column != m[c].first) t.add_column(m[c].first, cols[2 + c]);
   io::write_csv(p, t);
+}
+
+/// The metadata value `key` of a CSV file ("" when absent).
+std::string meta_of(const std::filesystem::path& p, const std::string& key) {
+  return io::read_csv(p).meta(key).value_or("");
+}
+
+/// Leading number of a metadata value such as "0.1603 (per reading, ...)".
+double leading_number(const std::string& v) {
+  return std::stod(v);
 }
 
 int run(const std::string& args, std::string* out) {
@@ -242,6 +262,328 @@ TEST_CASE("bad input: clear error, non-zero exit, nothing written") {
   CHECK(run("one-axis --d-mm 7.5 -i " + (dir / "scan.csv").string() + " -o " + res.string(),
             &out) == 1);
   CHECK(slurp(res) == "previous result\n");
+}
+
+TEST_CASE("one-axis: the residuals are written beside the result, with sigma_hat and whiteness") {
+  TempDir dir;
+  core::OneAxisSimOptions so;
+  so.workpiece_sensor.noise_sigma_um = 0.29;
+  so.reference_sensor.noise_sigma_um = 0.16;
+  so.seed = 11;
+  const auto sim = core::simulate_one_axis(core::haramiishi2024_fig5_truth(), so);
+  // A raw scan as errsep-scan records it: s1 is read in both scans.
+  io::RawDisplacementScan raw;
+  raw.x_mm = vec(sim.x_mm);
+  raw.s1_scan1_um = vec(sim.s1_1_um);
+  raw.s2_scan1_um = vec(sim.s2_1_um);
+  raw.s1_scan2_um = vec(sim.s1_2_um);
+  raw.s2_scan2_um = vec(sim.s2_2_um);
+  raw.d_mm = 5.0;
+  raw.complete = true;
+  io::write_raw_displacement_csv(dir / "raw.csv", raw);
+  std::string out;
+  const int rc =
+      run("one-axis -i " + (dir / "raw.csv").string() + " -o " + (dir / "res.csv").string(), &out);
+  INFO(out);
+  REQUIRE(rc == 0);
+  CHECK_THAT(out, Catch::Contains("workpiece_repeat: 25 equations, dof 24"));
+  const auto rpath = dir / "res.residuals.csv";
+  REQUIRE(std::filesystem::exists(rpath));
+  const auto t = io::read_csv(rpath);
+  CHECK(t.columns == std::vector<std::string>{"family", "sensor", "scan", "run", "order", "x_mm",
+                                              "value_um", "residual_um"});
+  REQUIRE(t.rows.size() == 25);
+  // value = S1_2 - S1_1; residual = value minus its mean
+  const auto v = t.column("value_um"), e = t.column("residual_um");
+  double mean = 0;
+  for (std::size_t k = 0; k < 25; ++k) {
+    CHECK(v[k] == Approx(sim.s1_2_um(static_cast<Eigen::Index>(k)) -
+                         sim.s1_1_um(static_cast<Eigen::Index>(k)))
+                      .margin(1e-8));
+    mean += v[k] / 25.0;
+  }
+  for (std::size_t k = 0; k < 25; ++k)
+    CHECK(e[k] == Approx(v[k] - mean).margin(1e-8));
+  const double sigma = leading_number(t.meta("family_1_sigma_um").value());
+  std::printf("one-axis app: family_1_sigma_um: %s\n  whiteness: %s\n",
+              t.meta("family_1_sigma_um").value().c_str(),
+              t.meta("family_1_whiteness").value_or("").c_str());
+  CHECK(sigma > 0.29 * 0.55);  // χ²_24 99.9 % interval of σ̂/σ: 0.55-1.50
+  CHECK(sigma < 0.29 * 1.50);
+  CHECK_THAT(t.meta("family_1_whiteness").value_or(""), Catch::Contains("p = "));
+  CHECK_THAT(t.meta("family_1_offset_um").value_or(""), Catch::Contains("+-"));
+  CHECK_THAT(meta_of(dir / "res.csv", "residual_verdict"), Catch::Contains("workpiece_repeat"));
+  CHECK(meta_of(dir / "res.csv", "residuals") == rpath.string());
+
+  // Eqs. (1)-(3) only: the residual file says there is nothing to test.
+  write_one_axis(dir / "plain.csv", sim);
+  REQUIRE(run("one-axis -i " + (dir / "plain.csv").string() + " -o " + (dir / "p.csv").string() +
+                  " --residuals-out " + (dir / "pres.csv").string(),
+              &out) == 0);
+  const auto pt = io::read_csv(dir / "pres.csv", io::CsvReadOptions{false, 0});
+  CHECK(pt.rows.empty());
+  CHECK(pt.meta("verdict").value() == "nothing to test");
+  CHECK_THAT(pt.meta("note").value_or(""), Catch::Contains("exactly determined"));
+
+  // The table moving during scan 2 (4 um thermal rise, tau 8 samples, both sensors; the size
+  // tests/core/displacement_residuals.cpp finds in 40 of 40 seeds): reported as not white, exit
+  // status still 0 (a diagnosis, not an input error).
+  for (std::size_t k = 0; k < raw.x_mm.size(); ++k) {
+    const double h = 4.0 * (1.0 - std::exp(-static_cast<double>(k) / 8.0));
+    raw.s1_scan2_um[k] += h;
+    raw.s2_scan2_um[k] += h;
+  }
+  io::write_raw_displacement_csv(dir / "moved.csv", raw);
+  REQUIRE(run("one-axis -i " + (dir / "moved.csv").string() + " -o " + (dir / "m.csv").string(),
+              &out) == 0);
+  CHECK_THAT(out, Catch::Contains("NOT white"));
+  CHECK_THAT(meta_of(dir / "m.csv", "residual_verdict"), Catch::StartsWith("NOT white"));
+  CHECK_THAT(meta_of(dir / "m.residuals.csv", "verdict"), Catch::StartsWith("not white"));
+
+  // Repeated runs: -i twice; the runs' own family appears, the result is the mean's.
+  so.seed = 12;
+  const auto sim2 = core::simulate_one_axis(core::haramiishi2024_fig5_truth(), so);
+  raw.s1_scan1_um = vec(sim2.s1_1_um);
+  raw.s2_scan1_um = vec(sim2.s2_1_um);
+  raw.s1_scan2_um = vec(sim2.s1_2_um);
+  raw.s2_scan2_um = vec(sim2.s2_2_um);
+  io::write_raw_displacement_csv(dir / "raw2.csv", raw);
+  REQUIRE(run("one-axis -i " + (dir / "raw.csv").string() + " -i " + (dir / "raw2.csv").string() +
+                  " -o " + (dir / "r2.csv").string(),
+              &out) == 0);
+  CHECK_THAT(out, Catch::Contains("repeated_runs: 200 equations, dof 100"));
+  CHECK(meta_of(dir / "r2.csv", "runs") == "2 (mean)");
+}
+
+TEST_CASE("two-axis: residuals of the reference pieces and sensor 0; a thermal drift reported") {
+  TempDir dir;
+  core::TwoAxisSimOptions so;
+  so.nx = 13;
+  so.ny = 11;
+  so.eddy_sensor.noise_sigma_um = 0.16;
+  so.contact_sensor.noise_sigma_um = 0.29;
+  so.record_s0_scan2 = true;
+  so.seed = 5;
+  const auto sim = core::simulate_two_axis(core::example_two_axis_truth(), so);
+  write_two_axis(dir / "grid.csv", sim.scan);
+  std::string out;
+  REQUIRE(run("two-axis -i " + (dir / "grid.csv").string() + " -o " + (dir / "w.csv").string(),
+              &out) == 0);
+  INFO(out);
+  const auto t = io::read_csv(dir / "w.residuals.csv");
+  CHECK(t.columns == std::vector<std::string>{"family", "sensor", "scan", "run", "order", "x_mm",
+                                              "y_mm", "value_um", "residual_um"});
+  CHECK(t.rows.size() == 5 * 143);  // four reference sensors + sensor 0, one row per point
+  // dof: 2·13·10 + 2·11·12 = 524 for the reference pieces, 142 for sensor 0.
+  CHECK_THAT(t.meta("family_1_dof").value(), Catch::StartsWith("524"));
+  CHECK_THAT(t.meta("family_2_dof").value(), Catch::StartsWith("142"));
+  const double se = leading_number(t.meta("family_1_sigma_um").value());
+  const double sc = leading_number(t.meta("family_2_sigma_um").value());
+  std::printf(
+      "two-axis app: sigma_hat eddy %.4f um (truth 0.16, dof 524), contact %.4f um (truth "
+      "0.29, dof 142)\n",
+      se, sc);
+  CHECK(se > 0.16 * 0.90);  // χ²_524 99.9 % interval: 0.90-1.10
+  CHECK(se < 0.16 * 1.10);
+  CHECK(sc > 0.29 * 0.80);  // χ²_142 99.9 % interval: 0.80-1.20
+  CHECK(sc < 0.29 * 1.20);
+  // Residual of sensor 1 at one point = D1 minus its mean over the rows (y).
+  {
+    const auto fam = t.column("family"), sen = t.column("sensor"), x = t.column("x_mm"),
+               y = t.column("y_mm"), e = t.column("residual_um");
+    const Eigen::Index i = 4, j = 7;
+    double mean = 0;
+    for (Eigen::Index jj = 0; jj < 11; ++jj)
+      mean += (sim.scan.s1_2_um(i, jj) - sim.scan.s1_1_um(i, jj)) / 11.0;
+    const double expect = sim.scan.s1_2_um(i, j) - sim.scan.s1_1_um(i, j) - mean;
+    int hits = 0;
+    for (std::size_t r = 0; r < e.size(); ++r)
+      if (fam[r] == 1 && sen[r] == 1 && x[r] == 20.0 && y[r] == 35.0) {
+        ++hits;
+        CHECK(e[r] == Approx(expect).margin(1e-8));
+      }
+    CHECK(hits == 1);
+  }
+
+  // The eddy-current sensors drift thermally on the paper's 25 x 25 grid (0.5 um, tau 600 s,
+  // 1 s per point: the size of the paper's Fig. 14, which tests/core/displacement_residuals.cpp
+  // finds in 5 of 5 seeds): not white.
+  so.nx = 25;
+  so.ny = 25;
+  core::TwoAxisScan drift = core::simulate_two_axis(core::example_two_axis_truth(), so).scan;
+  for (int j = 0; j < 25; ++j)
+    for (int i = 0; i < 25; ++i) {
+      const double t1 = j * 25 + i, t2 = 625 + t1;
+      for (auto* m : {&drift.s1_1_um, &drift.s2_1_um, &drift.s3_1_um, &drift.s4_1_um})
+        (*m)(i, j) += 0.5 * (1 - std::exp(-t1 / 600.0));
+      for (auto* m : {&drift.s1_2_um, &drift.s2_2_um, &drift.s3_2_um, &drift.s4_2_um})
+        (*m)(i, j) += 0.5 * (1 - std::exp(-t2 / 600.0));
+    }
+  write_two_axis(dir / "drift.csv", drift);
+  REQUIRE(run("two-axis -i " + (dir / "drift.csv").string() + " -o " + (dir / "wd.csv").string(),
+              &out) == 0);
+  CHECK_THAT(out, Catch::Contains("NOT white"));
+  CHECK_THAT(meta_of(dir / "wd.residuals.csv", "family_1_whiteness"),
+             Catch::StartsWith("not white"));
+}
+
+namespace {
+
+// Yaw ψ(x, y) = Σ c_kl P_k(u) P_l(v) (µrad, order (0,0), (0,1), (1,0), (1,1), (2,0), (2,1)) on
+// the 120 mm grid, a side face and a lateral straightness for the lateral pair.
+core::YawTruth yaw_truth(const Eigen::VectorXd& c_urad) {
+  core::YawTruth y;
+  y.yaw_rad = [c_urad](double x, double yy) {
+    const double u = x / 60.0 - 1.0, v = yy / 60.0 - 1.0;
+    const double P[3] = {1.0, u, 1.5 * u * u - 0.5}, Q[2] = {1.0, v};
+    double s = 0;
+    int k = 0;
+    for (int a = 0; a <= 2; ++a)
+      for (int b = 0; b <= 1; ++b)
+        s += c_urad(k++) * P[a] * Q[b];
+    return 1e-6 * s;
+  };
+  y.side_um = [](double xi) { return 2.0 * std::sin(2.0 * 3.141592653589793 * xi / 150.0); };
+  y.offset_a_um = 12.3;
+  y.offset_b_um = -40.0;
+  y.lateral_um = [](double x, double yy) {
+    return 3.0 * std::sin(2.0 * 3.141592653589793 * x / 80.0) + 0.02 * yy;
+  };
+  return y;
+}
+
+}  // namespace
+
+TEST_CASE("two-axis: the lateral pair columns switch on the yaw diagnosis; a yaw is found") {
+  // An inclined workpiece (10 and 5 um/mm: yaw acts on heights through slopes) on the example
+  // stage, the yaw of a poor stage (up to ~0.5 mrad), low noise so that the yaw's share of the w
+  // error stands above the floor (as tests/core/refine_effects_more.cpp).
+  TempDir dir;
+  core::TwoAxisTruth truth = core::example_two_axis_truth();
+  const core::GridFn w0 = truth.w_um;
+  truth.w_um = [w0](double x, double y) { return w0(x, y) + 10.0 * x + 5.0 * y; };
+  core::TwoAxisSimOptions so;
+  so.eddy_sensor.noise_sigma_um = 0.002;
+  so.contact_sensor.noise_sigma_um = 0.002;
+  so.seed = 41;
+  const core::YawGeometry geo;  // lateral sensors at 0 and 100 mm, axis at s = 0, x = 60 mm
+  Eigen::VectorXd c(6);
+  c << 150.0, 60.0, 250.0, 0.0, -80.0, 40.0;
+  const auto with = core::simulate_two_axis_yaw(truth, yaw_truth(c), so, geo);
+  const auto without =
+      core::simulate_two_axis_yaw(truth, yaw_truth(Eigen::VectorXd::Zero(6)), so, geo);
+  write_two_axis(dir / "yaw.csv", with.two_axis.scan, -1, "", &with.lateral);
+  write_two_axis(dir / "clean.csv", without.two_axis.scan, -1, "", &without.lateral);
+  std::string out;
+  REQUIRE(run("two-axis -i " + (dir / "yaw.csv").string() + " -o " + (dir / "wy.csv").string(),
+              &out) == 0);
+  INFO(out);
+  const auto t = io::read_csv(dir / "wy.csv");
+  std::printf("yaw app: %s\n", t.meta("yaw").value_or("(none)").c_str());
+  CHECK_THAT(t.meta("yaw").value_or(""), Catch::StartsWith("significant"));
+  REQUIRE(t.find_column("yaw_urad"));
+  REQUIRE(t.find_column("w_before_yaw_um"));
+  // w corrected: closer to the truth than before the correction (errors without their mean).
+  const auto x = t.column("x_mm"), y = t.column("y_mm"), w = t.column("w_um"),
+             wb = t.column("w_before_yaw_um"), psi = t.column("yaw_urad");
+  std::vector<double> ea, eb;
+  double psi_err = 0, psi_rms = 0;
+  for (std::size_t r = 0; r < w.size(); ++r) {
+    const auto i = static_cast<Eigen::Index>(std::lround(x[r] / 5.0));
+    const auto j = static_cast<Eigen::Index>(std::lround(y[r] / 5.0));
+    ea.push_back(w[r] - with.two_axis.w_um(i, j));
+    eb.push_back(wb[r] - with.two_axis.w_um(i, j));
+    psi_err += std::pow(psi[r] - 1e6 * (with.yaw_rad(i, j) - 1e-6 * c(0)), 2);
+    psi_rms += std::pow(1e6 * (with.yaw_rad(i, j) - 1e-6 * c(0)), 2);
+  }
+  auto centred_rms = [](std::vector<double> e) {
+    double m = 0;
+    for (double v : e)
+      m += v / static_cast<double>(e.size());
+    double s = 0;
+    for (double v : e)
+      s += (v - m) * (v - m);
+    return std::sqrt(s / static_cast<double>(e.size()));
+  };
+  const double after = centred_rms(ea), before = centred_rms(eb);
+  std::printf(
+      "yaw app: w error rms %.4f -> %.4f um; yaw (less its constant) rms %.1f urad, error "
+      "rms %.2f urad\n",
+      before, after, std::sqrt(psi_rms / static_cast<double>(w.size())),
+      std::sqrt(psi_err / static_cast<double>(w.size())));
+  CHECK(after < 0.5 * before);
+  CHECK(std::sqrt(psi_err / psi_rms) < 0.1);
+
+  // The same stage without yaw: diagnosed, nothing corrected.
+  REQUIRE(run("two-axis -i " + (dir / "clean.csv").string() + " -o " + (dir / "wc.csv").string(),
+              &out) == 0);
+  const auto tc = io::read_csv(dir / "wc.csv");
+  std::printf("yaw app, clean: %s\n", tc.meta("yaw").value_or("(none)").c_str());
+  CHECK_THAT(tc.meta("yaw").value_or(""), Catch::StartsWith("not significant"));
+  const auto wc = tc.column("w_um"), wcb = tc.column("w_before_yaw_um");
+  CHECK(wc == wcb);
+  // --no-yaw skips it; --yaw without the columns is an input error.
+  REQUIRE(
+      run("two-axis --no-yaw -i " + (dir / "yaw.csv").string() + " -o " + (dir / "wn.csv").string(),
+          &out) == 0);
+  CHECK_FALSE(io::read_csv(dir / "wn.csv").meta("yaw").has_value());
+  write_two_axis(dir / "nolat.csv", with.two_axis.scan);
+  CHECK(
+      run("two-axis --yaw -i " + (dir / "nolat.csv").string() + " -o " + (dir / "wx.csv").string(),
+          &out) == 1);
+  CHECK_THAT(out, Catch::Contains("--yaw needs the lateral pair columns"));
+  CHECK_FALSE(std::filesystem::exists(dir / "wx.csv"));
+  CHECK_FALSE(std::filesystem::exists(dir / "wx.residuals.csv"));
+}
+
+TEST_CASE(
+    "residual inputs: bad optional columns and mismatched runs are refused, nothing written") {
+  TempDir dir;
+  const auto res = dir / "res.csv";
+  const auto resid = dir / "res.residuals.csv";
+  std::string out;
+  auto expect_fail = [&](const std::string& args, const std::vector<std::string>& needles) {
+    const int rc = run(args + " -o " + res.string(), &out);
+    INFO(args << "\n" << out);
+    CHECK(rc == 1);
+    for (const auto& n : needles)
+      CHECK_THAT(out, Catch::Contains(n));
+    CHECK_FALSE(std::filesystem::exists(res));
+    CHECK_FALSE(std::filesystem::exists(resid));
+  };
+  // one axis: a nan in the optional workpiece column of scan 2 names its line
+  std::ofstream(dir / "nan2.csv") << "x_mm,s1_scan1_um,s2_scan1_um,s2_scan2_um,s1_scan2_um\n"
+                                     "0,1,2,3,1\n5,1,2,3,1\n10,1,2,3,nan\n";
+  expect_fail("one-axis -i " + (dir / "nan2.csv").string(), {"nan2.csv:4", "non-finite"});
+  // repeated runs on different grids
+  const auto sim = core::simulate_one_axis(core::haramiishi2024_fig5_truth(), {});
+  write_one_axis(dir / "a.csv", sim);
+  std::ofstream(dir / "b.csv") << "x_mm,s1_scan1_um,s2_scan1_um,s2_scan2_um\n0,1,2,3\n5,1,2,3\n";
+  expect_fail("one-axis -i " + (dir / "a.csv").string() + " -i " + (dir / "b.csv").string(),
+              {"b.csv", "x positions differ"});
+  // two axes: only some of the lateral pair's columns; a nan in s0_scan2_um
+  core::TwoAxisSimOptions so;
+  so.nx = 4;
+  so.ny = 3;
+  so.record_s0_scan2 = true;
+  const auto grid = core::simulate_two_axis(core::example_two_axis_truth(), so);
+  core::LateralPairScan lat{grid.scan.s1_1_um, grid.scan.s1_2_um, grid.scan.s2_1_um,
+                            grid.scan.s2_2_um};
+  write_two_axis(dir / "part.csv", grid.scan, -1, "sb_scan2_um", &lat);
+  expect_fail("two-axis -i " + (dir / "part.csv").string(),
+              {"part.csv", "missing column 'sb_scan2_um'", "lateral sensor pair"});
+  write_two_axis(dir / "g.csv", grid.scan);
+  {
+    // the last field of the last row (line 13: header + 12 points) is s0_scan2_um: make it nan
+    const std::string text = slurp(dir / "g.csv");
+    std::ofstream(dir / "g0.csv") << text.substr(0, text.rfind(',') + 1) << "nan\n";
+  }
+  expect_fail("two-axis -i " + (dir / "g0.csv").string(), {"g0.csv:13", "non-finite"});
+  so.nx = 5;
+  const auto other = core::simulate_two_axis(core::example_two_axis_truth(), so);
+  write_two_axis(dir / "o.csv", other.scan);
+  expect_fail("two-axis -i " + (dir / "g.csv").string() + " -i " + (dir / "o.csv").string(),
+              {"o.csv", "grid differs"});
 }
 
 TEST_CASE("errsep-budget prints and writes the paper budget, and fails cleanly on a bad config") {

@@ -60,6 +60,9 @@ struct OneAxisSimData {
   Eigen::VectorXd s1_1_um, s2_1_um, s2_2_um;  ///< Eqs. (1)-(3) plus sensor errors
   Eigen::VectorXd w_um, r_um, m_um;           ///< truth at x_k
   double applied_displacement_mm = 0;         ///< the traverse actually made
+  /// The workpiece sensor during scan 2 (Eq. 1 again: the workpiece is not traversed), as
+  /// errsep-scan records it.  Drawn after every other reading, so the others do not depend on it.
+  Eigen::VectorXd s1_2_um;
 };
 
 /// Throws std::invalid_argument if the options are invalid or a truth function is empty.
@@ -97,6 +100,8 @@ struct TwoAxisSimOptions {
   SensorErrorModel eddy_sensor;        ///< sensors 1-4 (independent draws per sensor)
   ScanTiming timing;                   ///< raster: x fastest, then y; scan 2 after scan 1
   std::uint64_t seed = 1;
+  /// Also read sensor 0 during scan 2 (TwoAxisScan::s0_2_um), drawn after every other reading.
+  bool record_s0_scan2 = false;
   bool is_valid(std::string* why = nullptr) const;
 };
 

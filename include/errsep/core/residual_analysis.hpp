@@ -16,6 +16,7 @@
 // Gaussian noise whatever the model.
 #include <Eigen/Core>
 #include <cstdint>
+#include <functional>
 #include <string>
 
 #include "errsep/core/four_sensor_config.hpp"
@@ -148,5 +149,37 @@ void whiteness_statistics(const Eigen::MatrixXd& residual_um, int lags, double* 
 /// Default reading times of the single-sensor system when none were recorded: configuration i
 /// (0-based) is the i-th traverse at speed v, so t = i·T + x_n/v with T = P·Δx/v.
 Eigen::MatrixXd scan_order_times_s(const FourSensorConfig& cfg, double speed_mm_per_s = 10.0);
+
+}  // namespace errsep::core
+
+namespace errsep::core {
+
+/// A residual of any linear model whose noise is independent and identically distributed per
+/// equation: r = Π·ε with Π the orthogonal projector onto the complement of the model's columns.
+/// Laid out as C channels observed at the same L instants (L × C, rows in time order), e.g. the
+/// sensors of the displacement method's redundant equations (displacement_residuals.hpp).
+struct ProjectedResidual {
+  Eigen::MatrixXd residual;  ///< L × C
+  /// Π applied to an L × C matrix (used on independent N(0, 1) draws for the calibration).
+  std::function<Eigen::MatrixXd(const Eigen::MatrixXd&)> project;
+  /// L × C: the diagonal of Π per channel (1 − leverage of each equation); its column sums are
+  /// the channels' degrees of freedom.
+  Eigen::MatrixXd projector_diagonal;
+};
+
+/// The five whiteness statistics of analyse_residual, for a ProjectedResidual, with the same
+/// Monte-Carlo calibration (draws of Π·ε, pooled ranks, the minimum p-value's own rank).  The
+/// statistics are taken of the time series: Ljung–Box per channel in time order (summed),
+/// periodogram peak and Bartlett's cumulative periodogram of the channel-summed periodogram along
+/// time, runs of the signs in time order (channels of one instant in column order), local excess
+/// over windows of consecutive instants.  Each channel is first scaled by its own σ̂ (RSS over its
+/// degrees of freedom), in the data and in every draw alike, so channels of different noise
+/// (sensors of different kinds) weigh alike and the test stays calibrated.  local_x_mm and
+/// local_width_mm are in rows (instants): the window's centre row and its length.  `power` (if
+/// given) receives the channel-summed periodogram of the scaled residual, frequencies k/L,
+/// k = 1..L/2.  Throws std::invalid_argument on inconsistent shapes or invalid options.
+WhitenessTest test_projected_whiteness(const ProjectedResidual& r,
+                                       const ResidualAnalysisOptions& opts = {},
+                                       Eigen::VectorXd* power = nullptr);
 
 }  // namespace errsep::core

@@ -62,6 +62,9 @@ struct TwoAxisScan {
   Eigen::VectorXd x_mm;  ///< nx grid positions, x_i = x_0 + i·dx
   Eigen::VectorXd y_mm;  ///< ny grid positions
   Eigen::MatrixXd s0_1_um, s1_1_um, s1_2_um, s2_1_um, s2_2_um, s3_1_um, s3_2_um, s4_1_um, s4_2_um;
+  /// Sensor 0 read during scan 2 as well (optional, empty when not recorded).  Eqs. (10)-(27) do
+  /// not use it; it makes Eq. (10) redundant (displacement_residuals.hpp).
+  Eigen::MatrixXd s0_2_um;
 };
 
 struct TwoAxisResult {
