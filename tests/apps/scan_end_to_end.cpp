@@ -123,10 +123,18 @@ TEST_CASE("SIGINT during the scan: stages stopped, raw data kept and marked inco
   TempDir dir;
   const auto cfg_path = write_test_config(dir);
   const auto out = dir / "out";
-  // Interrupt after 2 s (the scan takes longer).  The simulator runs in its own process group,
-  // so only the scan gets the signal, as with Ctrl-C in a terminal.
-  const std::string cmd = "sh -c '" + scan_cmd(cfg_path, out) +
-                          " & pid=$!; sleep 2; kill -INT $pid; wait $pid; echo exit=$?'";
+  // Interrupt once the scan reports 20 % of its points, not after a fixed time: a CI run once
+  // finished the whole scan within the 2 s this test used to wait.  The scan gets 50 readings per
+  // point here (~10x longer than the 2 s scan above), so 20 % leaves it far from done.  The
+  // simulator runs in its own process group, so only the scan gets the signal, as with Ctrl-C.
+  std::string slow = scan_cmd(cfg_path, out);
+  slow.replace(slow.find("--averages 5"), 12, "--averages 50");
+  const auto log = dir / "scan.log";
+  const std::string cmd = "sh -c '" + slow + " > " + log.string() +
+                          " 2>&1 & pid=$!; i=0; while ! grep -q \"(20%)\" " + log.string() +
+                          " && [ $i -lt 600 ]; do sleep 0.05; i=$((i+1)); done; kill -INT $pid; "
+                          "wait $pid; echo exit=$?; cat " +
+                          log.string() + "'";
   std::string output;
   REQUIRE(run_command(cmd, &output) == 0);
   INFO(output);
