@@ -17,6 +17,7 @@
 #include <functional>
 #include <string>
 #include <tuple>
+#include <utility>
 
 #include "errsep/core/effect_drift.hpp"
 #include "errsep/core/effect_thermal_drift.hpp"
@@ -430,12 +431,17 @@ TEST_CASE("realistic noise: non-repeating S at sigma 0.1 and 0.3 um") {
   p(2 * 4 + 1) = 2.0;
   p(2 * 4 + 2) = 1.0;
   p -= Z * (Z.transpose() * p);
-  for (double sigma : {0.1, 0.3})
+  // 40 seeds at 0.1 µm (160 decorrelated z).  Seeds 1-4 alone gave 4 of 16 beyond 2 against a
+  // 99 % allowance of 3, and seeds 1-16 8 of 64 against 7: draws of 1 % and 3 %.  Over seeds
+  // 301-900 the z have RMS 1.007 and 4.7 % beyond 2, as a t with ~52 dof should (5.1 %), so the
+  // count is made on a sample large enough not to hang on a few seeds.  At 0.3 µm the same seeds
+  // give the same z (the error is linear in the noise): four seeds, for the error check only.
+  for (const auto& [sigma, seeds] : {std::pair{0.1, 40}, std::pair{0.3, 4}})
     errsep::test::check_realistic(
         "non-repeating S (identifiable part of a 2 um P2 + 1 um P3 on traverse 3)", "traverse",
-        sigma, 4, 0,
+        sigma, seeds, 0,
         [&](double sg, std::uint64_t seed) {
           return make_refine_case(sg, seed, {}, add_traverse_polynomials(p));
         },
-        [&](const ModelEffect&) { return p; });
+        [&](const ModelEffect&) { return p; }, /*count_z=*/sigma < 0.2);
 }
