@@ -355,7 +355,7 @@ TEST_CASE("one-axis: the residuals are written beside the result, with sigma_hat
   CHECK(meta_of(dir / "r2.csv", "runs") == "2 (mean)");
 }
 
-TEST_CASE("two-axis: residuals of the reference pieces and sensor 0; a thermal drift reported") {
+TEST_CASE("two-axis: residuals of the reference pieces and sensor 0, a thermal drift reported") {
   TempDir dir;
   core::TwoAxisSimOptions so;
   so.nx = 13;
@@ -454,7 +454,7 @@ core::YawTruth yaw_truth(const Eigen::VectorXd& c_urad) {
 
 }  // namespace
 
-TEST_CASE("two-axis: the lateral pair columns switch on the yaw diagnosis; a yaw is found") {
+TEST_CASE("two-axis: the lateral pair columns switch on the yaw diagnosis, a yaw is found") {
   // An inclined workpiece (10 and 5 um/mm: yaw acts on heights through slopes) on the example
   // stage, the yaw of a poor stage (up to ~0.5 mrad), low noise so that the yaw's share of the w
   // error stands above the floor (as tests/core/refine_effects_more.cpp).

@@ -104,7 +104,7 @@ TEST_CASE("a simulated raw scan is separated: S within its stated uncertainty of
   CHECK_THAT(slurp(dir / "res" / "summary.txt"), Catch::Contains("no bow"));
 }
 
-TEST_CASE("malformed raw scans: file, line and problem; exit 1; nothing written") {
+TEST_CASE("malformed raw scans: file, line and problem, exit 1, nothing written") {
   TempDir dir;
   const auto sim = simulate();
   const auto raw_file = dir / "raw.csv";

@@ -113,7 +113,7 @@ TEST_CASE("one axis: the workpiece repeat's sigma_hat and whiteness over 40 clea
   CHECK(white >= 38);
 }
 
-TEST_CASE("one axis: repeated runs give each sensor's sigma_hat; the separation uses their mean") {
+TEST_CASE("one axis: repeated runs give each sensor's sigma_hat, the separation uses their mean") {
   // Three runs (independent noise); per channel dof n(R - 1) = 50.
   std::vector<OneAxisRun> runs;
   std::vector<OneAxisSimData> sims;
@@ -222,7 +222,7 @@ TEST_CASE("two axes: sigma_hat of the reference pieces and the workpiece repeat,
   CHECK(white >= 38);
 }
 
-TEST_CASE("two axes: a thermal drift of the paper's size is found; what cannot be seen is zero") {
+TEST_CASE("two axes: a thermal drift of the paper's size is found, what cannot be seen is zero") {
   // First-order thermal drift of the eddy-current sensors, δ(t) = A (1 - exp(-t/τ)) from the
   // start of scan 1 (1 s per point, 625 s per scan), A = 0.5 µm, τ = 600 s: the range the paper
   // measured over 10 min (Fig. 14: -0.3 to 0.2 µm).  D_k picks up δ(t + 625 s) - δ(t), which

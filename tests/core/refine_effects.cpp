@@ -155,7 +155,7 @@ TEST_CASE("drift: the identifiable drift combination is found and removed") {
 // what is true: the drift is found, its determined combination recovered within its uncertainty,
 // and after the refinement the errors are those of a scan carrying only the invisible part (within
 // the noise of the separation), not that they halve.
-TEST_CASE("drift: one configuration drifting; the part no scan can see stays in S, gamma, f") {
+TEST_CASE("drift: one configuration drifting, the part no scan can see stays in S, gamma, f") {
   const double sigma = 0.1, rate = 0.02;  // µm, µm/s
   const auto c0 = make_refine_case(sigma, 16);
   const Eigen::MatrixXd Z = drift_null_basis(c0.cfg, c0.sim.m_um);
