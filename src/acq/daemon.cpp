@@ -205,8 +205,11 @@ Daemon::~Daemon() {
     abort_.store(true);
     worker_.join();
   }
-  for (int fd : wake_pipe_)
-    if (fd >= 0) ::close(fd);
+  // A worker left behind at SIGTERM may still write its wake-up byte: its pipe stays open (the
+  // process exits next), so that byte can never land in a descriptor reused for something else.
+  if (!worker_left_behind_)
+    for (int fd : wake_pipe_)
+      if (fd >= 0) ::close(fd);
 }
 
 void Daemon::wake() noexcept {
@@ -320,21 +323,27 @@ DaemonStatus Daemon::status() const {
 }
 
 bool Daemon::try_open() {
-  try {
-    if (!backend_) {
+  // A config error stays an error until SIGHUP (the file is not re-read on every check); a
+  // device that does not answer is retried with the config loaded.
+  if (!backend_) {
+    if (config_failed_) return false;
+    try {
       backend_ = factory_();
       log(kInfo, backend_->describe());
+    } catch (const std::exception& e) {
+      config_failed_ = true;
+      set_state(DaemonState::fault,
+                std::string("configuration: ") + e.what() + " (fix it and send SIGHUP)");
+      return false;
     }
-    backend_->open();
+  }
+  try {
+    backend_->open();  // opens every device from scratch
     backend_open_ = true;
     start_gpio_watch();
     return true;
   } catch (const std::exception& e) {
-    // A config error stays an error until SIGHUP; a device that does not answer is retried.
     stop_gpio_watch();
-    if (backend_) {
-      backend_.reset();  // rebuilt (and re-opened from scratch) on the next attempt
-    }
     backend_open_ = false;
     set_state(DaemonState::fault, std::string("cannot open devices: ") + e.what());
     return false;
@@ -424,28 +433,34 @@ void Daemon::start_scan(TriggerSource src) {
   checkpoint_on_disk_ = false;
   checkpoint_error_logged_ = false;
   abort_.store(false);
-  scan_done_.store(false);
   {
     std::lock_guard<std::mutex> lock(mu_);
     ctx_ = std::make_unique<ScanContext>(id, abort_);
     status_.scan_id = id;
   }
-  pending_.store(false);
+  // The state says scanning before the pending request is cleared: a trigger in between sees
+  // "a scan is about to start" or "a scan is running", never an idle daemon with nothing pending
+  // (which it would accept, and a second scan would follow this one).
   set_state(DaemonState::scanning,
             "scan " + std::to_string(id) + " (" + to_string(src) + ") " + scan_stem_);
+  pending_.store(false);
   set_lamp(true);
   ScanContext* ctx = ctx_.get();
   ScanBackend* be = backend_.get();
-  worker_ = std::thread([this, ctx, be] {
+  auto shared = std::make_shared<WorkerShared>();
+  worker_state_ = shared;
+  const int wake_fd = wake_pipe_[1];
+  worker_ = std::thread([shared, ctx, be, wake_fd] {
     ScanEnd end;
     try {
       end = be->run_scan(*ctx);
     } catch (const std::exception& e) {
       end = {ScanOutcome::device_fault, e.what()};
     }
-    worker_end_ = end;
-    scan_done_.store(true);
-    wake();
+    shared->end = std::move(end);
+    shared->done.store(true);
+    const char c = 1;
+    [[maybe_unused]] const ssize_t n = ::write(wake_fd, &c, 1);
   });
 }
 
@@ -613,7 +628,8 @@ void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd
 void Daemon::finish_scan(bool stopping) {
   worker_.join();
   set_lamp(false);
-  ScanEnd end = worker_end_;
+  ScanEnd end = worker_state_->end;
+  worker_state_.reset();
   if (stopping && end.outcome == ScanOutcome::aborted) end.outcome = ScanOutcome::stopped;
   if (stopping && end.outcome == ScanOutcome::complete &&
       ctx_->points_done() < ctx_->points_total())
@@ -659,6 +675,7 @@ void Daemon::do_reload() {
   backend_.reset();  // closes the old devices before the new ones open the same endpoints
   backend_ = std::move(fresh);
   backend_open_ = false;
+  config_failed_ = false;
   try {
     backend_->open();
     backend_open_ = true;
@@ -666,7 +683,6 @@ void Daemon::do_reload() {
     set_state(DaemonState::idle, "configuration reloaded");
   } catch (const std::exception& e) {
     stop_gpio_watch();
-    backend_.reset();
     set_state(DaemonState::fault, std::string("cannot open devices: ") + e.what());
   }
   notify_.ready();
@@ -700,7 +716,7 @@ int Daemon::run() {
     const auto now = clock::now();
     ping_watchdog(monotonic_ns());
 
-    if (worker_.joinable() && scan_done_.load()) {
+    if (worker_.joinable() && worker_state_->done.load()) {
       finish_scan(false);
       next_check = now + interval;
     }
@@ -740,9 +756,10 @@ int Daemon::run() {
           if (!ok) set_state(DaemonState::fault, "devices do not answer: " + why);
         }
         if (ok) {
+          // Cleared before the state says idle: a trigger that sees idle is never dropped.
+          pending_.store(false);
           set_state(DaemonState::idle,
                     st == DaemonState::starting ? "devices answer, ready" : "devices answer again");
-          pending_.store(false);
           fails = 0;
         }
         // Up and reporting, whether the devices answer or not (see the header): a machine
@@ -775,6 +792,9 @@ int Daemon::run() {
         }
       }
     } else if (st == DaemonState::scanning) {
+      // No device checks during a scan (the scan is the check); keeps the wait below from
+      // collapsing onto a stale check time and polling every millisecond.
+      next_check = std::max(next_check, now + interval);
       if (now >= next_status) {
         next_status = now + std::chrono::seconds(1);
         const DaemonStatus s = status();
@@ -782,7 +802,8 @@ int Daemon::run() {
                        std::to_string(s.points_done) + "/" + std::to_string(s.points_total) +
                        " points");
       }
-      if (worker_.joinable() && !scan_done_.load() && now >= next_checkpoint_) write_checkpoint();
+      if (worker_.joinable() && !worker_state_->done.load() && now >= next_checkpoint_)
+        write_checkpoint();
     }
 
     // Sleep until woken (signal, trigger, end of scan) or the next periodic duty.
@@ -795,7 +816,7 @@ int Daemon::run() {
       wait = std::min(wait, std::chrono::duration_cast<std::chrono::milliseconds>(wd / 4));
     wait = std::clamp(wait, std::chrono::milliseconds(1), std::chrono::milliseconds(1000));
     pollfd pfd{wake_pipe_[0], POLLIN, 0};
-    if (!stop_.load() && !(worker_.joinable() && scan_done_.load()) &&
+    if (!stop_.load() && !(worker_.joinable() && worker_state_->done.load()) &&
         !(pending_.load() && st == DaemonState::idle))
       ::poll(&pfd, 1, static_cast<int>(wait.count()));
     char buf[64];
@@ -804,49 +825,79 @@ int Daemon::run() {
   }
 
   // --- stopping: abort the scan, stop the stages, write what was measured, exit in bound.
+  // Everything that talks to a device runs against one deadline; a device that does not answer
+  // in time is left behind (the process exits next) rather than holding the exit up by a
+  // response timeout per stage.  The main thread never calls into the backend while the scan
+  // worker may (a device connection serves one thread): the worker stops the stages itself.
   const auto deadline = clock::now() + opts_.stop_timeout;
   set_state(DaemonState::stopping, "SIGTERM");
   notify_.stopping();
   // No more edges: the watcher notices within its 100 ms wait slice.
   gpio_stop_.store(true);
   int rc = 0;
+  bool backend_free = true;  // no thread of ours is inside the backend
   if (worker_.joinable()) {
     abort_.store(true);
-    if (backend_) backend_->stop_motion();
-    while (!scan_done_.load() && clock::now() < deadline) {
+    while (!worker_state_->done.load() && clock::now() < deadline) {
       pollfd pfd{wake_pipe_[0], POLLIN, 0};
       ::poll(&pfd, 1, 20);
       char buf[64];
       while (::read(wake_pipe_[0], buf, sizeof buf) > 0) {
       }
     }
-    if (scan_done_.load()) {
+    if (worker_state_->done.load()) {
       finish_scan(true);
     } else {
       // The worker hangs in a device call: write what it measured and leave it behind.
       log(kErr, "scan worker did not stop within " + std::to_string(opts_.stop_timeout.count()) +
-                    " ms; writing the raw data measured so far");
-      worker_end_ = {ScanOutcome::stopped, "SIGTERM; worker did not stop in time"};
+                    " ms; writing the raw data measured so far (the stages got no stop command "
+                    "from the daemon: the hung worker holds the devices)");
       set_lamp(false);
-      write_scan_files(ctx_->snapshot(), worker_end_);
+      write_scan_files(ctx_->snapshot(),
+                       {ScanOutcome::stopped, "SIGTERM; worker did not stop in time"});
       worker_.detach();
+      worker_left_behind_ = true;
+      backend_free = false;
       // Still used by the detached worker: leaked on purpose (the process exits next), and told
       // to LeakSanitizer so a sanitizer run reports only leaks nobody meant.
       auto* ctx = ctx_.release();
-      auto* backend = backend_.release();
 #if defined(__SANITIZE_ADDRESS__)
       __lsan_ignore_object(ctx);
-      __lsan_ignore_object(backend);
 #endif
       (void)ctx;
-      (void)backend;
       rc = 2;
     }
-  } else if (backend_) {
-    backend_->stop_motion();
   }
   stop_gpio_watch();  // before its backend (which owns the DigitalIo) goes
-  backend_.reset();
+  if (backend_ && backend_free) {
+    // A last stop command to every stage and the devices' close, on a thread of their own so
+    // that the deadline holds when a device does not answer.
+    auto done = std::make_shared<std::atomic<bool>>(false);
+    ScanBackend* be = backend_.release();
+#if defined(__SANITIZE_ADDRESS__)
+    __lsan_ignore_object(be);  // a closer left behind still holds it when the process exits
+#endif
+    std::thread closer([be, done] {
+      be->stop_motion();
+      delete be;
+      done->store(true);
+    });
+    while (!done->load() && clock::now() < deadline)
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    if (done->load()) {
+      closer.join();
+    } else {
+      closer.detach();
+      log(kWarning, "devices did not take the stop command and close within " +
+                        std::to_string(opts_.stop_timeout.count()) + " ms: left behind");
+    }
+  } else if (backend_) {
+    auto* be = backend_.release();  // in use by the worker left behind
+#if defined(__SANITIZE_ADDRESS__)
+    __lsan_ignore_object(be);
+#endif
+    (void)be;
+  }
   log(kInfo, "stopped");
   return rc;
 }

@@ -404,6 +404,14 @@ void read_stages(const std::string& file, const toml::table& root, MachineConfig
       r.fail("role", "'" + role + "' is not one of slide, sensor_stage, reference_piece");
     r.get("bus", s.bus, true);
     r.check("bus", c.find_bus(s.bus) != nullptr, "no [[bus]] named '" + s.bus + "'");
+    // A bus is one libmodbus connection, and a connection serves one thread: the sampling
+    // thread owns every bus with sensors on it, the scan worker moves the stages.  Sharing one
+    // would interleave their requests on one context.
+    for (const auto& sensor : c.sensors)
+      r.check("bus", sensor.bus != s.bus,
+              "bus '" + s.bus + "' also carries sensor '" + sensor.name +
+                  "': stages need a [[bus]] of their own (the sampling thread owns a sensor "
+                  "bus; for Modbus TCP, a second [[bus]] to the same host and port)");
     int unit = 1;
     r.get_int("unit_id", unit, 0, 247);
     RegisterSpec pos;

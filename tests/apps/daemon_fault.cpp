@@ -175,3 +175,84 @@ TEST_CASE(
   CHECK(r[test::reg_last_outcome] == 1);
   CHECK(rig.find_file(1, "raw"));
 }
+
+namespace {
+// Voluntary context switches of the daemon's main thread so far (its thread id is its pid):
+// how often its loop goes to sleep and wakes up.
+long main_thread_wakeups(pid_t pid) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/task/" + std::to_string(pid) + "/status");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("voluntary_ctxt_switches:", 0) == 0) return std::stol(line.substr(24));
+  return -1;
+}
+
+// Wall time from SIGTERM to the exit of the daemon (nullopt: still running after 10 s).
+std::optional<double> seconds_to_exit(test::Child& daemon, int* status) {
+  const auto t0 = std::chrono::steady_clock::now();
+  daemon.signal(SIGTERM);
+  const auto st = daemon.wait(10s);
+  if (!st) return std::nullopt;
+  *status = *st;
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+}  // namespace
+
+TEST_CASE("devices that stop answering do not hold SIGTERM past the bound, idle or mid-scan") {
+  // The simulator is frozen (SIGSTOP): its connections stay open and every request runs into
+  // the response timeout, the way a machine whose controller hangs behaves.  Every stop command
+  // and close then costs timeouts; the daemon must still exit within --stop-timeout-ms (plus
+  // the writing of the scan's files and the process's own start of exit).
+  constexpr int kStopMs = 300;
+  constexpr double kMarginS = 0.35;
+  SECTION("idle") {
+    DaemonRig rig;
+    rig.devsim.start(rig.config, rig.tmp / "devsim.log");
+    rig.start_daemon({"--stop-timeout-ms", std::to_string(kStopMs)});
+    REQUIRE(rig.notify->wait_for("READY=1", 15s));
+    rig.devsim.proc->signal(SIGSTOP);
+    int status = 0;
+    const auto s = seconds_to_exit(*rig.daemon, &status);
+    rig.devsim.proc->signal(SIGCONT);
+    REQUIRE(s);
+    WARN("idle, devices frozen: exit " << *s << " s after SIGTERM (bound " << kStopMs << " ms)");
+    CHECK(*s < kStopMs / 1000.0 + kMarginS);
+    CHECK(WIFEXITED(status));
+  }
+  SECTION("mid-scan") {
+    DaemonRig rig;
+    rig.devsim.start(rig.config, rig.tmp / "devsim.log");
+    rig.start_daemon({"--stop-timeout-ms", std::to_string(kStopMs)});
+    REQUIRE(rig.notify->wait_for("READY=1", 15s));
+    REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1) == 0);
+    auto r = rig.wait_regs([](const std::vector<long>& x) { return x[test::reg_points_done] >= 4; },
+                           20s);
+    REQUIRE(r.size() == test::kRegisterCount);
+    // While the scan runs, the main loop sleeps between its duties (status once a second,
+    // checkpoints, wake-ups by the worker); it once polled every millisecond (~1000 wake-ups
+    // a second) because its device-check time went stale during a scan.
+    const long w0 = main_thread_wakeups(rig.daemon->pid());
+    std::this_thread::sleep_for(1000ms);
+    const long w1 = main_thread_wakeups(rig.daemon->pid());
+    r = rig.registers();
+    REQUIRE(r.size() == test::kRegisterCount);
+    REQUIRE(r[test::reg_state] == 2);  // still scanning: the count is of a scan
+    WARN("main loop wake-ups during 1 s of scanning: " << (w1 - w0));
+    CHECK(w0 >= 0);
+    CHECK(w1 - w0 < 100);
+
+    rig.devsim.proc->signal(SIGSTOP);
+    int status = 0;
+    const auto s = seconds_to_exit(*rig.daemon, &status);
+    rig.devsim.proc->signal(SIGCONT);
+    REQUIRE(s);
+    WARN("mid-scan, devices frozen: exit " << *s << " s after SIGTERM (bound " << kStopMs
+                                           << " ms)");
+    CHECK(*s < kStopMs / 1000.0 + kMarginS);
+    CHECK(WIFEXITED(status));
+    // What was measured is on disk, marked incomplete.
+    const auto raw = rig.find_file(1, "raw-incomplete");
+    REQUIRE(raw);
+    CHECK(test::check_checkpoint_file(*raw) == "");
+  }
+}

@@ -26,11 +26,17 @@ register = { address = 4, type = "int32", word_order = "little", scale = 0.001 }
 [[stage]]
 name = "x"
 role = "slide"
-bus = "b"
+bus = "m"
 target_position = { address = 100 }
 actual_position = { address = 100 }
 status = { address = 104 }
 stop_coil = { address = 0 }
+
+[[bus]]
+name = "m"
+kind = "tcp"
+host = "127.0.0.1"
+port = 1503
 )";
 
 // Parses `text` expecting a ConfigError; returns its message.
@@ -48,7 +54,7 @@ std::string error_of(const std::string& text) {
 
 TEST_CASE("a minimal config parses with the documented defaults") {
   const MachineConfig c = parse_machine_config(kMinimal, "t.toml");
-  REQUIRE(c.buses.size() == 1);
+  REQUIRE(c.buses.size() == 2);
   CHECK(c.buses[0].kind == BusKind::tcp);
   CHECK(c.buses[0].port == 1502);
   REQUIRE(c.sensors.size() == 1);
@@ -151,6 +157,13 @@ TEST_CASE("mistakes name the file, the line and the key") {
                                          "range_max_um = -5\n")
             .find("sensor[1].range_max_um: must be greater than range_min_um") !=
         std::string::npos);
+
+  // A stage on a bus that carries sensors: the sampling thread owns a sensor bus's connection.
+  t = kMinimal;
+  t.replace(t.find("bus = \"m\""), 9, "bus = \"b\"");
+  m = error_of(t);
+  CHECK(m.find("t.toml:") == 0);
+  CHECK(m.find("stage[0].bus: bus 'b' also carries sensor 's'") != std::string::npos);
 
   // TOML syntax error: line of the error.
   m = error_of("[[bus]]\nname = \"b\"\nport = = 3\n");

@@ -154,7 +154,8 @@ class ScanBackend {
   /// Runs one scan, recording into `ctx`, until complete, aborted or failed.  Must return soon
   /// after ctx.abort_requested() becomes true (it stops the stages itself).
   virtual ScanEnd run_scan(ScanContext& ctx) = 0;
-  /// Stops every stage now.  Thread-safe (called by the main loop during a scan on SIGTERM).
+  /// Stops every stage now.  Called by the main loop only while no scan runs (a running scan
+  /// stops the stages itself on abort: a device connection serves one thread).
   virtual void stop_motion() noexcept = 0;
   /// One line for the journal ("machine config X: 5 sensors, 3 stages on 2 buses").
   virtual std::string describe() const = 0;
@@ -171,7 +172,10 @@ using BackendFactory = std::function<std::unique_ptr<ScanBackend>()>;
 struct DaemonOptions {
   io::ResultsStoreOptions results;
   std::chrono::milliseconds check_interval{500};  ///< device check while idle / in fault
-  std::chrono::milliseconds stop_timeout{5000};   ///< SIGTERM → exit bound
+  /// SIGTERM → exit bound: the scan stops, the stages get their stop command and the devices
+  /// are closed within it (a device that does not answer in time is left behind); only the
+  /// writing of the scan's files comes on top.
+  std::chrono::milliseconds stop_timeout{5000};
   /// Longest a scan may go without progress before the watchdog is no longer pinged (systemd
   /// then restarts a hung daemon).
   std::chrono::milliseconds scan_stall_limit{60000};
@@ -264,13 +268,23 @@ class Daemon {
 
   int wake_pipe_[2] = {-1, -1};
   std::atomic<bool> stop_{false}, reload_{false}, abort_{false};
-  std::atomic<bool> scan_done_{false};
   std::atomic<bool> pending_{false};
+  /// The backend could not be built from the config (it changed on disk after the start): the
+  /// daemon stays in fault until SIGHUP instead of re-reading the file on every check.
+  bool config_failed_ = false;
   TriggerSource pending_source_ = TriggerSource::command;
 
+  // What the scan worker hands back.  Shared with the worker thread rather than a member, so a
+  // worker left behind at SIGTERM (hung in a device call) never touches the Daemon after it is
+  // gone; it then writes only this and the wake-up pipe, which is left open for it.
+  struct WorkerShared {
+    ScanEnd end;
+    std::atomic<bool> done{false};
+  };
   std::unique_ptr<ScanContext> ctx_;
   std::thread worker_;
-  ScanEnd worker_end_;
+  std::shared_ptr<WorkerShared> worker_state_;
+  bool worker_left_behind_ = false;
   std::uint64_t next_scan_id_ = 1;
   std::chrono::system_clock::time_point scan_start_{};
   TriggerSource scan_source_ = TriggerSource::command;
