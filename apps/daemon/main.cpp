@@ -15,6 +15,7 @@
 #include "errsep/drivers/daemon_backend.hpp"
 #include "errsep/drivers/daemon_register_server.hpp"
 #include "errsep/io/machine_config.hpp"
+#include "errsep/io/unit_dropin.hpp"
 #include "errsep/version.hpp"
 
 namespace {
@@ -40,7 +41,7 @@ int main(int argc, char** argv) {
   double schedule_s = 0;
   int check_ms = 500, stop_timeout_ms = 5000, gpio_debounce_ms = 20, checkpoint_ms = 1000;
   double min_free_mb = 1.0;
-  bool no_separate = false, no_register_map = false;
+  bool no_separate = false, no_register_map = false, print_dropin = false;
   app.add_option("-c,--config", config_path, "machine config (TOML); re-read on SIGHUP")
       ->required()
       ->check(CLI::ExistingFile);
@@ -79,9 +80,17 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
   app.add_flag("--no-separate", no_separate, "write raw data only (no four-sensor result)");
+  app.add_flag("--print-unit-dropin", print_dropin,
+               "print the systemd drop-in that lets the unit reach the Modbus TCP hosts of the "
+               "config and the register map's address (the unit allows loopback only), and exit");
   CLI11_PARSE(app, argc, argv);
 
   try {
+    if (print_dropin) {
+      std::cout << errsep::io::unit_network_dropin(errsep::io::load_machine_config(config_path),
+                                                   no_register_map ? std::string() : reg.host);
+      return 0;
+    }
     errsep::acq::DaemonOptions opts;
     if (results_dir.empty()) {
       const char* state = std::getenv("STATE_DIRECTORY");

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <set>
 #include <sstream>
 
 #if defined(__SANITIZE_ADDRESS__)
@@ -514,6 +515,93 @@ void Daemon::write_checkpoint() {
   next_checkpoint_ = std::max(next_checkpoint_, clock::now() + 10 * cost);
 }
 
+Daemon::ResultFigures Daemon::write_result(
+    const std::string& stem, const io::RawFourSensorScan& raw,
+    const std::vector<std::pair<std::string, std::string>>& meta, const std::string& raw_file) {
+  Eigen::MatrixXd m(static_cast<Eigen::Index>(raw.positions()), 4);
+  for (std::size_t i = 0; i < 4; ++i)
+    for (std::size_t n = 0; n < raw.positions(); ++n)
+      m(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(i)) = raw.m_um[i][n];
+  core::FourSensorOptions so;
+  so.compute_uncertainty = true;
+  const core::FourSensorResult r = core::separate_four_sensor(*raw.geometry, m, so);
+  io::CsvTable t;
+  t.set_meta("format", "errsep four-sensor result");
+  for (const auto& [k, v] : meta)
+    t.set_meta(k, v);
+  t.set_meta("raw_file", std::filesystem::path(raw_file).filename().string());
+  t.set_meta("solver", r.brief_report());
+  const auto n = static_cast<std::size_t>(r.x_mm.size());
+  std::vector<double> x(n), s(n), g(n), us(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const auto e = static_cast<Eigen::Index>(k);
+    x[k] = r.x_mm(e);
+    s[k] = r.S_um(e);
+    g[k] = r.gamma_rad(e) * 1e6;
+    us[k] = r.u_S_um.size() == r.x_mm.size() ? r.u_S_um(e) : 0.0;
+  }
+  // ISO 230-1 straightness deviation: S(x) carries a line the separation cannot fix (and the
+  // slide's alignment to the reference adds one), so the figure is taken about a reference line,
+  // never as max - min of S.  Both references; the register map shows the minimum zone (the
+  // smallest zone enclosing S, ISO 12780-1).
+  const std::vector<double> u_pts = r.u_S_um.size() == r.x_mm.size() ? us : std::vector<double>{};
+  const core::StraightnessResult mz =
+      core::evaluate_straightness(x, s, u_pts, core::ReferenceLine::minimum_zone);
+  const core::StraightnessResult ls =
+      core::evaluate_straightness(x, s, u_pts, core::ReferenceLine::least_squares);
+  t.set_meta("straightness_minimum_zone_um", fmt(mz.straightness_um, 6));
+  t.set_meta("straightness_minimum_zone_U_um", fmt(mz.uncertainty.expanded, 6));
+  t.set_meta("straightness_least_squares_um", fmt(ls.straightness_um, 6));
+  t.set_meta("straightness_least_squares_U_um", fmt(ls.uncertainty.expanded, 6));
+  t.set_meta("straightness_U_note",
+             "k = 2, bound over any correlation of the per-point u_S (core/iso230.hpp)");
+  t.add_column("x_mm", x);
+  t.add_column("S_um", s);
+  t.add_column("gamma_urad", g);
+  t.add_column("u_S_um", us);
+  ResultFigures out;
+  out.file = store_.write(stem, "result", io::format_csv(t, 10)).string();
+  out.minimum_zone_um = mz.straightness_um;
+  out.minimum_zone_U_um = mz.uncertainty.expanded;
+  out.least_squares_um = ls.straightness_um;
+  return out;
+}
+
+int Daemon::recover_results() {
+  // A complete raw file is the scan: the result is computed from it alone.  The daemon stopped
+  // (SIGKILL, power cut) between writing the one and the other; the result is made now, with
+  // the raw file's scan metadata, so that no complete scan is left without its result.
+  int made = 0;
+  std::set<std::string> raw_stems, result_stems;
+  for (const auto& f : store_.list()) {
+    if (f.kind == "raw") raw_stems.insert(f.stem);
+    if (f.kind == "result") result_stems.insert(f.stem);
+  }
+  for (const auto& stem : raw_stems) {
+    if (result_stems.count(stem)) continue;
+    const auto raw_path = store_.path(stem, "raw");
+    try {
+      const io::RawFourSensorScan raw = io::read_raw_four_sensor_csv(raw_path);
+      if (!raw.geometry) throw std::runtime_error("no scan geometry in its metadata");
+      std::vector<std::pair<std::string, std::string>> meta;
+      for (const char* key : {"scan_id", "trigger", "started_utc", "ended_utc", "outcome",
+                              "outcome_reason", "points_measured"})
+        if (const auto v = raw.meta(key)) meta.emplace_back(key, *v);
+      meta.emplace_back("result_recovered_utc", utc_iso(std::chrono::system_clock::now()));
+      const ResultFigures f = write_result(stem, raw, meta, raw_path.string());
+      log(kWarning, "result of " + raw_path.filename().string() +
+                        " was missing (the daemon stopped before writing it): computed "
+                        "from the raw file, wrote " +
+                        f.file);
+      ++made;
+    } catch (const std::exception& e) {
+      log(kErr, "result of " + raw_path.filename().string() +
+                    " is missing and could not be made: " + e.what());
+    }
+  }
+  return made;
+}
+
 void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd& end) {
   io::RawFourSensorScan raw = raw_in;
   raw.complete = end.outcome == ScanOutcome::complete;
@@ -545,52 +633,11 @@ void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd
     checkpoint_on_disk_ = false;
     if (raw.complete && opts_.separate && raw.geometry) {
       try {
-        Eigen::MatrixXd m(static_cast<Eigen::Index>(raw.positions()), 4);
-        for (std::size_t i = 0; i < 4; ++i)
-          for (std::size_t n = 0; n < raw.positions(); ++n)
-            m(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(i)) = raw.m_um[i][n];
-        core::FourSensorOptions so;
-        so.compute_uncertainty = true;
-        const core::FourSensorResult r = core::separate_four_sensor(*raw.geometry, m, so);
-        io::CsvTable t;
-        t.set_meta("format", "errsep four-sensor result");
-        for (const auto& [k, v] : meta)
-          t.set_meta(k, v);
-        t.set_meta("raw_file", std::filesystem::path(last_file).filename().string());
-        t.set_meta("solver", r.brief_report());
-        const auto n = static_cast<std::size_t>(r.x_mm.size());
-        std::vector<double> x(n), s(n), g(n), us(n);
-        for (std::size_t k = 0; k < n; ++k) {
-          const auto e = static_cast<Eigen::Index>(k);
-          x[k] = r.x_mm(e);
-          s[k] = r.S_um(e);
-          g[k] = r.gamma_rad(e) * 1e6;
-          us[k] = r.u_S_um.size() == r.x_mm.size() ? r.u_S_um(e) : 0.0;
-        }
-        // ISO 230-1 straightness deviation: S(x) carries a line the separation cannot fix (and
-        // the slide's alignment to the reference adds one), so the figure is taken about a
-        // reference line, never as max - min of S.  Both references; the register map shows
-        // the minimum zone (the smallest zone enclosing S, ISO 12780-1).
-        const std::vector<double> u_pts =
-            r.u_S_um.size() == r.x_mm.size() ? us : std::vector<double>{};
-        const core::StraightnessResult mz =
-            core::evaluate_straightness(x, s, u_pts, core::ReferenceLine::minimum_zone);
-        const core::StraightnessResult ls =
-            core::evaluate_straightness(x, s, u_pts, core::ReferenceLine::least_squares);
-        straightness = mz.straightness_um;
-        straightness_U = mz.uncertainty.expanded;
-        straightness_lsq = ls.straightness_um;
-        t.set_meta("straightness_minimum_zone_um", fmt(mz.straightness_um, 6));
-        t.set_meta("straightness_minimum_zone_U_um", fmt(mz.uncertainty.expanded, 6));
-        t.set_meta("straightness_least_squares_um", fmt(ls.straightness_um, 6));
-        t.set_meta("straightness_least_squares_U_um", fmt(ls.uncertainty.expanded, 6));
-        t.set_meta("straightness_U_note",
-                   "k = 2, bound over any correlation of the per-point u_S (core/iso230.hpp)");
-        t.add_column("x_mm", x);
-        t.add_column("S_um", s);
-        t.add_column("gamma_urad", g);
-        t.add_column("u_S_um", us);
-        last_file = store_.write(scan_stem_, "result", io::format_csv(t, 10)).string();
+        const ResultFigures f = write_result(scan_stem_, raw, meta, last_file);
+        last_file = f.file;
+        straightness = f.minimum_zone_um;
+        straightness_U = f.minimum_zone_U_um;
+        straightness_lsq = f.least_squares_um;
         log(kInfo, "scan " + std::to_string(id) + ": straightness " + fmt(straightness) +
                        " um (minimum zone), " + fmt(straightness_lsq) +
                        " um (least squares); wrote " + last_file);
@@ -697,6 +744,7 @@ int Daemon::run() {
   if (superseded > 0)
     log(kWarning, "removed " + std::to_string(superseded) +
                       " checkpoints whose complete raw file was written before the daemon stopped");
+  if (opts_.separate) recover_results();
   next_scan_id_ = store_.next_scan_id();
   log(kInfo, "results in " + store_.dir().string() + ", next scan id " +
                  std::to_string(next_scan_id_) +

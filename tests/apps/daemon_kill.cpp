@@ -335,11 +335,22 @@ TEST_CASE("SIGKILL at the end of scans and mid-scan leaves only whole files") {
   REQUIRE_FALSE(ids.empty());
   const auto planted = rig.results / ".20261123T000000Z_scan000999.raw.csv.tmp.Ab12Cd";
   { std::ofstream(planted) << "# format: errsep raw four-sensor scan\n# complete: tr"; }
+  // A kill between a complete raw file and its result, made certain: one result removed.
+  std::string unresulted;
+  for (const auto& f : io::ResultsStore({rig.results, 0, {}}).list())
+    if (f.kind == "result") {
+      unresulted = f.stem;
+      std::filesystem::remove(f.path);
+      break;
+    }
+  REQUIRE_FALSE(unresulted.empty());
   rig.start_daemon();
   REQUIRE(rig.notify->wait_for("READY=1", 15s));
-  std::set<std::string> raw_stems;
-  for (const auto& f : io::ResultsStore({rig.results, 0, {}}).list())
+  std::set<std::string> raw_stems, result_stems;
+  for (const auto& f : io::ResultsStore({rig.results, 0, {}}).list()) {
     if (f.kind == "raw") raw_stems.insert(f.stem);
+    if (f.kind == "result") result_stems.insert(f.stem);
+  }
   for (const auto& e : std::filesystem::directory_iterator(rig.results)) {
     const std::string name = e.path().filename().string();
     INFO(name);
@@ -348,6 +359,15 @@ TEST_CASE("SIGKILL at the end of scans and mid-scan leaves only whole files") {
     if (f && f->kind == "raw-incomplete") CHECK(raw_stems.count(f->stem) == 0);
   }
   CHECK_FALSE(std::filesystem::exists(planted));
+  // Every complete raw file has its result again (made at the start from the raw file), whole.
+  for (const auto& stem : raw_stems) {
+    INFO(stem);
+    REQUIRE(result_stems.count(stem) == 1);
+    io::RawFourSensorScan raw;
+    REQUIRE(test::check_raw_file(rig.results / (stem + ".raw.csv"), &raw) == "");
+    CHECK(test::check_result_file(rig.results / (stem + ".result.csv"), raw) == "");
+  }
+  CHECK(result_stems.count(unresulted) == 1);
   REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1) == 0);
   // The quick machine may finish the scan between two reads: its id is then the last scan id.
   const auto r = rig.wait_regs(

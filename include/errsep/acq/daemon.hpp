@@ -7,7 +7,8 @@
 //     fault ◀────────────────── check fails        fault (raw data kept, marked incomplete)
 //   READY=1 after the first open attempt, into idle or fault alike (see "Readiness" below).
 //   SIGTERM in any state ─▶ stopping: abort the scan, stop the stages, write what was measured,
-//   exit within DaemonOptions::stop_timeout.
+//   exit within DaemonOptions::stop_timeout (plus the writing of the files; devices that do not
+//   answer in time are left behind, the process exits regardless).
 //
 // One scan at a time: a trigger (Modbus coil, GPIO edge, schedule) while a scan runs, while in
 // fault or while stopping is refused with a reason (TriggerReply + text) that the register map
@@ -33,7 +34,9 @@
 // loop on it), atomically like every other file.  The final file replaces it (raw-incomplete) or
 // makes it superfluous (raw: the checkpoint is then removed), so a SIGKILL or power cut mid-scan
 // leaves the points measured up to the last checkpoint.  The sampling threads are not involved:
-// the checkpoint is a copy of the ScanContext taken under its mutex by the main loop.
+// the checkpoint is a copy of the ScanContext taken under its mutex by the main loop.  A scan
+// whose complete raw file made it to disk but whose result did not (a stop between the two) gets
+// its result at the next start, computed from the raw file (metadata result_recovered_utc).
 //
 // The main loop sleeps in poll() on a wake-up pipe (signals, triggers and the end of a scan write
 // to it) with a timeout of at most the health-check / watchdog period: it never spins.  The scan
@@ -246,6 +249,17 @@ class Daemon {
   void start_scan(TriggerSource src);
   void finish_scan(bool stopping);
   void write_scan_files(const io::RawFourSensorScan& raw, const ScanEnd& end);
+  struct ResultFigures {
+    std::string file;
+    double minimum_zone_um = 0, minimum_zone_U_um = 0, least_squares_um = 0;
+  };
+  /// Separates a complete raw scan and writes its result file (scan metadata `meta`); throws
+  /// io::DiskFullError or std::exception.
+  ResultFigures write_result(const std::string& stem, const io::RawFourSensorScan& raw,
+                             const std::vector<std::pair<std::string, std::string>>& meta,
+                             const std::string& raw_file);
+  /// At start: the result of every complete raw file that has none (a stop between the two).
+  int recover_results();
   /// Metadata of the scan's raw/result files (scan id, trigger, times, outcome, points).
   std::vector<std::pair<std::string, std::string>> scan_metadata(const std::string& outcome,
                                                                  const std::string& reason) const;
