@@ -2,6 +2,7 @@
 // with reasons, SIGHUP during a scan deferred to its end (no scan dropped), a bad config on
 // reload keeps the old one, abort keeps the raw data marked incomplete, and a worker that hangs
 // does not keep SIGTERM from exiting within the bound.
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
@@ -10,6 +11,7 @@
 #include "errsep/acq/daemon.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/results_store.hpp"
+#include "support/daemon_rig.hpp"
 #include "support/support.hpp"
 
 using namespace errsep;
@@ -203,4 +205,47 @@ TEST_CASE("SIGTERM with a hung scan worker: raw data written, exit within the bo
   CHECK(files[0].kind == "raw-incomplete");
   s->hold = false;  // let the worker finish (it writes only into the leaked daemon)
   std::this_thread::sleep_for(50ms);
+}
+
+TEST_CASE("watchdog: pinged while idle and while a scan progresses, held back when it stalls") {
+  // systemd restarts a unit whose WATCHDOG=1 pings stop: the main loop pings only while the scan
+  // worker shows progress, so a scan hung in a device call ends in a restart, not a daemon that
+  // looks alive forever.
+  test::TempDir tmp;
+  Script s;
+  test::NotifyListener listener(tmp / "notify.sock");
+  const acq::SdNotifier notifier(listener.path().string(), 400ms);
+  auto o = options(tmp / "r");
+  o.scan_stall_limit = 1000ms;
+  acq::Daemon d(
+      o, [&s] { return std::make_unique<ScriptedBackend>(s, 1); }, notifier);
+  std::thread loop([&] { d.run(); });
+  auto pings = [&] {
+    const auto m = listener.messages();
+    return std::count(m.begin(), m.end(), std::string("WATCHDOG=1"));
+  };
+  REQUIRE(wait_until(d, [](auto st) { return is(st, acq::DaemonState::idle); }));
+  const auto p0 = pings();
+  std::this_thread::sleep_for(1000ms);
+  const auto idle_pings = pings() - p0;
+  // A scan that stops making progress at point 10.
+  s.hold = true;
+  REQUIRE(d.trigger(acq::TriggerSource::command) == acq::TriggerReply::accepted);
+  REQUIRE(wait_until(d, [](auto st) { return st.points_done >= 10; }));
+  std::this_thread::sleep_for(1500ms);  // past the stall limit
+  const auto p1 = pings();
+  std::this_thread::sleep_for(1000ms);
+  const auto stalled_pings = pings() - p1;
+  s.hold = false;  // progress again
+  REQUIRE(wait_until(d, [](auto st) { return st.last_scan_id == 1; }));
+  const auto p2 = pings();
+  std::this_thread::sleep_for(1000ms);
+  const auto after_pings = pings() - p2;
+  d.request_stop();
+  loop.join();
+  WARN("WATCHDOG=1 per second (interval 400 ms): idle "
+       << idle_pings << ", scan stalled " << stalled_pings << ", after it " << after_pings);
+  CHECK(idle_pings >= 3);  // every half interval: ~5 a second
+  CHECK(stalled_pings == 0);
+  CHECK(after_pings >= 3);
 }

@@ -55,6 +55,8 @@ TEST_CASE("device simulator stopped and restarted: fault reported, recovery, nex
   CHECK(r[test::reg_last_scan_id] == 1);
   CHECK(r[test::reg_last_outcome] == 3);  // device fault
   CHECK(rig.notify->wait_for("STATUS=fault", 2s));
+  // The journal gets the fault at error priority (sd-daemon "<3>" prefix on stderr).
+  CHECK(rig.logs().find("<3>state scanning -> fault") != std::string::npos);
   const auto raw1 = rig.find_file(1, "raw-incomplete");
   REQUIRE(raw1);
   io::RawReadOptions ro;
