@@ -3,6 +3,7 @@
 #include <Eigen/Dense>
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <vector>
 
 #include "errsep/core/four_sensor_simulation.hpp"
 #include "errsep/core/four_sensor_system.hpp"
@@ -27,9 +28,12 @@ TEST_CASE("CHOLMOD Tikhonov solution equals the dense one for every lambda") {
   const Eigen::MatrixXd A = Eigen::MatrixXd(sys.A);
   const Eigen::MatrixXd AtA = A.transpose() * A;
   // Without a border (CHOLMOD factorises all of AᵀA) and with the Δe border eliminated by its
-  // Schur complement: both must give the dense solution and the dense quadratic form.
+  // Schur complement: both must give the dense solution and the dense quadratic form.  With the
+  // border AᵀA is formed from A's rows in band storage (every row spans at most s2+s3+s4+1
+  // samples of f); without it the Δe columns make every data row wide (cholmod_aat then).
   for (int border : {0, 4}) {
     TikhonovSolver solver(sys.A, border);
+    CHECK(solver.stats().banded_normal == (border > 0));
     for (double lambda : {0.0, 1e-3, 0.05, 1.0, 10.0}) {
       REQUIRE(solver.factorize(lambda) == SolverStatus::success);
       const Eigen::VectorXd x = solver.solve(sys.b);
@@ -45,6 +49,40 @@ TEST_CASE("CHOLMOD Tikhonov solution equals the dense one for every lambda") {
       CHECK(std::abs(solver.inverse_quadratic_form(ref) - q_ref) <= 10 * cond * 2.2e-16 * q_ref);
     }
     CHECK(solver.stats().factorizations == 5);
+  }
+}
+
+TEST_CASE("a row wider than a band: AtA by the general product, the same solutions") {
+  // A row tying f(x_0) to f(x_{N-1}) (bandwidth N - 1 > 64): the banded formation refuses it and
+  // cholmod_aat forms AᵀA; the solutions must still be the dense ones.
+  const auto sys = example_system(0.1);
+  const Eigen::Index r = sys.A.rows(), n = sys.A.cols();
+  Eigen::SparseMatrix<double> A2(r + 1, n);
+  {
+    std::vector<Eigen::Triplet<double>> t;
+    for (int k = 0; k < sys.A.outerSize(); ++k)
+      for (Eigen::SparseMatrix<double>::InnerIterator it(sys.A, k); it; ++it)
+        t.emplace_back(static_cast<int>(it.row()), static_cast<int>(it.col()), it.value());
+    t.emplace_back(static_cast<int>(r), 0, 0.5);
+    t.emplace_back(static_cast<int>(r), static_cast<int>(n - 5), -0.5);
+    A2.setFromTriplets(t.begin(), t.end());
+  }
+  Eigen::VectorXd b2(r + 1);
+  b2 << sys.b, 0.3;
+  const Eigen::MatrixXd A = Eigen::MatrixXd(A2);
+  for (int border : {0, 4}) {
+    TikhonovSolver solver(A2, border);
+    CHECK_FALSE(solver.stats().banded_normal);
+    for (double lambda : {1e-3, 0.05, 1.0}) {
+      REQUIRE(solver.factorize(lambda) == SolverStatus::success);
+      const Eigen::MatrixXd M =
+          A.transpose() * A + lambda * lambda * Eigen::MatrixXd::Identity(n, n);
+      const Eigen::VectorXd ref = M.ldlt().solve(A.transpose() * b2);
+      Eigen::JacobiSVD<Eigen::MatrixXd> svd(M);
+      const double cond = svd.singularValues()(0) / svd.singularValues().tail(1)(0);
+      INFO("border = " << border << ", lambda = " << lambda);
+      CHECK((solver.solve(b2) - ref).norm() <= 10 * cond * 2.2e-16 * ref.norm());
+    }
   }
 }
 

@@ -30,6 +30,8 @@ struct TikhonovSolverStats {
   double analyze_s = 0;
   double factorize_s = 0;  ///< total over all factorisations
   double solve_s = 0;
+  /// AᵀA was formed from A's rows in band storage (every row narrow); else by cholmod_aat.
+  bool banded_normal = false;
 };
 
 class TikhonovSolver {
@@ -73,6 +75,8 @@ class TikhonovSolver {
   struct Impl;    // CHOLMOD workspace and factor, one per solver
   TikhonovSolver() = default;
   void build(int border_columns);
+  bool build_banded(const Eigen::SparseMatrix<double>& At);
+  void build_general(const Eigen::SparseMatrix<double>& At);
   std::shared_ptr<const Eigen::SparseMatrix<double>> A_;
   std::shared_ptr<Normal> normal_;
   std::unique_ptr<Impl> impl_;
