@@ -3,6 +3,7 @@
 #include <cholmod.h>
 
 #include <Eigen/Cholesky>
+#include <Eigen/SVD>
 
 #include <algorithm>
 #include <chrono>
@@ -85,6 +86,10 @@ struct TikhonovSolver::Normal {
   cholmod_sparse band{};
   Eigen::MatrixXd C;  ///< m × k coupling of the band unknowns with the border (mostly zero)
   Eigen::MatrixXd D;  ///< k × k border block
+  /// C = U·Vᵀ with V (k × r) orthonormal, r = rank C: the border needs r triangular solves per
+  /// λ, not k.  For the four-sensor system r = 2 < k = 4: column j of C collects row j of
+  /// Eq. (3)'s C along the ends of f, and that C has rank 2.
+  Eigen::MatrixXd U, V;
   Normal() { start_common(cm); }
   ~Normal() {
     cholmod_free_sparse(&upper, &cm);
@@ -103,9 +108,11 @@ struct TikhonovSolver::Impl {
   // reallocate it on every call.
   cholmod_dense *X = nullptr, *Y = nullptr, *E = nullptr;
   cholmod_dense *Xk = nullptr, *Yk = nullptr, *Ek = nullptr;
-  /// L⁻¹C (m × k): a view of the k-column solve's output Xk, which only factorize() overwrites
-  /// (no 8·m·k-byte copy per λ).
+  /// L⁻¹U (m × r): a view of the multi-column solve's output Xk, which only factorize()
+  /// overwrites (no 8·m·r-byte copy per λ).
   Eigen::Map<const Eigen::MatrixXd> W{nullptr, 0, 0};
+  /// [U | right-hand side] (m × (r + 1)) for factorize_and_solve: U copied in once.
+  Eigen::MatrixXd rhs_block;
   /// Scratch m-vector (D_B⁻¹z), kept: a temporary per solve would cost page faults at N = 10⁶.
   Eigen::VectorXd zd;
   Eigen::VectorXd d;  ///< the diagonal D of the band's LDLᵀ
@@ -184,6 +191,7 @@ void TikhonovSolver::build(int border_columns) {
   At.makeCompressed();
   stats_.banded_normal = build_banded(At);
   if (!stats_.banded_normal) build_general(At);
+  compress_border();
   stats_.analyze_s = seconds_since(t0);
   const auto t1 = std::chrono::steady_clock::now();
   impl_->L = cholmod_analyze(&normal_->band, &impl_->cm);
@@ -290,6 +298,33 @@ bool TikhonovSolver::build_banded(const Eigen::SparseMatrix<double>& At) {
   return true;
 }
 
+// C = U·Vᵀ with V the right singular vectors of C whose singular values exceed 1e-12 of the
+// largest: the directions of the border that the band sees.  The SVD is of C's nonzero rows
+// (a few near the ends of f for the four-sensor system), which have the same V; a Gram-matrix
+// eigendecomposition would blur a zero singular value into ~1e-8 of the largest.
+void TikhonovSolver::compress_border() {
+  const Eigen::MatrixXd& C = normal_->C;
+  const Eigen::Index k = C.cols();
+  std::vector<Eigen::Index> rows;
+  for (Eigen::Index i = 0; i < C.rows() && k > 0; ++i)
+    if (C.row(i).cwiseAbs().maxCoeff() > 0.0) rows.push_back(i);
+  Eigen::MatrixXd Cs(static_cast<Eigen::Index>(rows.size()), k);
+  for (std::size_t q = 0; q < rows.size(); ++q)
+    Cs.row(static_cast<Eigen::Index>(q)) = C.row(rows[q]);
+  Eigen::Index r = 0;
+  if (Cs.rows() > 0) {
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(Cs, Eigen::ComputeFullV);
+    const Eigen::VectorXd& sv = svd.singularValues();  // descending
+    while (r < sv.size() && sv(r) > 1e-12 * sv(0))
+      ++r;
+    normal_->V = svd.matrixV().leftCols(r);
+  } else {
+    normal_->V.resize(k, 0);
+  }
+  normal_->U = C * normal_->V;
+  stats_.border_rank = static_cast<int>(r);
+}
+
 // The general case: AᵀA = F·Fᵀ with F = Aᵀ (cholmod_aat; 3x faster than Eigen's sparse-sparse
 // product here), its upper triangle kept, the border split off as C and D.
 void TikhonovSolver::build_general(const Eigen::SparseMatrix<double>& At) {
@@ -360,6 +395,21 @@ std::unique_ptr<TikhonovSolver> TikhonovSolver::worker() const {
 }
 
 SolverStatus TikhonovSolver::factorize(double lambda) {
+  return factorize_impl(lambda, nullptr, nullptr);
+}
+
+SolverStatus TikhonovSolver::factorize_and_solve(double lambda, const Eigen::VectorXd& rhs,
+                                                 Eigen::VectorXd& x) {
+  const auto m = static_cast<Eigen::Index>(impl_->L->n);
+  if (rhs.size() != m + border_)
+    throw std::invalid_argument("TikhonovSolver::factorize_and_solve: right-hand side has " +
+                                std::to_string(rhs.size()) + " entries, expected " +
+                                std::to_string(m + border_));
+  return factorize_impl(lambda, &rhs, &x);
+}
+
+SolverStatus TikhonovSolver::factorize_impl(double lambda, const Eigen::VectorXd* rhs,
+                                            Eigen::VectorXd* x) {
   const auto t0 = std::chrono::steady_clock::now();
   double beta[2] = {lambda * lambda, 0.0};  // B + βI with β = λ²
   const int ok = cholmod_factorize_p(&normal_->band, beta, nullptr, 0, impl_->L, &impl_->cm);
@@ -368,6 +418,7 @@ SolverStatus TikhonovSolver::factorize(double lambda) {
   // cholmod_factorize_p returns TRUE even when a pivot failed: check status and L->minor too.
   impl_->factor_ok =
       ok && impl_->cm.status == CHOLMOD_OK && impl_->L->minor == impl_->L->n && !impl_->L->is_ll;
+  bool solved = false;
   if (impl_->factor_ok) {
     const auto m = static_cast<Eigen::Index>(impl_->L->n);
     const auto* Lp = static_cast<const int*>(impl_->L->p);
@@ -376,35 +427,73 @@ SolverStatus TikhonovSolver::factorize(double lambda) {
     for (Eigen::Index j = 0; j < m; ++j)
       impl_->d(j) = Lx[Lp[j]];  // D_j on L's diagonal
     if (border_ > 0) {
-      // Block LDLᵀ of [B C; Cᵀ D]: W = L⁻¹C, Schur complement S = D + λ²I − WᵀD_B⁻¹W.
-      impl_->band_solve_k(normal_->C.data(), m, border_);
-      new (&impl_->W)
-          Eigen::Map<const Eigen::MatrixXd>(static_cast<const double*>(impl_->Xk->x), m, border_);
-      // WᵀD_B⁻¹W in one pass over the rows of W (no m × k temporary: memory traffic is what a
+      // Block LDLᵀ of [B C; Cᵀ D] with C = U·Vᵀ: W = L⁻¹U, Schur complement
+      // S = D + λ²I − V·(WᵀD_B⁻¹W)·Vᵀ.  With a right-hand side, its forward substitution rides
+      // along in the same multi-column solve (CHOLMOD takes up to 4 columns in one pass over L):
+      // one pass over the factor fewer per λ.
+      const Eigen::Index r = normal_->U.cols();
+      const bool fuse = rhs != nullptr && r > 0 && r + 1 <= 4;
+      if (fuse) {
+        if (impl_->rhs_block.rows() != m || impl_->rhs_block.cols() != r + 1) {
+          impl_->rhs_block.resize(m, r + 1);
+          impl_->rhs_block.leftCols(r) = normal_->U;
+        }
+        impl_->rhs_block.col(r) = rhs->head(m);
+        impl_->band_solve_k(impl_->rhs_block.data(), m, r + 1);
+      } else if (r > 0) {
+        impl_->band_solve_k(normal_->U.data(), m, r);
+      }
+      new (&impl_->W) Eigen::Map<const Eigen::MatrixXd>(
+          r > 0 ? static_cast<const double*>(impl_->Xk->x) : nullptr, m, r);
+      // WᵀD_B⁻¹W in one pass over the rows of W (no m × r temporary: memory traffic is what a
       // λ costs at N = 10⁶).
-      Eigen::MatrixXd S = normal_->D;
-      S.diagonal().array() += lambda * lambda;
-      const Eigen::Index k = border_;
       const double* Wp = impl_->W.data();
       const double* dp = impl_->d.data();
-      Eigen::MatrixXd acc = Eigen::MatrixXd::Zero(k, k);
-      Eigen::VectorXd row(k);
-      for (Eigen::Index j = 0; j < m; ++j) {
+      Eigen::MatrixXd acc = Eigen::MatrixXd::Zero(r, r);
+      Eigen::VectorXd row(r);
+      for (Eigen::Index j = 0; j < m && r > 0; ++j) {
         const double inv = 1.0 / dp[j];
-        for (Eigen::Index a = 0; a < k; ++a)
+        for (Eigen::Index a = 0; a < r; ++a)
           row(a) = Wp[a * m + j];
-        for (Eigen::Index b = 0; b < k; ++b)
+        for (Eigen::Index b = 0; b < r; ++b)
           for (Eigen::Index a = 0; a <= b; ++a)
             acc(a, b) += row(a) * row(b) * inv;
       }
       acc.triangularView<Eigen::StrictlyLower>() = acc.transpose();
-      S -= acc;
+      Eigen::MatrixXd S = normal_->D;
+      S.diagonal().array() += lambda * lambda;
+      S.noalias() -= normal_->V * acc * normal_->V.transpose();
       impl_->S.compute(S);
       impl_->factor_ok = impl_->S.info() == Eigen::Success;
+      if (fuse && impl_->factor_ok) {
+        const auto t1 = std::chrono::steady_clock::now();
+        Eigen::VectorXd z =
+            Eigen::Map<const Eigen::VectorXd>(static_cast<const double*>(impl_->Xk->x) + r * m, m);
+        finish_solve(*rhs, z, *x);
+        ++stats_.solves;
+        stats_.solve_s += seconds_since(t1);
+        solved = true;
+      }
     }
   }
   stats_.factorize_s += seconds_since(t0);
-  return impl_->factor_ok ? SolverStatus::success : SolverStatus::not_positive_definite;
+  if (!impl_->factor_ok) return SolverStatus::not_positive_definite;
+  if (rhs != nullptr && !solved) *x = solve_normal(*rhs);
+  return SolverStatus::success;
+}
+
+// From z = L⁻¹r₁: y = S⁻¹(r₂ − V·WᵀD_B⁻¹z), x = (D_B Lᵀ)⁻¹(z − W·Vᵀy).
+void TikhonovSolver::finish_solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& z,
+                                  Eigen::VectorXd& out) {
+  const auto m = static_cast<Eigen::Index>(impl_->L->n);
+  impl_->zd.resize(m);
+  impl_->zd = z.cwiseQuotient(impl_->d);
+  const Eigen::VectorXd y =
+      impl_->S.solve(rhs.tail(border_) - normal_->V * (impl_->W.transpose() * impl_->zd));
+  z.noalias() -= impl_->W * (normal_->V.transpose() * y);
+  out.resize(m + border_);
+  impl_->band_solve(CHOLMOD_DLt, z.data(), m, 1, out.data());
+  out.tail(border_) = y;
 }
 
 Eigen::VectorXd TikhonovSolver::solve_normal(const Eigen::VectorXd& rhs) {
@@ -425,15 +514,9 @@ Eigen::VectorXd TikhonovSolver::solve_normal(const Eigen::VectorXd& rhs) {
                                ")");
     out = Eigen::Map<const Eigen::VectorXd>(static_cast<const double*>(impl_->X->x), m);
   } else {
-    // z = L⁻¹r₁, y = S⁻¹(r₂ − WᵀD_B⁻¹z), x = (D_B Lᵀ)⁻¹(z − W·y).
     Eigen::VectorXd z(m);
     impl_->band_solve(CHOLMOD_L, rhs.data(), m, 1, z.data());
-    impl_->zd.resize(m);
-    impl_->zd = z.cwiseQuotient(impl_->d);
-    const Eigen::VectorXd y = impl_->S.solve(rhs.tail(border_) - impl_->W.transpose() * impl_->zd);
-    z.noalias() -= impl_->W * y;
-    impl_->band_solve(CHOLMOD_DLt, z.data(), m, 1, out.data());
-    out.tail(border_) = y;
+    finish_solve(rhs, z, out);
   }
   ++stats_.solves;
   stats_.solve_s += seconds_since(t0);
@@ -447,13 +530,13 @@ double TikhonovSolver::inverse_quadratic_form(const Eigen::VectorXd& v) {
   if (v.size() != m + border_)
     throw std::invalid_argument("TikhonovSolver::inverse_quadratic_form: wrong vector size");
   const auto t0 = std::chrono::steady_clock::now();
-  // vᵀM⁻¹v = zᵀD_B⁻¹z + tᵀS⁻¹t with z = L⁻¹v₁, t = v₂ − WᵀD_B⁻¹z: one triangular solve.
+  // vᵀM⁻¹v = zᵀD_B⁻¹z + tᵀS⁻¹t with z = L⁻¹v₁, t = v₂ − V·WᵀD_B⁻¹z: one triangular solve.
   Eigen::VectorXd z(m);
   impl_->band_solve(CHOLMOD_L, v.data(), m, 1, z.data());
   const Eigen::VectorXd zd = z.cwiseQuotient(impl_->d);
   double q = z.dot(zd);
   if (border_ > 0) {
-    const Eigen::VectorXd t = v.tail(border_) - impl_->W.transpose() * zd;
+    const Eigen::VectorXd t = v.tail(border_) - normal_->V * (impl_->W.transpose() * zd);
     q += t.dot(impl_->S.solve(t));
   }
   ++stats_.solves;

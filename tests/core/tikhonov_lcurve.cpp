@@ -47,8 +47,16 @@ TEST_CASE("CHOLMOD Tikhonov solution equals the dense one for every lambda") {
       CHECK((x - ref).norm() <= 10 * cond * 2.2e-16 * ref.norm());
       const double q_ref = ref.dot(M.ldlt().solve(ref));
       CHECK(std::abs(solver.inverse_quadratic_form(ref) - q_ref) <= 10 * cond * 2.2e-16 * q_ref);
+      // The fused factorisation and solve (the border's and the right-hand side's forward
+      // substitutions in one pass) gives the same solution.
+      Eigen::VectorXd xf;
+      REQUIRE(solver.factorize_and_solve(lambda, A.transpose() * sys.b, xf) ==
+              SolverStatus::success);
+      CHECK((xf - ref).norm() <= 10 * cond * 2.2e-16 * ref.norm());
     }
-    CHECK(solver.stats().factorizations == 5);
+    CHECK(solver.stats().factorizations == 10);
+    // The Δe border couples to f through Eq. (3)'s C, of rank 2: two solves per λ, not four.
+    CHECK(solver.stats().border_rank == (border > 0 ? 2 : 0));
   }
 }
 

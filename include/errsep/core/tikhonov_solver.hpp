@@ -32,6 +32,8 @@ struct TikhonovSolverStats {
   double solve_s = 0;
   /// AᵀA was formed from A's rows in band storage (every row narrow); else by cholmod_aat.
   bool banded_normal = false;
+  /// Rank of the band–border coupling: triangular solves the border costs per λ (<= k).
+  int border_rank = 0;
 };
 
 class TikhonovSolver {
@@ -57,6 +59,9 @@ class TikhonovSolver {
 
   /// Numeric factorisation of AᵀA + λ²I.  λ = 0 gives the plain least-squares normal equations.
   SolverStatus factorize(double lambda);
+  /// factorize(λ), then x = solve_normal(rhs), with rhs's forward substitution done in the same
+  /// pass over the factor as the border's (one pass fewer per λ; what an L-curve sweep calls).
+  SolverStatus factorize_and_solve(double lambda, const Eigen::VectorXd& rhs, Eigen::VectorXd& x);
   /// Solves (AᵀA + λ²I)·y = rhs with the current factor.
   Eigen::VectorXd solve_normal(const Eigen::VectorXd& rhs);
   /// vᵀ(AᵀA + λ²I)⁻¹v with the current factor (one triangular solve for the LDLᵀ factor).
@@ -76,6 +81,9 @@ class TikhonovSolver {
   TikhonovSolver() = default;
   void build(int border_columns);
   bool build_banded(const Eigen::SparseMatrix<double>& At);
+  void compress_border();
+  SolverStatus factorize_impl(double lambda, const Eigen::VectorXd* rhs, Eigen::VectorXd* x);
+  void finish_solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& z, Eigen::VectorXd& out);
   void build_general(const Eigen::SparseMatrix<double>& At);
   std::shared_ptr<const Eigen::SparseMatrix<double>> A_;
   std::shared_ptr<Normal> normal_;
