@@ -1,10 +1,11 @@
 #pragma once
 // Tikhonov solutions of A·X ≈ b (Eq. 17 of Zhao 2019): X_λ = (AᵀA + λ²I)⁻¹Aᵀb, by CHOLMOD on the
-// regularised normal equations.  AᵀA is formed once (cholmod_aat, upper triangle kept); the
-// symbolic analysis (natural ordering, simplicial LDLᵀ: AᵀA is banded with a few dense trailing
-// rows) is done once in the constructor and each λ costs one numeric factorisation with CHOLMOD's
-// diagonal shift β = λ² (Ceres-style: Tikhonov is a per-solve option, not a matrix edit).  This is
-// the only place that talks to CHOLMOD (its C API, in tikhonov_solver.cpp).
+// regularised normal equations.  AᵀA is formed once (from A's rows in band storage when they are
+// narrow, else by cholmod_aat; upper triangle kept); the symbolic analysis (natural ordering,
+// simplicial LDLᵀ: AᵀA is banded with a few dense trailing rows) is done once in the constructor
+// and each λ costs one numeric factorisation with CHOLMOD's diagonal shift β = λ² (Ceres-style:
+// Tikhonov is a per-solve option, not a matrix edit).  This is the only place that talks to CHOLMOD
+// (its C API, in tikhonov_solver.cpp).
 //
 // A sweep over λ can run on several threads: worker() gives another solver over the same A and
 // AᵀA (shared, read-only) with its own CHOLMOD workspace and a copy of the analysed factor.  Each
@@ -44,9 +45,9 @@ class TikhonovSolver {
   /// zero-adjustment differences Δe of Eq. (7) do, so AᵀA is a band with a k-wide border.
   /// CHOLMOD then factorises only the band B (twice as fast as band plus border: the border rows
   /// of the factor are dense) and the border is eliminated by its k × k Schur complement
-  /// S = D − Cᵀ B⁻¹ C (k forward substitutions per λ).  The band block alone must be positive
-  /// definite at the λ used (it is for every gauge of four_sensor_system: f alone has no null
-  /// direction there, or λ > 0).
+  /// S = D − Cᵀ B⁻¹ C (rank(C) forward substitutions per λ, in one pass over the factor).  The
+  /// band block alone must be positive definite at the λ used (it is for every gauge of
+  /// four_sensor_system: f alone has no null direction there, or λ > 0).
   explicit TikhonovSolver(const Eigen::SparseMatrix<double>& A, int border_columns = 0);
   /// The same, taking A over instead of copying it (at N = 10⁶ the copy is 200 MB).
   explicit TikhonovSolver(Eigen::SparseMatrix<double>&& A, int border_columns = 0);
