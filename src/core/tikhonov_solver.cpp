@@ -50,11 +50,13 @@ cholmod_sparse view(const Eigen::SparseMatrix<double>& M) {
   return s;
 }
 
-cholmod_dense view(const Eigen::VectorXd& v) {
+// Views a column-major rows × cols array as a cholmod_dense (no copy).
+cholmod_dense view(const double* v, Eigen::Index rows, Eigen::Index cols) {
   cholmod_dense d{};
-  d.nrow = d.nzmax = d.d = static_cast<size_t>(v.size());
-  d.ncol = 1;
-  d.x = const_cast<double*>(v.data());
+  d.nrow = d.d = static_cast<size_t>(rows);
+  d.ncol = static_cast<size_t>(cols);
+  d.nzmax = d.nrow * d.ncol;
+  d.x = const_cast<double*>(v);
   d.xtype = CHOLMOD_REAL;
   d.dtype = CHOLMOD_DOUBLE;
   return d;
@@ -124,32 +126,17 @@ struct TikhonovSolver::Impl {
   Eigen::LDLT<Eigen::MatrixXd> S;  ///< Schur complement D + λ²I − WᵀD⁻¹W of the border
   bool factor_ok = false;
 
-  /// out = op⁻¹·v for CHOLMOD system `sys` (CHOLMOD_L or CHOLMOD_DLt) on the band factor.
-  void band_solve(int sys, const double* v, Eigen::Index rows, Eigen::Index cols, double* out) {
-    cholmod_dense b{};
-    b.nrow = static_cast<size_t>(rows);
-    b.ncol = static_cast<size_t>(cols);
-    b.nzmax = b.nrow * b.ncol;
-    b.d = b.nrow;
-    b.x = const_cast<double*>(v);
-    b.xtype = CHOLMOD_REAL;
-    b.dtype = CHOLMOD_DOUBLE;
-    const bool single = cols == 1;
-    if (!cholmod_solve2(sys, L, &b, nullptr, single ? &X : &Xk, nullptr, single ? &Y : &Yk,
-                        single ? &E : &Ek, &cm))
+  /// out = op⁻¹·v for CHOLMOD system `sys` (CHOLMOD_L or CHOLMOD_DLt) on the band factor, one
+  /// column of `rows` entries.
+  void band_solve(int sys, const double* v, Eigen::Index rows, double* out) {
+    cholmod_dense b = view(v, rows, 1);
+    if (!cholmod_solve2(sys, L, &b, nullptr, &X, nullptr, &Y, &E, &cm))
       throw std::runtime_error("CHOLMOD solve failed (status " + std::to_string(cm.status) + ")");
-    std::copy_n(static_cast<const double*>((single ? X : Xk)->x), rows * cols, out);
+    std::copy_n(static_cast<const double*>(X->x), rows, out);
   }
-  /// Xk = L⁻¹·v for the k-column right-hand side v (m × k), left in Xk.
+  /// Xk = L⁻¹·v for the multi-column right-hand side v (rows × cols), left in Xk.
   void band_solve_k(const double* v, Eigen::Index rows, Eigen::Index cols) {
-    cholmod_dense b{};
-    b.nrow = static_cast<size_t>(rows);
-    b.ncol = static_cast<size_t>(cols);
-    b.nzmax = b.nrow * b.ncol;
-    b.d = b.nrow;
-    b.x = const_cast<double*>(v);
-    b.xtype = CHOLMOD_REAL;
-    b.dtype = CHOLMOD_DOUBLE;
+    cholmod_dense b = view(v, rows, cols);
     if (!cholmod_solve2(CHOLMOD_L, L, &b, nullptr, &Xk, nullptr, &Yk, &Ek, &cm))
       throw std::runtime_error("CHOLMOD solve failed (status " + std::to_string(cm.status) + ")");
   }
@@ -492,7 +479,7 @@ void TikhonovSolver::finish_solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& z
       impl_->S.solve(rhs.tail(border_) - normal_->V * (impl_->W.transpose() * impl_->zd));
   z.noalias() -= impl_->W * (normal_->V.transpose() * y);
   out.resize(m + border_);
-  impl_->band_solve(CHOLMOD_DLt, z.data(), m, 1, out.data());
+  impl_->band_solve(CHOLMOD_DLt, z.data(), m, out.data());
   out.tail(border_) = y;
 }
 
@@ -507,7 +494,7 @@ Eigen::VectorXd TikhonovSolver::solve_normal(const Eigen::VectorXd& rhs) {
   const auto t0 = std::chrono::steady_clock::now();
   Eigen::VectorXd out(rhs.size());
   if (border_ == 0) {
-    cholmod_dense b = view(rhs);
+    cholmod_dense b = view(rhs.data(), rhs.size(), 1);
     if (!cholmod_solve2(CHOLMOD_A, impl_->L, &b, nullptr, &impl_->X, nullptr, &impl_->Y, &impl_->E,
                         &impl_->cm))
       throw std::runtime_error("CHOLMOD solve failed (status " + std::to_string(impl_->cm.status) +
@@ -515,7 +502,7 @@ Eigen::VectorXd TikhonovSolver::solve_normal(const Eigen::VectorXd& rhs) {
     out = Eigen::Map<const Eigen::VectorXd>(static_cast<const double*>(impl_->X->x), m);
   } else {
     Eigen::VectorXd z(m);
-    impl_->band_solve(CHOLMOD_L, rhs.data(), m, 1, z.data());
+    impl_->band_solve(CHOLMOD_L, rhs.data(), m, z.data());
     finish_solve(rhs, z, out);
   }
   ++stats_.solves;
@@ -532,7 +519,7 @@ double TikhonovSolver::inverse_quadratic_form(const Eigen::VectorXd& v) {
   const auto t0 = std::chrono::steady_clock::now();
   // vᵀM⁻¹v = zᵀD_B⁻¹z + tᵀS⁻¹t with z = L⁻¹v₁, t = v₂ − V·WᵀD_B⁻¹z: one triangular solve.
   Eigen::VectorXd z(m);
-  impl_->band_solve(CHOLMOD_L, v.data(), m, 1, z.data());
+  impl_->band_solve(CHOLMOD_L, v.data(), m, z.data());
   const Eigen::VectorXd zd = z.cwiseQuotient(impl_->d);
   double q = z.dot(zd);
   if (border_ > 0) {
