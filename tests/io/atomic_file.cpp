@@ -60,9 +60,9 @@ TEST_CASE("ENOSPC in the middle of a write: clear error, old file kept, no tempo
   const fs::path dir = tmp / "full";
   fs::create_directories(dir);
   std::string out;
-  if (errsep::test::run_command("/usr/bin/unshare -Urm sh -c 'mount -t tmpfs -o size=8k tmpfs " +
-                                    dir.string() + "' 2>&1",
-                                &out) != 0) {
+  if (errsep::test::run_command(
+          "/usr/bin/unshare -Urm sh -c 'mount -t tmpfs -o size=8k tmpfs " + dir.string() + "' 2>&1",
+          &out) != 0) {
     std::cout << "SKIPPED: cannot mount a tmpfs in a user+mount namespace (unshare -Urm): " << out
               << "\n";
     return;
