@@ -81,7 +81,8 @@ TEST_CASE("an incomplete scan is refused for separation, readable for inspection
   CHECK(r.m_um[3][1] == -0.25);
 }
 
-TEST_CASE("a plain CSV with the four-sensor columns is accepted, but nan in a complete scan is not") {
+TEST_CASE(
+    "a plain CSV with the four-sensor columns is accepted, but nan in a complete scan is not") {
   TempDir dir;
   {
     std::ofstream f(dir / "plain.csv");
