@@ -57,9 +57,12 @@ int main(int argc, char** argv) {
   app.add_option("--device-port", device_port,
                  "use this port for every TCP bus whose port is 0 (the port errsep-devsim printed)")
       ->check(CLI::Range(1, 65535));
-  app.add_option("--keep-scans", keep_scans, "retention: keep the newest N scans (0 = keep all)")
+  app.add_option("--keep-scans", keep_scans,
+                 "retention: keep the N scans of highest scan id (0 = keep all)")
       ->check(CLI::NonNegativeNumber);
-  app.add_option("--max-age-days", max_age_days, "retention: delete scans older (0 = keep all)")
+  app.add_option("--max-age-days", max_age_days,
+                 "retention: delete scans older than this, by the time in their names; a clock "
+                 "before 2024 (no RTC) ages nothing (0 = keep all)")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--schedule-s", schedule_s, "also start a scan every this many seconds (0 = off)")
       ->check(CLI::NonNegativeNumber);

@@ -180,21 +180,42 @@ int ResultsStore::remove_superseded() {
   return n;
 }
 
+std::chrono::system_clock::time_point earliest_plausible_scan_time() {
+  return std::chrono::sys_days{std::chrono::year{2024} / 1 / 1};
+}
+
 int ResultsStore::prune(std::chrono::system_clock::time_point now) {
   if (!opts_.retention.enabled()) return 0;
-  // Group files by scan (stem), newest scan first.
-  std::map<std::string, std::vector<StoredFile>, std::greater<>> scans;
+  // Group files by scan id.  Scans are ranked by id, not by the time in their names: ids only
+  // grow (next_scan_id), while a board without a battery-backed clock names its scans 1970 until
+  // NTP has synchronised, and ranking by name would then delete the newest scans first.
+  std::map<std::uint64_t, std::vector<StoredFile>> scans;
   for (auto& f : list())
-    scans[f.stem].push_back(f);
+    scans[f.scan_id].push_back(f);
+  // Age: a scan is at least as recent as every scan before it, so its time is taken as the
+  // largest name time up to its id (a scan named 1970 after one named 2026 is at least 2026).
+  // Before earliest_plausible_scan_time no scan of this software was made: a time before it (or
+  // after `now`, the clock of the scan or of this call being wrong) is unknown and the scan is
+  // kept by the age rule; the count rule still applies.
   const auto max_age = std::chrono::duration_cast<std::chrono::system_clock::duration>(
       std::chrono::duration<double, std::ratio<86400>>(opts_.retention.max_age_days));
+  const bool now_plausible = now >= earliest_plausible_scan_time();
+  std::map<std::uint64_t, std::chrono::system_clock::time_point> lower_bound_time;
+  auto running = std::chrono::system_clock::time_point::min();
+  for (const auto& [id, files] : scans) {
+    for (const auto& f : files)
+      running = std::max(running, f.time);
+    lower_bound_time[id] = running;
+  }
   int removed = 0, rank = 0;
-  for (const auto& [stem_, files] : scans) {
+  for (auto it = scans.rbegin(); it != scans.rend(); ++it) {  // newest id first
     ++rank;
+    const auto t = lower_bound_time[it->first];
     const bool too_many = opts_.retention.keep_scans > 0 && rank > opts_.retention.keep_scans;
-    const bool too_old = opts_.retention.max_age_days > 0 && files.front().time < now - max_age;
+    const bool time_known = now_plausible && t >= earliest_plausible_scan_time() && t <= now;
+    const bool too_old = opts_.retention.max_age_days > 0 && time_known && t < now - max_age;
     if (!too_many && !too_old) continue;
-    for (const auto& f : files) {
+    for (const auto& f : it->second) {
       std::error_code ec;
       if (fs::remove(f.path, ec)) ++removed;
     }

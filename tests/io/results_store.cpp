@@ -3,6 +3,7 @@
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <fstream>
+#include <set>
 
 #include "errsep/io/results_store.hpp"
 #include "support/support.hpp"
@@ -137,6 +138,60 @@ TEST_CASE("retention: nothing deleted unless configured") {
     io::ResultsStore store(o);
     CHECK(store.prune(now) == 6);  // scans 1-3 are 5, 4 and 3 days old
     CHECK(store.list().front().scan_id == 4);
+  }
+  SECTION("a wrong clock: scans named 1970 after NTP-less boots") {
+    // Scans 6 and 7 were made after 5 on a board whose clock restarted at 1970 (no RTC).
+    {
+      io::ResultsStore store(o);
+      const auto epoch = std::chrono::system_clock::time_point{} + std::chrono::hours(1);
+      for (int id = 6; id <= 7; ++id) {
+        const auto stem = io::ResultsStore::stem(epoch + std::chrono::minutes(id), id);
+        store.write(stem, "raw", "x\n1\n");
+        store.write(stem, "result", "x\n1\n");
+      }
+    }
+    auto ids = [](const io::ResultsStore& st) {
+      std::set<std::uint64_t> v;
+      for (const auto& f : st.list())
+        v.insert(f.scan_id);
+      return v;
+    };
+    SECTION("count: the newest are the highest ids, not the latest names") {
+      o.retention.keep_scans = 3;
+      io::ResultsStore store(o);
+      CHECK(store.prune(now) == 8);
+      CHECK(ids(store) == std::set<std::uint64_t>{5, 6, 7});
+    }
+    SECTION("age: a 1970 scan after a recent one is at least as recent") {
+      o.retention.max_age_days = 2.5;
+      io::ResultsStore store(o);
+      CHECK(store.prune(now) == 6);  // scans 1-3 only
+      CHECK(ids(store) == std::set<std::uint64_t>{4, 5, 6, 7});
+    }
+    SECTION("age: with the clock itself in 1970 nothing is aged out") {
+      o.retention.max_age_days = 2.5;
+      io::ResultsStore store(o);
+      CHECK(store.prune(std::chrono::system_clock::time_point{} + std::chrono::hours(5)) == 0);
+      CHECK(store.list().size() == 14);
+    }
+  }
+  SECTION("age: scans with only implausible times are kept by the age rule") {
+    test::TempDir tmp2;
+    io::ResultsStoreOptions o2 = o;
+    o2.dir = tmp2 / "results";
+    o2.retention.max_age_days = 1;
+    io::ResultsStore store(o2);
+    const auto epoch = std::chrono::system_clock::time_point{};
+    store.write(io::ResultsStore::stem(epoch + std::chrono::hours(2), 1), "raw", "x\n1\n");
+    // Named after `now` (the clock ran ahead, then was set back): unknown age, kept.
+    store.write(io::ResultsStore::stem(now + std::chrono::hours(48), 2), "raw", "x\n1\n");
+    CHECK(store.prune(now) == 0);
+    CHECK(store.list().size() == 2);
+    o2.retention.keep_scans = 1;  // the count rule still applies
+    io::ResultsStore counted(o2);
+    CHECK(counted.prune(now) == 1);
+    REQUIRE(counted.list().size() == 1);
+    CHECK(counted.list().front().scan_id == 2);
   }
   SECTION("invalid retention is refused") {
     o.retention.keep_scans = -1;

@@ -63,6 +63,10 @@ struct StoredFile {
   std::chrono::system_clock::time_point time;
 };
 
+/// 2024-01-01 UTC: no scan of this software is older; a scan time or clock before it is wrong
+/// (a board without a battery-backed clock starts in 1970) and retention does not age by it.
+std::chrono::system_clock::time_point earliest_plausible_scan_time();
+
 class ResultsStore {
  public:
   /// Creates the directory if needed.  Throws std::runtime_error (naming the directory) when it
@@ -98,8 +102,12 @@ class ResultsStore {
   /// how many.
   int remove_superseded();
   /// Applies the retention setting (no-op when not enabled): removes every file of the scans
-  /// beyond the newest keep_scans, and of the scans started before now − max_age_days.
-  /// Returns the number of files deleted.
+  /// beyond the newest keep_scans (newest = highest scan id, whatever the clock said), and of the
+  /// scans started before now − max_age_days.  A scan's start is taken as the latest time named
+  /// by it or any scan of a lower id; where that time or `now` is before
+  /// earliest_plausible_scan_time() or the scan's time is after `now` (a board without a
+  /// battery-backed clock before NTP), the age rule keeps the scan.  Returns the number of files
+  /// deleted.
   int prune(std::chrono::system_clock::time_point now);
 
   /// Free bytes for unprivileged writers on the store's file system.
