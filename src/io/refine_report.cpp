@@ -6,6 +6,16 @@
 
 namespace errsep::io {
 
+std::string lambda_summary(const core::FourSensorResult& sep) {
+  char buf[160];
+  std::snprintf(buf, sizeof buf, "%.4g (%s%s%s)", sep.lambda, core::to_string(sep.rule),
+                sep.lambda_fallback == core::LambdaFallback::none ? "" : ", ",
+                sep.lambda_fallback == core::LambdaFallback::none
+                    ? ""
+                    : core::to_string(sep.lambda_fallback));
+  return buf;
+}
+
 CsvTable refine_csv(const core::RefineResult& r) {
   CsvTable t;
   t.set_meta("format", "errsep refine steps");
@@ -22,6 +32,11 @@ CsvTable refine_csv(const core::RefineResult& r) {
   }
   for (std::size_t i = 0; i < r.implausible_kept.size(); ++i)
     t.set_meta("implausible_kept" + std::to_string(i), r.implausible_kept[i]);
+  // The errors before and after are those of two separations with the same solver options; the
+  // λ rule may regularise one and not the other (an undeclared effect can give the L-curve a
+  // corner that the corrected readings no longer have), so both λ go with them.
+  t.set_meta("lambda_before", lambda_summary(r.before));
+  t.set_meta("lambda_after", lambda_summary(r.after));
   t.columns = {"step",
                "parameter_index",
                "value",
@@ -89,6 +104,21 @@ std::string format_refine_text(const core::RefineResult& r) {
                     s.error_after->gamma_urad, s.error_before->f_um, s.error_after->f_um);
       out += buf;
     }
+  }
+  {
+    // Why an error "before" can be smaller than the noise floor: see refine_csv.
+    auto regularised = [](const core::FourSensorResult& sep) {
+      return sep.lambda > 0 && sep.rule != core::LambdaRule::least_squares &&
+             sep.lambda_fallback != core::LambdaFallback::no_regularisation;
+    };
+    const bool regularised_before = regularised(r.before);
+    const bool regularised_after = regularised(r.after);
+    out += "\nseparations: raw readings lambda = " + lambda_summary(r.before) +
+           ", corrected readings lambda = " + lambda_summary(r.after) + "\n";
+    if (regularised_before != regularised_after)
+      out += std::string("  only the ") + (regularised_before ? "raw" : "corrected") +
+             " readings' separation is regularised: its errors carry shrinkage (less noise, more "
+             "bias), the other's do not\n";
   }
   for (const auto& rc : r.rejected) {
     std::snprintf(buf, sizeof buf, "\nround %d: %s  (F = %.4g, p = %.3g) NOT ADDED\n", rc.round + 1,

@@ -32,42 +32,11 @@ using errsep::test::RefineCase;
 
 namespace {
 
+using errsep::test::add_traverse_polynomials;
 using errsep::test::check_identified;
+using errsep::test::null_basis;
 using errsep::test::print_steps;
-
-EffectContext scan_context(const RefineCase& c) {
-  EffectContext ctx;
-  ctx.cfg = c.cfg;
-  ctx.m_um = c.sim.m_um;
-  ctx.t_s = scan_order_times_s(c.cfg);
-  return ctx;
-}
-
-// Adds h_i(x_n) = Σ_k c_ik·P_k(2x_n/L − 1) (k = 1..4, Legendre, written out here rather than taken
-// from TraverseEffect) to the readings of traverse i; c configuration-major as the effect's
-// parameters.
-std::function<void(Eigen::MatrixXd&, const Eigen::MatrixXd&)> add_traverse_polynomials(
-    const Eigen::VectorXd& c) {
-  return [c](Eigen::MatrixXd& m, const Eigen::MatrixXd&) {
-    const Eigen::Index P = m.rows();
-    for (Eigen::Index n = 0; n < P; ++n) {
-      const double u = 2.0 * static_cast<double>(n) / static_cast<double>(P - 1) - 1.0;
-      const double Pk[4] = {u, 0.5 * (3 * u * u - 1), 0.5 * (5 * u * u * u - 3 * u),
-                            (35 * u * u * u * u - 30 * u * u + 3) / 8.0};
-      for (int i = 0; i < 4; ++i)
-        for (int k = 0; k < 4; ++k)
-          m(n, i) += c(4 * i + k) * Pk[k];
-    }
-  };
-}
-
-// Orthonormal basis (parameter units) of the directions no scan can determine.
-Eigen::MatrixXd null_basis(const Identifiability& id) {
-  const Eigen::Index k = id.null_directions.rows(), k0 = id.null_directions.cols();
-  if (k0 == 0) return Eigen::MatrixXd(k, 0);
-  return Eigen::HouseholderQR<Eigen::MatrixXd>(id.null_directions).householderQ() *
-         Eigen::MatrixXd::Identity(k, k0);
-}
+using errsep::test::scan_context;
 
 RefineResult run(const RefineCase& c, const RefineOptions& o = {}) {
   return refine_four_sensor(c.cfg, c.sim.m_um, Eigen::MatrixXd(), o, &c.truth);

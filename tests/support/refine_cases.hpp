@@ -3,6 +3,7 @@
 // Zhao 2019 Example 1 geometry and truth, an effect injected into the readings, noise.
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
+#include <Eigen/QR>
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
@@ -47,6 +48,41 @@ inline RefineCase make_refine_case(
   c.truth.S_um = c.sim.S_um;
   c.truth.gamma_rad = c.sim.gamma_rad;
   return c;
+}
+
+/// The effects' context for a case: its configuration, readings and scan-order times.
+inline core::EffectContext scan_context(const RefineCase& c) {
+  core::EffectContext ctx;
+  ctx.cfg = c.cfg;
+  ctx.m_um = c.sim.m_um;
+  ctx.t_s = core::scan_order_times_s(c.cfg);
+  return ctx;
+}
+
+/// Adds h_i(x_n) = Σ_k c_ik·P_k(2x_n/L − 1) (k = 1..4, Legendre, written out here rather than taken
+/// from TraverseEffect) to the readings of traverse i; c configuration-major as the effect's
+/// parameters.
+inline std::function<void(Eigen::MatrixXd&, const Eigen::MatrixXd&)> add_traverse_polynomials(
+    const Eigen::VectorXd& c) {
+  return [c](Eigen::MatrixXd& m, const Eigen::MatrixXd&) {
+    const Eigen::Index P = m.rows();
+    for (Eigen::Index n = 0; n < P; ++n) {
+      const double u = 2.0 * static_cast<double>(n) / static_cast<double>(P - 1) - 1.0;
+      const double Pk[4] = {u, 0.5 * (3 * u * u - 1), 0.5 * (5 * u * u * u - 3 * u),
+                            (35 * u * u * u * u - 30 * u * u + 3) / 8.0};
+      for (int i = 0; i < 4; ++i)
+        for (int k = 0; k < 4; ++k)
+          m(n, i) += c(4 * i + k) * Pk[k];
+    }
+  };
+}
+
+/// Orthonormal basis (parameter units) of the directions no scan can determine.
+inline Eigen::MatrixXd null_basis(const core::Identifiability& id) {
+  const Eigen::Index k = id.null_directions.rows(), k0 = id.null_directions.cols();
+  if (k0 == 0) return Eigen::MatrixXd(k, 0);
+  return Eigen::HouseholderQR<Eigen::MatrixXd>(id.null_directions).householderQ() *
+         Eigen::MatrixXd::Identity(k, k0);
 }
 
 /// Standardised errors of an estimate along the combinations the data determine: for every

@@ -11,10 +11,16 @@ namespace errsep::io {
 /// Columns: step, parameter_index, value, u_value, F, p_value, rms_before_um, rms_after_um,
 /// whiteness_p, S_err_before_um, S_err_after_um, gamma_err_before_urad, gamma_err_after_urad,
 /// f_err_before_um, f_err_after_um (nan where not applicable).  Metadata: model, stop reason,
-/// "step<k>_effect" and "step<k>_parameter<j>" names.
+/// "step<k>_effect" and "step<k>_parameter<j>" names, "lambda_before" / "lambda_after" (the λ of
+/// the separations of the raw and the corrected readings, see lambda_summary).
 CsvTable refine_csv(const core::RefineResult& r);
 
-/// The step table, the final candidate scores and the whiteness verdict as text.
+/// "λ (rule)" or "λ (rule, fallback)" of a separation, e.g. "0.3481 (lcurve)" or
+/// "9.033e-07 (lcurve, no_regularisation)".
+std::string lambda_summary(const core::FourSensorResult& sep);
+
+/// The step table, the λ of the separations before and after, the final candidate scores and the
+/// whiteness verdict as text.
 std::string format_refine_text(const core::RefineResult& r);
 
 }  // namespace errsep::io
