@@ -7,13 +7,12 @@
 namespace errsep::io {
 
 std::string lambda_summary(const core::FourSensorResult& sep) {
-  char buf[160];
-  std::snprintf(buf, sizeof buf, "%.4g (%s%s%s)", sep.lambda, core::to_string(sep.rule),
-                sep.lambda_fallback == core::LambdaFallback::none ? "" : ", ",
-                sep.lambda_fallback == core::LambdaFallback::none
-                    ? ""
-                    : core::to_string(sep.lambda_fallback));
-  return buf;
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.4g (", sep.lambda);
+  std::string out = buf + std::string(core::to_string(sep.rule));
+  if (sep.lambda_fallback != core::LambdaFallback::none)
+    out += std::string(", ") + core::to_string(sep.lambda_fallback);
+  return out + ")";
 }
 
 CsvTable refine_csv(const core::RefineResult& r) {
@@ -105,21 +104,13 @@ std::string format_refine_text(const core::RefineResult& r) {
       out += buf;
     }
   }
-  {
-    // Why an error "before" can be smaller than the noise floor: see refine_csv.
-    auto regularised = [](const core::FourSensorResult& sep) {
-      return sep.lambda > 0 && sep.rule != core::LambdaRule::least_squares &&
-             sep.lambda_fallback != core::LambdaFallback::no_regularisation;
-    };
-    const bool regularised_before = regularised(r.before);
-    const bool regularised_after = regularised(r.after);
-    out += "\nseparations: raw readings lambda = " + lambda_summary(r.before) +
-           ", corrected readings lambda = " + lambda_summary(r.after) + "\n";
-    if (regularised_before != regularised_after)
-      out += std::string("  only the ") + (regularised_before ? "raw" : "corrected") +
-             " readings' separation is regularised: its errors carry shrinkage (less noise, more "
-             "bias), the other's do not\n";
-  }
+  // Why an error "before" can be smaller than the noise floor: see refine_csv.
+  out += "\nseparations: raw readings lambda = " + lambda_summary(r.before) +
+         ", corrected readings lambda = " + lambda_summary(r.after) + "\n";
+  if (r.before.regularised() != r.after.regularised())
+    out += std::string("  only the ") + (r.before.regularised() ? "raw" : "corrected") +
+           " readings' separation is regularised: its errors carry shrinkage (less noise, more "
+           "bias), the other's do not\n";
   for (const auto& rc : r.rejected) {
     std::snprintf(buf, sizeof buf, "\nround %d: %s  (F = %.4g, p = %.3g) NOT ADDED\n", rc.round + 1,
                   rc.effect.c_str(), rc.F, rc.p_value);

@@ -85,6 +85,12 @@ struct FourSensorResult {
   TikhonovSolverStats solver_stats;
   double total_s = 0;
 
+  /// Whether λ shrinks the solution: false for least squares, λ = 0 and an L-curve without a
+  /// corner that fell back to no regularisation (λ then only keeps the factorisation defined).
+  bool regularised() const noexcept {
+    return lambda > 0 && rule != LambdaRule::least_squares &&
+           lambda_fallback != LambdaFallback::no_regularisation;
+  }
   /// One line: λ (rule), norms, σ̂, counts, time; flags an L-curve corner at the range edge.
   std::string brief_report() const;
 };
