@@ -1,5 +1,7 @@
 #include "errsep/core/four_sensor.hpp"
 
+#include "four_sensor_paths.hpp"
+
 #include <Eigen/Dense>
 #include <chrono>
 #include <cmath>
@@ -11,6 +13,10 @@ namespace errsep::core {
 
 const char* to_string(LambdaRule r) {
   switch (r) {
+    case LambdaRule::reml:
+      return "reml";
+    case LambdaRule::gcv:
+      return "gcv";
     case LambdaRule::lcurve:
       return "lcurve";
     case LambdaRule::discrepancy:
@@ -23,6 +29,44 @@ const char* to_string(LambdaRule r) {
   return "unknown";
 }
 
+std::optional<LambdaRule> lambda_rule_from_string(std::string_view s) {
+  if (s == "ls") return LambdaRule::least_squares;
+  for (auto r : {LambdaRule::reml, LambdaRule::gcv, LambdaRule::lcurve, LambdaRule::discrepancy,
+                 LambdaRule::fixed, LambdaRule::least_squares})
+    if (s == to_string(r)) return r;
+  return std::nullopt;
+}
+
+const char* to_string(Estimator e) {
+  switch (e) {
+    case Estimator::posterior:
+      return "posterior";
+    case Estimator::paper_system:
+      return "paper_system";
+  }
+  return "unknown";
+}
+
+std::optional<Estimator> estimator_from_string(std::string_view s) {
+  for (auto e : {Estimator::posterior, Estimator::paper_system})
+    if (s == to_string(e)) return e;
+  return std::nullopt;
+}
+
+bool LambdaSearchOptions::is_valid(std::string* why) const {
+  auto fail = [&](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  if (count < 3) return fail("search.count = " + std::to_string(count) + ": need at least 3");
+  if (!(decades_below >= 0 && decades_above >= 0 && decades_below + decades_above > 0))
+    return fail("search range decades must be >= 0 and not both 0");
+  if (refine_iterations < 0) return fail("search.refine_iterations must be >= 0");
+  if (threads < 1 || threads > 64)
+    return fail("search.threads = " + std::to_string(threads) + ": must be 1 to 64");
+  return true;
+}
+
 const char* to_string(LambdaFallback f) {
   switch (f) {
     case LambdaFallback::none:
@@ -31,6 +75,8 @@ const char* to_string(LambdaFallback f) {
       return "no_regularisation";
     case LambdaFallback::discrepancy:
       return "discrepancy";
+    case LambdaFallback::collapse_least_squares:
+      return "collapse_least_squares";
   }
   return "unknown";
 }
@@ -47,7 +93,19 @@ bool FourSensorOptions::is_valid(std::string* why) const {
     return fail("iterated_refinements = " + std::to_string(iterated_refinements) +
                 ": must be in [0, 100]");
   if (uncertainty_probes < 1) return fail("uncertainty_probes must be >= 1");
-  return lcurve.is_valid(why);
+  if (!(collapse_edf >= 0)) return fail("collapse_edf must be >= 0");
+  if (estimator == Estimator::paper_system && (rule == LambdaRule::reml || rule == LambdaRule::gcv))
+    return fail(std::string("rule ") + to_string(rule) +
+                " needs estimator posterior (the paper's system has correlated rows)");
+  if (estimator == Estimator::posterior) {
+    if (gauge != CurvatureGauge::reference_without_curvature)
+      return fail(std::string("gauge ") + to_string(gauge) +
+                  " needs estimator paper_system (the posterior fixes the bow of f exactly)");
+    if (motion != MotionEstimator::all_configurations)
+      return fail("motion paper_eq18_19 needs estimator paper_system");
+    if (iterated_refinements != 0) return fail("iterated_refinements needs estimator paper_system");
+  }
+  return search.is_valid(why) && lcurve.is_valid(why);
 }
 
 namespace {
@@ -120,19 +178,22 @@ struct Pipeline {
 }  // namespace
 
 std::string FourSensorResult::brief_report() const {
-  char buf[512];
+  char buf[768];
   std::snprintf(buf, sizeof buf,
-                "four-sensor N=%d P=%d s=(%d,%d,%d) dx=%.4g mm: lambda=%.4g (%s%s) |AX-b|=%.4g "
-                "|X|=%.4g sigma_hat=%.3g um (dof %d) factorizations=%d time=%.3f s",
-                config.N, config.positions(), config.s2, config.s3, config.s4, config.dx_mm, lambda,
-                to_string(rule),
+                "four-sensor N=%d P=%d s=(%d,%d,%d) dx=%.4g mm: %s, prior %s, lambda=%.4g (%s%s%s) "
+                "edf_f=%.3g |AX-b|=%.4g |LX|=%.4g sigma_hat=%.3g um (dof %d) factorizations=%d "
+                "time=%.3f s",
+                config.N, config.positions(), config.s2, config.s3, config.s4, config.dx_mm,
+                to_string(estimator), to_string(penalty), lambda, to_string(rule),
                 lambda_fallback == LambdaFallback::discrepancy
                     ? ", no L-curve corner: discrepancy principle used"
                 : lambda_fallback == LambdaFallback::no_regularisation
                     ? ", no L-curve corner: not noise-dominated, no regularisation"
+                : lambda_fallback == LambdaFallback::collapse_least_squares
+                    ? ", COLLAPSE: the prior swallowed f; unregularised separation reported"
                     : "",
-                residual_norm, solution_norm, sigma_um, redundancy_dof, solver_stats.factorizations,
-                total_s);
+                lambda_at_edge ? ", at the edge of the range" : "", edf_f, residual_norm,
+                solution_norm, sigma_um, redundancy_dof, solver_stats.factorizations, total_s);
   return buf;
 }
 
@@ -160,6 +221,8 @@ FourSensorResult separate(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_
   FourSensorResult res;
   res.config = cfg;
   res.rule = opts.rule;
+  res.estimator = Estimator::paper_system;
+  res.penalty = Penalty::identity;
   res.gauge = opts.gauge;
 
   // With the exact gauge A has the known 3-dimensional null space, so "λ = 0" means the smallest
@@ -232,6 +295,9 @@ FourSensorResult separate(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_
     case LambdaRule::least_squares:
       res.lambda = 0.0;
       break;
+    case LambdaRule::reml:
+    case LambdaRule::gcv:
+      throw std::invalid_argument("rule reml/gcv needs estimator posterior");  // is_valid refuses
   }
   res.lambda = floor_lambda(res.lambda);
   if (solver.factorize(res.lambda) != SolverStatus::success)
@@ -292,6 +358,13 @@ FourSensorResult separate(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_
 
 FourSensorResult separate_four_sensor(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
                                       const FourSensorOptions& opts) {
+  if (opts.estimator == Estimator::posterior) {
+    std::string why;
+    if (!cfg.is_valid(&why)) throw std::invalid_argument("invalid configuration: " + why);
+    if (!opts.is_valid(&why)) throw std::invalid_argument("invalid options: " + why);
+    if (!m_um.allFinite()) throw std::invalid_argument("sensor outputs contain non-finite values");
+    return separate_posterior(cfg, m_um, opts);
+  }
   return separate(cfg, m_um, nullptr, opts);
 }
 
@@ -299,6 +372,9 @@ FourSensorResult separate_four_sensor_combined(const FourSensorConfig& cfg,
                                                const Eigen::MatrixXd& m_um,
                                                const Eigen::MatrixXd& g_um,
                                                const FourSensorOptions& opts) {
+  if (opts.estimator != Estimator::paper_system)
+    throw std::invalid_argument(
+        "separate_four_sensor_combined: measured combined outputs need estimator paper_system");
   return separate(cfg, m_um, &g_um, opts);
 }
 

@@ -2,10 +2,13 @@
 
 #include "errsep/core/four_sensor_system.hpp"
 
+#include <Eigen/Dense>
 #include <cmath>
 #include <numbers>
 #include <random>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 namespace errsep::core {
 
@@ -104,6 +107,63 @@ ProfileFn zhao2019_pe2_um(double L) {
     return -10.0 * std::sin(2 * pi / L * x + pi / 12) - 3.0 * std::sin(6 * pi / L * x + 0.5 * pi) +
            4.5 * std::sin(2 * pi / L * x + 5.0 / 6 * pi);
   };
+}
+
+SlidewayTruth random_smooth_truth(const FourSensorConfig& cfg, std::uint64_t seed,
+                                  const RandomTruthOptions& o) {
+  std::string why;
+  if (!cfg.is_valid(&why)) throw std::invalid_argument("invalid configuration: " + why);
+  std::mt19937_64 rng(seed);
+  auto uni = [&](double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng); };
+  struct Harmonic {
+    double amplitude, wavenumber, phase;  // a·sin(k·x + φ)
+  };
+  auto draw = [&](double length, double pmin, double pmax, double amin, double amax) {
+    std::vector<Harmonic> h(static_cast<std::size_t>(
+        std::uniform_int_distribution<int>(o.min_harmonics, o.max_harmonics)(rng)));
+    for (auto& c : h)
+      c = {uni(amin, amax), 2 * pi * uni(pmin, pmax) / length, uni(0.0, 2 * pi)};
+    return h;
+  };
+  auto eval = [](const std::vector<Harmonic>& h, double x) {
+    double v = 0.0;
+    for (const auto& c : h)
+      v += c.amplitude * std::sin(c.wavenumber * x + c.phase);
+    return v;
+  };
+  const double L = cfg.travel_mm(), L0 = cfg.reference_length_mm();
+  const auto hS =
+      draw(L, o.S_periods_min, o.S_periods_max, o.S_amplitude_min_um, o.S_amplitude_max_um);
+  const auto hg = draw(L, o.gamma_periods_min, o.gamma_periods_max,
+                       o.gamma_amplitude_min_urad * 1e-6, o.gamma_amplitude_max_urad * 1e-6);
+  const auto hf =
+      draw(L0, o.f_periods_min, o.f_periods_max, o.f_amplitude_min_um, o.f_amplitude_max_um);
+  // a + b·t + c·t² (t = x/L0) that puts f in the gauge on the sample grid.
+  const int N = cfg.N;
+  Eigen::Matrix3d G = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+  for (int n = 0; n < N; ++n) {
+    const double t = static_cast<double>(n) / (N - 1), bow = t * (1 - t);
+    const double fv = eval(hf, n * cfg.dx_mm);
+    if (n == 0 || n == N - 1) {
+      const int r = n == 0 ? 0 : 1;
+      G.row(r) << 1.0, t, t * t;
+      rhs(r) = -fv;
+    }
+    G.row(2) += bow * Eigen::RowVector3d(1.0, t, t * t);
+    rhs(2) -= bow * fv;
+  }
+  const Eigen::Vector3d abc = G.partialPivLu().solve(rhs);
+  SlidewayTruth t;
+  t.S_um = [hS, eval](double x) { return eval(hS, x); };
+  t.gamma_rad = [hg, eval](double x) { return eval(hg, x); };
+  t.f_um = [hf, eval, abc, L0](double x) {
+    const double u = x / L0;
+    return eval(hf, x) + abc(0) + abc(1) * u + abc(2) * u * u;
+  };
+  std::normal_distribution<double> e(0.0, o.e_sd_um);
+  t.e_um = {0.0, e(rng), e(rng), 0.0};
+  return t;
 }
 
 }  // namespace errsep::core

@@ -8,6 +8,26 @@
 
 namespace errsep::core {
 
+const char* to_string(CurvatureGauge g) {
+  switch (g) {
+    case CurvatureGauge::reference_without_curvature:
+      return "reference";
+    case CurvatureGauge::sensor_stage_without_curvature:
+      return "sensor_stage";
+    case CurvatureGauge::paper_eq12_literal:
+      return "paper_eq12";
+  }
+  return "unknown";
+}
+
+std::optional<CurvatureGauge> curvature_gauge_from_string(std::string_view s) {
+  for (auto g :
+       {CurvatureGauge::reference_without_curvature, CurvatureGauge::sensor_stage_without_curvature,
+        CurvatureGauge::paper_eq12_literal})
+    if (s == to_string(g)) return g;
+  return std::nullopt;
+}
+
 Eigen::Matrix4d combination_matrix(const FourSensorConfig& cfg) {
   // Eq. (3).  Spacings enter only through their ratios, so integer s_i serve as well as D_i.
   const double D2 = cfg.s2, D3 = cfg.s3, D4 = cfg.s4;

@@ -485,6 +485,40 @@ StraightnessResult evaluate_straightness(const std::vector<double>& x_mm,
   return straightness_unchecked(x_mm, s_um, u_um, reference, opts);
 }
 
+StraightnessEstimate estimate_straightness(const std::vector<double>& x_mm,
+                                           const std::vector<double>& s_um,
+                                           const ProfileVariance& variance,
+                                           const ProfileSampler& sampler, ReferenceLine reference,
+                                           int draws, std::uint64_t seed,
+                                           const EvaluationOptions& opts) {
+  require_valid(opts);
+  check_profile(x_mm, s_um, {}, "straightness");
+  if (draws < 20)
+    throw std::invalid_argument("straightness: " + std::to_string(draws) +
+                                " Monte Carlo draws, need at least 20");
+  StraightnessEstimate out;
+  out.draws = draws;
+  out.zone = straightness_unchecked(x_mm, s_um, {}, reference, opts);
+  std::vector<double> dev, sd(s_um.size());
+  double sum = 0.0;
+  for (int k = 0; k < draws; ++k) {
+    sampler(seed + static_cast<std::uint64_t>(k), dev);
+    if (dev.size() != s_um.size())
+      throw std::invalid_argument("straightness: a draw has " + std::to_string(dev.size()) +
+                                  " points, the profile " + std::to_string(s_um.size()));
+    for (std::size_t i = 0; i < s_um.size(); ++i)
+      sd[i] = s_um[i] + dev[i];
+    sum += straightness_unchecked(x_mm, sd, {}, reference, opts).straightness_um;
+  }
+  out.bias_um = sum / draws - out.zone.straightness_um;
+  out.straightness_um = out.zone.straightness_um - out.bias_um;
+  out.u_um = std::sqrt(std::max(0.0, variance(out.zone.sensitivity)));
+  out.expanded_um = opts.coverage_factor * out.u_um;
+  out.zone.uncertainty.expanded = out.expanded_um;
+  out.zone.uncertainty.coverage_factor = opts.coverage_factor;
+  return out;
+}
+
 LocalStraightnessResult evaluate_local_straightness(const std::vector<double>& x_mm,
                                                     const std::vector<double>& s_um,
                                                     const std::vector<double>& u_um,

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <new>
 #include <stdexcept>
 #include <vector>
@@ -92,6 +93,11 @@ struct TikhonovSolver::Normal {
   /// λ, not k.  For the four-sensor system r = 2 < k = 4: column j of C collects row j of
   /// Eq. (3)'s C along the ends of f, and that C has rank 2.
   Eigen::MatrixXd U, V;
+  /// The penalty P of the general form: its band part aligned with upper->x (empty: CHOLMOD's
+  /// shift λ²I), its coupling with the border C_P (m × k) and border block D_P (k × k), and
+  /// U_P = C_P·V (V spans the rows of both C and C_P).
+  std::vector<double> pen_x;
+  Eigen::MatrixXd C_P, D_P, U_P;
   Normal() { start_common(cm); }
   ~Normal() {
     cholmod_free_sparse(&upper, &cm);
@@ -125,6 +131,11 @@ struct TikhonovSolver::Impl {
   // arbitrary in that one direction (Fig. 3(d)) but still usable for σ̂ from the residual.
   Eigen::LDLT<Eigen::MatrixXd> S;  ///< Schur complement D + λ²I − WᵀD⁻¹W of the border
   bool factor_ok = false;
+  /// With a penalty: the values of AᵀA + λ²P on the shared pattern (one array per solver, so
+  /// workers factorise different λ at once), and the matrix header that points to them.
+  std::vector<double> work_x;
+  cholmod_sparse work{};
+  Eigen::MatrixXd U_l;  ///< U + λ²U_P of the current λ (general form with a border)
 
   /// out = op⁻¹·v for CHOLMOD system `sys` (CHOLMOD_L or CHOLMOD_DLt) on the band factor, one
   /// column of `rows` entries.
@@ -155,17 +166,19 @@ struct TikhonovSolver::Impl {
   Impl& operator=(const Impl&) = delete;
 };
 
-TikhonovSolver::TikhonovSolver(const Eigen::SparseMatrix<double>& A, int border_columns)
+TikhonovSolver::TikhonovSolver(const Eigen::SparseMatrix<double>& A, int border_columns,
+                               const Eigen::SparseMatrix<double>& penalty)
     : A_(std::make_shared<const Eigen::SparseMatrix<double>>(A)) {
-  build(border_columns);
+  build(border_columns, penalty);
 }
 
-TikhonovSolver::TikhonovSolver(Eigen::SparseMatrix<double>&& A, int border_columns)
+TikhonovSolver::TikhonovSolver(Eigen::SparseMatrix<double>&& A, int border_columns,
+                               const Eigen::SparseMatrix<double>& penalty)
     : A_(std::make_shared<const Eigen::SparseMatrix<double>>(std::move(A))) {
-  build(border_columns);
+  build(border_columns, penalty);
 }
 
-void TikhonovSolver::build(int border_columns) {
+void TikhonovSolver::build(int border_columns, const Eigen::SparseMatrix<double>& penalty) {
   normal_ = std::make_shared<Normal>();
   impl_ = std::make_unique<Impl>();
   border_ = border_columns;
@@ -176,8 +189,24 @@ void TikhonovSolver::build(int border_columns) {
   // The rows of A as columns: AᵀA is the sum of their outer products.
   Eigen::SparseMatrix<double> At = A_->transpose();
   At.makeCompressed();
-  stats_.banded_normal = build_banded(At);
-  if (!stats_.banded_normal) build_general(At);
+  const bool general_form = penalty.rows() > 0 || penalty.cols() > 0;
+  if (general_form && (penalty.rows() != A_->cols() || penalty.cols() != A_->cols()))
+    throw std::invalid_argument("TikhonovSolver: the penalty is " + std::to_string(penalty.rows()) +
+                                "x" + std::to_string(penalty.cols()) + ", expected " +
+                                std::to_string(A_->cols()) + " square (all unknowns)");
+  stats_.banded_normal = build_banded(At, penalty);
+  if (!stats_.banded_normal) {
+    if (general_form)
+      throw std::invalid_argument(
+          "TikhonovSolver: a penalty needs narrow rows (the banded normal matrix)");
+    build_general(At);
+  }
+  if (general_form) {
+    impl_->work_x.assign(static_cast<const double*>(normal_->band.x),
+                         static_cast<const double*>(normal_->band.x) + normal_->pen_x.size());
+    impl_->work = normal_->band;
+    impl_->work.x = impl_->work_x.data();
+  }
   compress_border();
   stats_.analyze_s = seconds_since(t0);
   const auto t1 = std::chrono::steady_clock::now();
@@ -197,13 +226,20 @@ void TikhonovSolver::build(int border_columns) {
 // Each row's outer product is added into band storage (the border into C and D), which is then
 // written as CHOLMOD's upper-stored band: O(nnz(A)·row length), and 4-5x faster at N = 10⁶ than
 // the general sparse product (cholmod_aat) it replaces.  False (nothing built) for a wide row.
-bool TikhonovSolver::build_banded(const Eigen::SparseMatrix<double>& At) {
+bool TikhonovSolver::build_banded(const Eigen::SparseMatrix<double>& At,
+                                  const Eigen::SparseMatrix<double>& P) {
   constexpr int kMaxBand = 64;
   const Eigen::Index n = At.rows(), m = n - border_, rows = At.cols();
   const int* p = At.outerIndexPtr();
   const int* idx = At.innerIndexPtr();
   const double* val = At.valuePtr();
+  const bool general_form = P.rows() > 0;
   int bw = 0;
+  for (int j = 0; j < P.outerSize(); ++j)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(P, j); it; ++it)
+      if (it.row() < m && it.col() < m)
+        bw = std::max(bw, static_cast<int>(std::abs(it.row() - it.col())));
+  if (bw > kMaxBand) return false;
   for (Eigen::Index r = 0; r < rows; ++r) {
     int lo = -1, hi = -1;
     for (int q = p[r]; q < p[r + 1]; ++q)
@@ -241,13 +277,37 @@ bool TikhonovSolver::build_banded(const Eigen::SparseMatrix<double>& At) {
   for (double& v : band)
     if (std::abs(v) <= tol) v = 0.0;
   C = C.unaryExpr([tol](double v) { return std::abs(v) <= tol ? 0.0 : v; });
+  // The penalty in the same band storage (upper triangle: i <= j).
+  std::vector<double> pband;
+  if (general_form) {
+    pband.assign(band.size(), 0.0);
+    normal_->C_P = Eigen::MatrixXd::Zero(m, border_);
+    normal_->D_P = Eigen::MatrixXd::Zero(border_, border_);
+    for (int j = 0; j < P.outerSize(); ++j)
+      for (Eigen::SparseMatrix<double>::InnerIterator it(P, j); it; ++it) {
+        const Eigen::Index r = it.row(), c = it.col();
+        if (r < m && c < m) {
+          if (r <= c)
+            pband[static_cast<std::size_t>(c) * w + static_cast<std::size_t>(c - r)] += it.value();
+        } else if (r < m) {
+          normal_->C_P(r, c - m) = it.value();
+        } else if (c >= m) {
+          normal_->D_P(r - m, c - m) = it.value();
+        }
+      }
+  }
+  // An entry is in the pattern when AᵀA or P has it (the diagonal always).
+  auto kept = [&](std::size_t q, int d) {
+    return d == 0 || band[q] != 0.0 || (general_form && pband[q] != 0.0);
+  };
   // ‖AᵀA‖₁ (column sums of the symmetric matrix) bounds λ_max(AᵀA) = σ_max(A)².
   Eigen::VectorXd colsum = Eigen::VectorXd::Zero(n);
   std::size_t nnz = 0;
   for (Eigen::Index j = 0; j < m; ++j)
     for (int d = 0; d <= bw && d <= j; ++d) {
-      const double v = band[static_cast<std::size_t>(j) * w + static_cast<std::size_t>(d)];
-      if (v == 0.0 && d > 0) continue;
+      const std::size_t q = static_cast<std::size_t>(j) * w + static_cast<std::size_t>(d);
+      const double v = band[q];
+      if (!kept(q, d)) continue;
       ++nnz;
       colsum(j) += std::abs(v);
       if (d > 0) colsum(j - d) += std::abs(v);
@@ -268,13 +328,15 @@ bool TikhonovSolver::build_banded(const Eigen::SparseMatrix<double>& At) {
   auto* ui = static_cast<int*>(normal_->upper->i);
   auto* ux = static_cast<double*>(normal_->upper->x);
   int k = 0;
+  if (general_form) normal_->pen_x.assign(nnz, 0.0);
   for (Eigen::Index j = 0; j < m; ++j) {
     up[j] = k;
     for (int d = std::min<int>(bw, static_cast<int>(j)); d >= 0; --d) {  // rows ascending
-      const double v = band[static_cast<std::size_t>(j) * w + static_cast<std::size_t>(d)];
-      if (v == 0.0 && d > 0) continue;
+      const std::size_t q = static_cast<std::size_t>(j) * w + static_cast<std::size_t>(d);
+      if (!kept(q, d)) continue;
       ui[k] = static_cast<int>(j) - d;
-      ux[k] = v;
+      ux[k] = band[q];
+      if (general_form) normal_->pen_x[static_cast<std::size_t>(k)] = pband[q];
       ++k;
     }
   }
@@ -292,12 +354,21 @@ bool TikhonovSolver::build_banded(const Eigen::SparseMatrix<double>& At) {
 void TikhonovSolver::compress_border() {
   const Eigen::MatrixXd& C = normal_->C;
   const Eigen::Index k = C.cols();
+  const bool with_pen = normal_->C_P.size() > 0;
+  // The rows of C (and of the penalty's coupling C_P: V must span both) that are not zero.
   std::vector<Eigen::Index> rows;
-  for (Eigen::Index i = 0; i < C.rows() && k > 0; ++i)
-    if (C.row(i).cwiseAbs().maxCoeff() > 0.0) rows.push_back(i);
+  for (Eigen::Index i = 0; i < C.rows() && k > 0; ++i) {
+    if (C.row(i).cwiseAbs().maxCoeff() > 0.0) rows.push_back(-(i + 1));
+    if (with_pen && normal_->C_P.row(i).cwiseAbs().maxCoeff() > 0.0) rows.push_back(i + 1);
+  }
   Eigen::MatrixXd Cs(static_cast<Eigen::Index>(rows.size()), k);
-  for (std::size_t q = 0; q < rows.size(); ++q)
-    Cs.row(static_cast<Eigen::Index>(q)) = C.row(rows[q]);
+  const Eigen::MatrixXd& CP = normal_->C_P;
+  for (std::size_t q = 0; q < rows.size(); ++q) {
+    if (rows[q] < 0)
+      Cs.row(static_cast<Eigen::Index>(q)) = C.row(-rows[q] - 1);
+    else
+      Cs.row(static_cast<Eigen::Index>(q)) = CP.row(rows[q] - 1);
+  }
   Eigen::Index r = 0;
   if (Cs.rows() > 0) {
     const Eigen::JacobiSVD<Eigen::MatrixXd> svd(Cs, Eigen::ComputeFullV);
@@ -309,6 +380,7 @@ void TikhonovSolver::compress_border() {
     normal_->V.resize(k, 0);
   }
   normal_->U = C * normal_->V;
+  if (with_pen) normal_->U_P = normal_->C_P * normal_->V;
   stats_.border_rank = static_cast<int>(r);
 }
 
@@ -378,6 +450,11 @@ std::unique_ptr<TikhonovSolver> TikhonovSolver::worker() const {
   w->impl_ = std::make_unique<Impl>();
   w->impl_->L = cholmod_copy_factor(impl_->L, &w->impl_->cm);
   if (!w->impl_->L) throw std::runtime_error("CHOLMOD could not copy the factor for a worker");
+  if (has_penalty()) {
+    w->impl_->work_x = impl_->work_x;
+    w->impl_->work = normal_->band;
+    w->impl_->work.x = w->impl_->work_x.data();
+  }
   return w;
 }
 
@@ -398,8 +475,19 @@ SolverStatus TikhonovSolver::factorize_and_solve(double lambda, const Eigen::Vec
 SolverStatus TikhonovSolver::factorize_impl(double lambda, const Eigen::VectorXd* rhs,
                                             Eigen::VectorXd* x) {
   const auto t0 = std::chrono::steady_clock::now();
-  double beta[2] = {lambda * lambda, 0.0};  // B + βI with β = λ²
-  const int ok = cholmod_factorize_p(&normal_->band, beta, nullptr, 0, impl_->L, &impl_->cm);
+  const bool general_form = has_penalty();
+  // B + βI with β = λ² (CHOLMOD's shift), or B + λ²P written into this solver's value array.
+  double beta[2] = {general_form ? 0.0 : lambda * lambda, 0.0};
+  if (general_form) {
+    const double l2 = lambda * lambda;
+    const auto* a = static_cast<const double*>(normal_->band.x);
+    const double* pen = normal_->pen_x.data();
+    double* wx = impl_->work_x.data();
+    for (std::size_t q = 0; q < impl_->work_x.size(); ++q)
+      wx[q] = a[q] + l2 * pen[q];
+  }
+  const int ok = cholmod_factorize_p(general_form ? &impl_->work : &normal_->band, beta, nullptr, 0,
+                                     impl_->L, &impl_->cm);
   ++stats_.factorizations;
   lambda_ = lambda;
   // cholmod_factorize_p returns TRUE even when a pivot failed: check status and L->minor too.
@@ -420,15 +508,19 @@ SolverStatus TikhonovSolver::factorize_impl(double lambda, const Eigen::VectorXd
       // one pass over the factor fewer per λ.
       const Eigen::Index r = normal_->U.cols();
       const bool fuse = rhs != nullptr && r > 0 && r + 1 <= 4;
+      // The coupling of this λ: U, or U + λ²U_P when the penalty reaches the border.
+      const bool pen_border = general_form && normal_->U_P.size() > 0;
+      if (pen_border) impl_->U_l = normal_->U + (lambda * lambda) * normal_->U_P;
+      const Eigen::MatrixXd& U = pen_border ? impl_->U_l : normal_->U;
       if (fuse) {
-        if (impl_->rhs_block.rows() != m || impl_->rhs_block.cols() != r + 1) {
+        if (impl_->rhs_block.rows() != m || impl_->rhs_block.cols() != r + 1 || pen_border) {
           impl_->rhs_block.resize(m, r + 1);
-          impl_->rhs_block.leftCols(r) = normal_->U;
+          impl_->rhs_block.leftCols(r) = U;
         }
         impl_->rhs_block.col(r) = rhs->head(m);
         impl_->band_solve_k(impl_->rhs_block.data(), m, r + 1);
       } else if (r > 0) {
-        impl_->band_solve_k(normal_->U.data(), m, r);
+        impl_->band_solve_k(U.data(), m, r);
       }
       new (&impl_->W) Eigen::Map<const Eigen::MatrixXd>(
           r > 0 ? static_cast<const double*>(impl_->Xk->x) : nullptr, m, r);
@@ -448,7 +540,10 @@ SolverStatus TikhonovSolver::factorize_impl(double lambda, const Eigen::VectorXd
       }
       acc.triangularView<Eigen::StrictlyLower>() = acc.transpose();
       Eigen::MatrixXd S = normal_->D;
-      S.diagonal().array() += lambda * lambda;
+      if (!general_form)
+        S.diagonal().array() += lambda * lambda;
+      else if (normal_->D_P.size() > 0)
+        S += (lambda * lambda) * normal_->D_P;
       S.noalias() -= normal_->V * acc * normal_->V.transpose();
       impl_->S.compute(S);
       impl_->factor_ok = impl_->S.info() == Eigen::Success;
@@ -533,6 +628,157 @@ double TikhonovSolver::inverse_quadratic_form(const Eigen::VectorXd& v) {
 
 Eigen::VectorXd TikhonovSolver::solve(const Eigen::VectorXd& b) {
   return solve_normal(A_->transpose() * b);
+}
+
+bool TikhonovSolver::has_penalty() const {
+  return !normal_->pen_x.empty();
+}
+
+Eigen::VectorXd TikhonovSolver::apply_penalty(const Eigen::VectorXd& x) const {
+  const auto n = static_cast<Eigen::Index>(A_->cols());
+  if (x.size() != n)
+    throw std::invalid_argument("TikhonovSolver::apply_penalty: vector has " +
+                                std::to_string(x.size()) + " entries, expected " +
+                                std::to_string(n));
+  if (!has_penalty()) return x;
+  Eigen::VectorXd out = Eigen::VectorXd::Zero(n);
+  const auto* p = static_cast<const int*>(normal_->band.p);
+  const auto* i = static_cast<const int*>(normal_->band.i);
+  const double* v = normal_->pen_x.data();
+  const auto m = static_cast<Eigen::Index>(normal_->band.ncol);
+  for (Eigen::Index j = 0; j < m; ++j)
+    for (int q = p[j]; q < p[j + 1]; ++q) {
+      if (v[q] == 0.0) continue;
+      out(i[q]) += v[q] * x(j);
+      if (i[q] != j) out(j) += v[q] * x(i[q]);
+    }
+  if (border_ > 0 && normal_->C_P.size() > 0) {
+    out.head(m).noalias() += normal_->C_P * x.tail(border_);
+    out.tail(border_).noalias() += normal_->C_P.transpose() * x.head(m);
+    out.tail(border_).noalias() += normal_->D_P * x.tail(border_);
+  }
+  return out;
+}
+
+double TikhonovSolver::log_det() const {
+  if (!impl_->factor_ok)
+    throw std::logic_error("TikhonovSolver::log_det without a successful factorisation");
+  double s = impl_->d.array().log().sum();
+  if (border_ > 0) s += impl_->S.vectorD().array().abs().log().sum();
+  return s;
+}
+
+double SelectedInverse::operator()(Eigen::Index i, Eigen::Index j) const {
+  const Eigen::Index m = band_size;
+  if (i >= m && j >= m) return border(i - m, j - m);
+  if (i >= m) return cross(j, i - m);
+  if (j >= m) return cross(i, j - m);
+  const Eigen::Index a = std::min(i, j), b = std::max(i, j);
+  const double z =
+      b - a <= bandwidth
+          ? band[static_cast<std::size_t>(a) * static_cast<std::size_t>(bandwidth + 1) +
+                 static_cast<std::size_t>(b - a)]
+          : std::numeric_limits<double>::quiet_NaN();
+  if (std::isnan(z))
+    throw std::out_of_range("SelectedInverse: entry (" + std::to_string(i) + ", " +
+                            std::to_string(j) + ") is outside the factor's pattern");
+  return z;
+}
+
+// Takahashi's recurrence on the band's LDLᵀ (L unit lower): Z = D⁻¹L⁻¹ + (I − Lᵀ)Z gives, column
+// by column from the last, Z(i, j) = −Σ_k L(k, j)·Z(k, i) for i in the pattern of column j (k over
+// it too) and Z(j, j) = 1/D_j − Σ_k L(k, j)·Z(k, j): every Z(k, i) needed lies inside the pattern
+// of L, so the band of the inverse costs O(m·b²) and nothing outside it is formed.  The border
+// adds the low-rank term of the block inverse: with Y = B⁻¹C and the Schur block S,
+// M⁻¹ = [B⁻¹ + Y S⁻¹Yᵀ, −Y S⁻¹; −S⁻¹Yᵀ, S⁻¹].
+SelectedInverse TikhonovSolver::selected_inverse() {
+  if (!impl_->factor_ok)
+    throw std::logic_error("TikhonovSolver::selected_inverse without a successful factorisation");
+  const auto t0 = std::chrono::steady_clock::now();
+  const cholmod_factor* L = impl_->L;
+  const auto m = static_cast<Eigen::Index>(L->n);
+  const auto* Lp = static_cast<const int*>(L->p);
+  const auto* Li = static_cast<const int*>(L->i);
+  const auto* Lx = static_cast<const double*>(L->x);
+  const auto* Lnz = static_cast<const int*>(L->nz);
+  int bw = 0;
+  for (Eigen::Index j = 0; j < m; ++j)
+    for (int q = Lp[j] + 1; q < Lp[j] + Lnz[j]; ++q)
+      bw = std::max(bw, Li[q] - static_cast<int>(j));
+  SelectedInverse z;
+  z.bandwidth = bw;
+  z.band_size = m;
+  const auto w = static_cast<std::size_t>(bw + 1);
+  z.band.assign(static_cast<std::size_t>(m) * w, std::numeric_limits<double>::quiet_NaN());
+  auto at = [&](Eigen::Index a, Eigen::Index b) -> double& {
+    if (a > b) std::swap(a, b);
+    return z.band[static_cast<std::size_t>(a) * w + static_cast<std::size_t>(b - a)];
+  };
+  std::vector<int> rows;
+  std::vector<double> vals;
+  for (Eigen::Index j = m - 1; j >= 0; --j) {
+    rows.clear();
+    vals.clear();
+    for (int q = Lp[j] + 1; q < Lp[j] + Lnz[j]; ++q) {
+      rows.push_back(Li[q]);
+      vals.push_back(Lx[q]);
+    }
+    for (std::size_t a = 0; a < rows.size(); ++a) {
+      double s = 0.0;
+      for (std::size_t b = 0; b < rows.size(); ++b)
+        s += vals[b] * at(rows[b], rows[a]);
+      at(rows[a], j) = -s;
+    }
+    double s = 0.0;
+    for (std::size_t b = 0; b < rows.size(); ++b)
+      s += vals[b] * at(rows[b], j);
+    at(j, j) = 1.0 / impl_->d(j) - s;
+  }
+  if (border_ > 0) {
+    // Y = B⁻¹C = (B⁻¹U)·Vᵀ, B⁻¹U = L⁻ᵀD⁻¹·(L⁻¹U) from the W kept by the factorisation.
+    const Eigen::Index r = normal_->U.cols();
+    Eigen::MatrixXd BinvU(m, r);
+    for (Eigen::Index c = 0; c < r; ++c) {
+      Eigen::VectorXd col = impl_->W.col(c);
+      impl_->band_solve(CHOLMOD_DLt, col.data(), m, BinvU.col(c).data());
+    }
+    const Eigen::MatrixXd Y = BinvU * normal_->V.transpose();
+    z.border = impl_->S.solve(Eigen::MatrixXd::Identity(border_, border_));
+    const Eigen::MatrixXd G = Y * z.border;  // Y·S⁻¹
+    z.cross = -G;
+    for (Eigen::Index i = 0; i < m; ++i)
+      for (Eigen::Index j = i; j <= std::min<Eigen::Index>(m - 1, i + bw); ++j) {
+        double& v = at(i, j);
+        if (!std::isnan(v)) v += G.row(i).dot(Y.row(j));
+      }
+  } else {
+    z.cross.resize(m, 0);
+    z.border.resize(0, 0);
+  }
+  ++stats_.selected_inversions;
+  stats_.selected_inverse_s += seconds_since(t0);
+  return z;
+}
+
+double TikhonovSolver::trace_inverse_penalty(const SelectedInverse& z) const {
+  double t = 0.0;
+  if (!has_penalty()) {
+    for (Eigen::Index j = 0; j < z.band_size; ++j)
+      t += z(j, j);
+    for (Eigen::Index c = 0; c < z.border.rows(); ++c)
+      t += z.border(c, c);
+    return t;
+  }
+  const auto* p = static_cast<const int*>(normal_->band.p);
+  const auto* i = static_cast<const int*>(normal_->band.i);
+  const double* v = normal_->pen_x.data();
+  for (Eigen::Index j = 0; j < static_cast<Eigen::Index>(normal_->band.ncol); ++j)
+    for (int q = p[j]; q < p[j + 1]; ++q)
+      if (v[q] != 0.0) t += (i[q] == j ? 1.0 : 2.0) * v[q] * z(i[q], j);
+  if (border_ > 0 && normal_->C_P.size() > 0)
+    t += 2.0 * (normal_->C_P.cwiseProduct(z.cross)).sum() +
+         (normal_->D_P.cwiseProduct(z.border)).sum();
+  return t;
 }
 
 }  // namespace errsep::core

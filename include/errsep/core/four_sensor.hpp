@@ -1,11 +1,18 @@
 #pragma once
-// The four-sensor method of Zhao et al. 2019 end to end: assemble the augmented system (Eqs. 3–16),
-// choose λ, solve the Tikhonov problem (Eq. 17) with CHOLMOD, and recover S(x_n) and γ(x_n)
-// (Eqs. 18–19).  Pure computation: sensor outputs in, profiles with their diagnostics out.
+// The four-sensor method of Zhao et al. 2019 end to end: assemble the system (Eqs. 3–16), choose λ,
+// solve the Tikhonov problem (Eq. 17) with CHOLMOD, and recover S(x_n) and γ(x_n) (Eqs. 18–19),
+// each with its uncertainty.  Pure computation: sensor outputs in, profiles with their diagnostics
+// out.  The default estimator is the posterior of four_sensor_posterior.hpp (a smoothness prior
+// on f, λ by REML, posterior covariance); the paper's own augmented system is kept for comparison.
 #include <Eigen/Core>
+#include <limits>
+#include <memory>
+#include <optional>
 #include <string>
+#include <string_view>
 
 #include "errsep/core/four_sensor_config.hpp"
+#include "errsep/core/four_sensor_posterior.hpp"
 #include "errsep/core/four_sensor_system.hpp"
 #include "errsep/core/lcurve.hpp"
 #include "errsep/core/tikhonov_solver.hpp"
@@ -13,12 +20,34 @@
 namespace errsep::core {
 
 enum class LambdaRule {
+  /// Restricted maximum likelihood: the λ (prior precision) under which the data are most
+  /// probable, σ held at the σ̂ of the redundant equations.  Needs log det of the normal matrix
+  /// only.  The default (estimator posterior).
+  reml,
+  /// Generalised cross-validation: minimises n·‖AX_λ − b‖²/(n − edf)², edf from the selected
+  /// inverse of the factor.  Estimator posterior only.
+  gcv,
   lcurve,       ///< maximum curvature of the L-curve (the paper's choice)
   discrepancy,  ///< ‖AX_λ − b‖ = τ·δ, δ from the noise level estimated from the redundancy
   fixed,        ///< FourSensorOptions::fixed_lambda
   least_squares,  ///< λ = 0: the unregularised solution (the paper's Fig. 3(d))
 };
 const char* to_string(LambdaRule r);
+/// The strings of to_string ("ls" is accepted for least_squares).
+std::optional<LambdaRule> lambda_rule_from_string(std::string_view s);
+
+/// Which system is solved.
+enum class Estimator {
+  /// four_sensor_posterior.hpp: whitened rows, ends of f pinned, the bow fixed exactly, a prior
+  /// on f (Penalty), posterior covariance.  The default.
+  posterior,
+  /// The paper's augmented system (Eqs. 5–16) with the chosen CurvatureGauge and RowWeighting,
+  /// identity Tikhonov; its uncertainty is the covariance of the estimate for a fixed λ, which
+  /// omits the shrinkage bias.  Kept to reproduce and compare with the paper.
+  paper_system,
+};
+const char* to_string(Estimator e);
+std::optional<Estimator> estimator_from_string(std::string_view s);
 
 /// What LambdaRule::lcurve did when the curve had no corner to take (LCurveResult::has_corner).
 enum class LambdaFallback {
@@ -30,6 +59,11 @@ enum class LambdaFallback {
   /// No corner with a gauge whose curvature row is weak (the bow is nearly null): λ from the
   /// discrepancy principle instead, since a small λ would leave the bow unregularised.
   discrepancy,
+  /// Estimator posterior: the rule's λ shrank f to (almost) nothing — the largest λ of the
+  /// range, or effective degrees of freedom of f below FourSensorOptions::collapse_edf — so S
+  /// would inherit f's whole amplitude with an uncertainty that does not show it.  The
+  /// unregularised separation with its exact covariance is reported instead.
+  collapse_least_squares,
 };
 const char* to_string(LambdaFallback f);
 
@@ -43,9 +77,26 @@ enum class MotionEstimator {
   all_configurations,
 };
 
+/// The λ search of LambdaRule::reml and gcv: a log grid (evaluated on `threads` threads), then a
+/// golden-section refinement around the best grid point.  λ is relative to the bound of σ_max(A).
+struct LambdaSearchOptions {
+  int count = 21;              ///< grid points (>= 3)
+  double decades_below = 6.0;  ///< range [σ_max·10^−below, σ_max·10^above]
+  double decades_above = 4.0;
+  int refine_iterations = 10;  ///< golden-section steps in log λ
+  int threads = 1;
+  bool is_valid(std::string* why = nullptr) const;
+};
+
 struct FourSensorOptions {
-  LambdaRule rule = LambdaRule::lcurve;
-  double fixed_lambda = 0.0;  ///< used with LambdaRule::fixed
+  Estimator estimator = Estimator::posterior;
+  Penalty penalty = Penalty::second_difference;  ///< estimator posterior: the prior on f
+  LambdaRule rule = LambdaRule::reml;
+  double fixed_lambda = 0.0;   ///< used with LambdaRule::fixed
+  LambdaSearchOptions search;  ///< rules reml and gcv
+  /// Estimator posterior: below this many effective degrees of freedom of f the prior has
+  /// swallowed f (LambdaFallback::collapse_least_squares).
+  double collapse_edf = 1.0;
   LCurveOptions lcurve;
   double discrepancy_tau = 1.0;
   CurvatureGauge gauge = CurvatureGauge::reference_without_curvature;
@@ -55,7 +106,8 @@ struct FourSensorOptions {
   /// multiplies the shrinkage bias λ²/(σ²+λ²) of every component by itself again.
   int iterated_refinements = 0;
   bool compute_uncertainty = true;  ///< per-point standard uncertainties u_f, u_S, u_γ
-  int uncertainty_probes = 64;      ///< random probes when 4P is too large for exact propagation
+  /// Estimator paper_system: random probes when 4P is too large for exact propagation.
+  int uncertainty_probes = 64;
   bool is_valid(std::string* why = nullptr) const;
 };
 
@@ -68,13 +120,29 @@ struct FourSensorResult {
   Eigen::VectorXd f_um;       ///< reference profile f̄(x_n), with f(x_0) = f(x_{N−1}) = 0
   Eigen::Vector4d delta_e_um = Eigen::Vector4d::Zero();  ///< Δe = C·e (Eq. 10)
   Eigen::Vector4d e_um = Eigen::Vector4d::Zero();  ///< ê with e_1 = e_4 = 0 (see MotionEstimator)
-  Eigen::VectorXd u_S_um, u_gamma_rad, u_f_um;     ///< standard uncertainties (k = 1), from σ̂
+  /// Standard uncertainties (k = 1), from σ̂: the posterior's for Estimator::posterior (prior
+  /// included), for the paper's system those of the estimate at its λ (no shrinkage bias).
+  Eigen::VectorXd u_S_um, u_gamma_rad, u_f_um;
+  /// Estimator posterior with compute_uncertainty: covariances of linear functionals (ISO 230-1
+  /// figures), from the kept factor.  Null otherwise.
+  std::shared_ptr<FourSensorCovariance> covariance;
   /// Residual of every sensor reading after the fit, P × 4: m_i − f̄(x_n+O_i) − ê_i − S − O_i·γ.
   Eigen::MatrixXd sensor_residual_um;
 
   double lambda = 0;
-  LambdaRule rule = LambdaRule::lcurve;
+  LambdaRule rule = LambdaRule::reml;
+  Estimator estimator = Estimator::posterior;
+  Penalty penalty = Penalty::second_difference;  ///< the prior used (none after a fallback)
   CurvatureGauge gauge = CurvatureGauge::reference_without_curvature;
+  /// Effective degrees of freedom of the fit, tr(A(AᵀA + λ²P)⁻¹Aᵀ), and of f alone (estimator
+  /// posterior; NaN when not computed).
+  double edf = std::numeric_limits<double>::quiet_NaN();
+  double edf_f = std::numeric_limits<double>::quiet_NaN();
+  /// Rules reml and gcv: the λ of the search was at an end of its range.
+  bool lambda_at_edge = false;
+  /// What the data could not determine, in words (empty when nothing is to be said): the
+  /// gauge, and after a collapse the level at which S is undetermined.
+  std::string determination_note;
   LCurveResult lcurve;  ///< the whole curve (filled for rule lcurve)
   /// Rule lcurve found no corner (lcurve.has_corner false): what was done instead.
   LambdaFallback lambda_fallback = LambdaFallback::none;
@@ -89,7 +157,8 @@ struct FourSensorResult {
   /// corner that fell back to no regularisation (λ then only keeps the factorisation defined).
   bool regularised() const noexcept {
     return lambda > 0 && rule != LambdaRule::least_squares &&
-           lambda_fallback != LambdaFallback::no_regularisation;
+           lambda_fallback != LambdaFallback::no_regularisation &&
+           lambda_fallback != LambdaFallback::collapse_least_squares && penalty != Penalty::none;
   }
   /// One line: λ (rule), norms, σ̂, counts, time; flags an L-curve corner at the range edge.
   std::string brief_report() const;

@@ -66,6 +66,24 @@ FourSensorSimData simulate_four_sensor(const FourSensorConfig& cfg, const Slidew
 SlidewayTruth zhao2019_example1(const FourSensorConfig& cfg);
 /// Example 2: as Example 1 but f of Eq. (24) with harmonic order k.
 SlidewayTruth zhao2019_example2(const FourSensorConfig& cfg, int k);
+/// Random smooth profiles for tests on cases nobody designed for: each of S, γ and f is a sum of
+/// a random number of sine harmonics with random periods (counted over the travel L for S and γ,
+/// over the reference length L0 for f), amplitudes and phases.  f is then put in the gauge the
+/// separation reports (f(x_0) = f(x_{N−1}) = 0, no bow: a + b·x + c·x² added), so that the truth
+/// and the estimate mean the same S; e = (0, e2, e3, 0) with e2, e3 ~ N(0, e_sd).
+struct RandomTruthOptions {
+  int min_harmonics = 2, max_harmonics = 4;
+  double S_periods_min = 0.5, S_periods_max = 8.0;  ///< periods over L
+  double S_amplitude_min_um = 0.5, S_amplitude_max_um = 6.0;
+  double gamma_periods_min = 0.5, gamma_periods_max = 6.0;
+  double gamma_amplitude_min_urad = 20.0, gamma_amplitude_max_urad = 200.0;
+  double f_periods_min = 1.0, f_periods_max = 15.0;  ///< periods over L0
+  double f_amplitude_min_um = 0.3, f_amplitude_max_um = 4.0;
+  double e_sd_um = 0.5;
+};
+SlidewayTruth random_smooth_truth(const FourSensorConfig& cfg, std::uint64_t seed,
+                                  const RandomTruthOptions& o = {});
+
 /// PE1 of section 3: D2, D3, D4 = 5.012, 4.985, 25.02 mm.
 std::array<double, 3> zhao2019_pe1_spacing_mm();
 /// PE2 of Eq. (20) in µm, for travel L in mm.

@@ -17,6 +17,8 @@
 // Eq. (12) tries to fix; see CurvatureGauge.
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
+#include <optional>
+#include <string_view>
 
 #include "errsep/core/four_sensor_config.hpp"
 
@@ -60,6 +62,10 @@ enum class CurvatureGauge {
   /// only 2/(N−1)² of its amplitude) lets the regulariser pick the curvature instead.
   paper_eq12_literal,
 };
+
+/// "reference" | "sensor_stage" | "paper_eq12": the names the apps and the machine config use.
+const char* to_string(CurvatureGauge g);
+std::optional<CurvatureGauge> curvature_gauge_from_string(std::string_view s);
 
 /// How the 4 data rows of each slide position are weighted.
 enum class RowWeighting {

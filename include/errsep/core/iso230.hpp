@@ -28,6 +28,8 @@
 // covers the propagated input uncertainty only, not that bias.
 #include <Eigen/Dense>
 #include <cstddef>
+#include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -110,6 +112,38 @@ StraightnessResult evaluate_straightness(const std::vector<double>& x_mm,
                                          const std::vector<double>& s_um,
                                          const std::vector<double>& u_um, ReferenceLine reference,
                                          const EvaluationOptions& opts = {});
+
+/// Straightness of an estimated profile whose errors are correlated along it (a separation),
+/// with U from the full covariance rather than per-point u.  Straightness is max − min about a
+/// fitted line, a convex function of the profile: noise in the profile biases it upward, the
+/// more the larger the noise is against the profile's own shape.  That bias is estimated by
+/// Monte Carlo (JCGM 101: the mean change of the figure over draws of the profile's error) and
+/// removed; U is k·u from the covariance of the points that fix the zone (u² = cᵀVc, c the
+/// sensitivity).  Measured on random profiles (tests/core/four_sensor_coverage.cpp), the
+/// corrected figure lies within U of the truth's in 90–98 % of runs at every scan length, where
+/// the uncorrected one with the same U was off in up to 13 % and a pure Monte Carlo interval,
+/// which needs the error model's shape to be exact, in up to 100 %.
+struct StraightnessEstimate {
+  StraightnessResult zone;     ///< of the estimated profile (reference line, active points)
+  double straightness_um = 0;  ///< zone.straightness_um − bias_um
+  double bias_um = 0;          ///< Monte Carlo mean of T(s + draw) − T(s)
+  double u_um = 0;             ///< standard uncertainty sqrt(cᵀVc)
+  double expanded_um = 0;      ///< U = k·u
+  int draws = 0;
+};
+/// Var(cᵀs) for a sensitivity vector c over the profile's points.
+using ProfileVariance = std::function<double(const std::vector<double>& c)>;
+/// Fills `deviation` (profile size) with one draw of (truth − estimate) for the given seed.
+using ProfileSampler = std::function<void(std::uint64_t seed, std::vector<double>& deviation)>;
+
+/// The straightness of `s_um` about `reference` with the bias correction and U described above.
+/// Throws std::invalid_argument as evaluate_straightness, or for draws < 20.
+StraightnessEstimate estimate_straightness(const std::vector<double>& x_mm,
+                                           const std::vector<double>& s_um,
+                                           const ProfileVariance& variance,
+                                           const ProfileSampler& sampler, ReferenceLine reference,
+                                           int draws = 100, std::uint64_t seed = 1,
+                                           const EvaluationOptions& opts = {});
 
 struct LocalStraightnessResult {
   double local_length_mm = 0;

@@ -1,11 +1,18 @@
 #pragma once
 // Tikhonov solutions of A·X ≈ b (Eq. 17 of Zhao 2019): X_λ = (AᵀA + λ²I)⁻¹Aᵀb, by CHOLMOD on the
-// regularised normal equations.  AᵀA is formed once (from A's rows in band storage when they are
+// regularised normal equations, or in general form X_λ = (AᵀA + λ²P)⁻¹Aᵀb with a penalty
+// P = LᵀL (a smoothness prior: L a difference operator) that is banded on the band unknowns and
+// may couple them with the border.  AᵀA is formed once (from A's rows in band storage when they are
 // narrow, else by cholmod_aat; upper triangle kept); the symbolic analysis (natural ordering,
 // simplicial LDLᵀ: AᵀA is banded with a few dense trailing rows) is done once in the constructor
 // and each λ costs one numeric factorisation with CHOLMOD's diagonal shift β = λ² (Ceres-style:
 // Tikhonov is a per-solve option, not a matrix edit).  This is the only place that talks to CHOLMOD
 // (its C API, in tikhonov_solver.cpp).
+//
+// Read as a prior (x_band ~ N(0, σ²/λ²·P⁻¹), border flat), M = AᵀA + λ²P is the posterior
+// precision in units of 1/σ²: log_det() and selected_inverse() give what a likelihood-based λ rule
+// (REML) and the posterior covariance σ²M⁻¹ need, from the factor, in O(n·b²) for a band of
+// half-width b (Takahashi's recurrence), without forming anything dense of size n.
 //
 // A sweep over λ can run on several threads: worker() gives another solver over the same A and
 // AᵀA (shared, read-only) with its own CHOLMOD workspace and a copy of the analysed factor.  Each
@@ -14,6 +21,7 @@
 #include <Eigen/SparseCore>
 #include <memory>
 #include <string>
+#include <vector>
 
 namespace errsep::core {
 
@@ -25,6 +33,20 @@ enum class SolverStatus {
 };
 const char* to_string(SolverStatus s);
 
+/// Entries of M⁻¹ (M = AᵀA + λ²P, or + λ²I) inside the band of the factor, and its border blocks:
+/// what the posterior covariance of local quantities needs (Takahashi's selected inversion).
+struct SelectedInverse {
+  int bandwidth = 0;  ///< entries (i, j) of the band block with |i − j| <= bandwidth are held
+  Eigen::Index band_size = 0;  ///< m, unknowns of the band block
+  /// Z(i, j), i <= j <= i + bandwidth, at [i·(bandwidth + 1) + (j − i)] (0 past the end).
+  std::vector<double> band;
+  Eigen::MatrixXd cross;   ///< m × k block of M⁻¹ coupling band and border unknowns
+  Eigen::MatrixXd border;  ///< k × k block of M⁻¹ of the border unknowns
+  /// M⁻¹(i, j) for any i, j of the whole system inside the band or touching the border; throws
+  /// std::out_of_range for a band pair farther apart than `bandwidth`.
+  double operator()(Eigen::Index i, Eigen::Index j) const;
+};
+
 struct TikhonovSolverStats {
   int factorizations = 0;
   int solves = 0;
@@ -35,6 +57,8 @@ struct TikhonovSolverStats {
   bool banded_normal = false;
   /// Rank of the band–border coupling: triangular solves the border costs per λ (<= k).
   int border_rank = 0;
+  int selected_inversions = 0;
+  double selected_inverse_s = 0;
 };
 
 class TikhonovSolver {
@@ -48,9 +72,16 @@ class TikhonovSolver {
   /// S = D − Cᵀ B⁻¹ C (rank(C) forward substitutions per λ, in one pass over the factor).  The
   /// band block alone must be positive definite at the λ used (it is for every gauge of
   /// four_sensor_system: f alone has no null direction there, or λ > 0).
-  explicit TikhonovSolver(const Eigen::SparseMatrix<double>& A, int border_columns = 0);
+  ///
+  /// `penalty` (optional, n × n over all unknowns, symmetric, both triangles stored): the general
+  /// form AᵀA + λ²P.  It needs the banded path (every row of A narrow); its band part must lie
+  /// within 64 of the diagonal, its border rows and columns may be dense.  Unknowns where P is
+  /// zero carry no penalty (a flat prior).  Empty: AᵀA + λ²I (CHOLMOD's shift), border included.
+  explicit TikhonovSolver(const Eigen::SparseMatrix<double>& A, int border_columns = 0,
+                          const Eigen::SparseMatrix<double>& penalty = {});
   /// The same, taking A over instead of copying it (at N = 10⁶ the copy is 200 MB).
-  explicit TikhonovSolver(Eigen::SparseMatrix<double>&& A, int border_columns = 0);
+  explicit TikhonovSolver(Eigen::SparseMatrix<double>&& A, int border_columns = 0,
+                          const Eigen::SparseMatrix<double>& penalty = {});
   ~TikhonovSolver();
   /// Another solver over the same A and AᵀA (shared, not copied) with its own factor (the
   /// symbolic analysis is copied, not redone), for use on another thread.  Its stats start at 0.
@@ -58,7 +89,8 @@ class TikhonovSolver {
   TikhonovSolver(const TikhonovSolver&) = delete;
   TikhonovSolver& operator=(const TikhonovSolver&) = delete;
 
-  /// Numeric factorisation of AᵀA + λ²I.  λ = 0 gives the plain least-squares normal equations.
+  /// Numeric factorisation of AᵀA + λ²I (or + λ²P).  λ = 0 gives the plain least-squares normal
+  /// equations.
   SolverStatus factorize(double lambda);
   /// factorize(λ), then x = solve_normal(rhs), with rhs's forward substitution done in the same
   /// pass over the factor as the border's (one pass fewer per λ; what an L-curve sweep calls).
@@ -69,7 +101,17 @@ class TikhonovSolver {
   double inverse_quadratic_form(const Eigen::VectorXd& v);
   /// X_λ for right-hand side b: solve_normal(Aᵀb).
   Eigen::VectorXd solve(const Eigen::VectorXd& b);
-
+  /// P·x (x over all unknowns), or x itself without a penalty: the penalty's part of the normal
+  /// equations, so ‖Lx‖² = x·apply_penalty(x).
+  Eigen::VectorXd apply_penalty(const Eigen::VectorXd& x) const;
+  bool has_penalty() const;
+  /// log det(AᵀA + λ²P) of the current factorisation (band pivots and the border's Schur block).
+  double log_det() const;
+  /// Selected entries of the inverse of the current factorisation (see SelectedInverse).
+  SelectedInverse selected_inverse();
+  /// tr(M⁻¹·P) from a selected inverse of the current factorisation (P inside the band): what
+  /// the effective degrees of freedom n − λ²·tr(M⁻¹P) need.  Without a penalty, tr(M⁻¹).
+  double trace_inverse_penalty(const SelectedInverse& z) const;
   const Eigen::SparseMatrix<double>& A() const { return *A_; }
   double lambda() const { return lambda_; }
   /// An upper bound of the largest singular value of A (sqrt of ‖AᵀA‖₁), for λ ranges.
@@ -80,8 +122,8 @@ class TikhonovSolver {
   struct Normal;  // AᵀA in CHOLMOD form, shared by workers
   struct Impl;    // CHOLMOD workspace and factor, one per solver
   TikhonovSolver() = default;
-  void build(int border_columns);
-  bool build_banded(const Eigen::SparseMatrix<double>& At);
+  void build(int border_columns, const Eigen::SparseMatrix<double>& penalty);
+  bool build_banded(const Eigen::SparseMatrix<double>& At, const Eigen::SparseMatrix<double>& P);
   void compress_border();
   SolverStatus factorize_impl(double lambda, const Eigen::VectorXd* rhs, Eigen::VectorXd* x);
   void finish_solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& z, Eigen::VectorXd& out);

@@ -1,0 +1,695 @@
+// The posterior estimator of the four-sensor method (four_sensor_posterior.hpp): assembly, the λ
+// search (REML, GCV), the posterior covariance from the factor, and the gauge.
+//
+// Computational gauge.  The data see neither the constant, the line nor the bow of f (with a
+// change of η).  Columns of f(x_0) and f(x_{N−1}) are removed (Eq. 11), and so is f(x_c) at the
+// middle sample c: with that pin the normal matrix is positive definite for every λ, including 0,
+// and has no nearly null direction for round-off to spoil.  A prior needs f itself, not the pinned
+// representative f̃ (f̃(x_c) = 0): f = f̃ + β·bow, with β an unknown that the data do not see
+// (its column is zero: the bow's effect on the rows is −Qᵀ(O²)/L₀² per position, which η absorbs;
+// η̃ = η + β·Qᵀ(O²)/L₀² is what the rows see) and that only the prior ‖L(f̃ + β·bow)‖² holds.
+// Eliminating β leaves the marginal prior of f̃, which is what the posterior of anything the data
+// see must use.  Finally the bow is removed (f has no bow: the reported gauge): f_G = f̃ − a·bow,
+// a = bow·f̃/‖bow‖², and η_G = η̃ − a·Qᵀ(O²)/L₀².  β drops out of every reported quantity.
+#include "errsep/core/four_sensor_posterior.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <exception>
+#include <limits>
+#include <random>
+#include <stdexcept>
+#include <string>
+#include <thread>
+
+#include "errsep/core/four_sensor.hpp"
+#include "four_sensor_paths.hpp"
+
+namespace errsep::core {
+
+const char* to_string(Penalty p) {
+  switch (p) {
+    case Penalty::second_difference:
+      return "second_difference";
+    case Penalty::identity:
+      return "identity";
+    case Penalty::none:
+      return "none";
+  }
+  return "unknown";
+}
+
+std::optional<Penalty> penalty_from_string(std::string_view s) {
+  for (auto p : {Penalty::second_difference, Penalty::identity, Penalty::none})
+    if (s == to_string(p)) return p;
+  return std::nullopt;
+}
+
+Eigen::Matrix<double, 4, 2> reading_combinations(const FourSensorConfig& cfg) {
+  const auto O = cfg.offsets_mm();
+  Eigen::Matrix<double, 4, 2> X;
+  for (int j = 0; j < 4; ++j)
+    X.row(j) << 1.0, O[static_cast<std::size_t>(j)];
+  const Eigen::JacobiSVD<Eigen::Matrix<double, 4, 2>> svd(X, Eigen::ComputeFullU);
+  return svd.matrixU().rightCols<2>();
+}
+
+namespace {
+
+int middle_sample(const FourSensorConfig& cfg) {
+  return (cfg.N - 1) / 2;
+}
+
+// Qᵀ(O²)/L₀²: how η changes when c·bow is added to f (per unit c).
+Eigen::Vector2d bow_eta(const FourSensorConfig& cfg, const Eigen::Matrix<double, 4, 2>& Q) {
+  const auto O = cfg.offsets_mm();
+  Eigen::Vector4d o2;
+  for (int j = 0; j < 4; ++j)
+    o2(j) = O[static_cast<std::size_t>(j)] * O[static_cast<std::size_t>(j)];
+  const double L0 = cfg.reference_length_mm();
+  return Q.transpose() * o2 / (L0 * L0);
+}
+
+}  // namespace
+
+PinnedSystem assemble_pinned_system(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
+                                    bool with_bow_unknown) {
+  std::string why;
+  if (!cfg.is_valid(&why)) throw std::invalid_argument("invalid configuration: " + why);
+  const int N = cfg.N, P = cfg.positions();
+  if (m_um.rows() != P || m_um.cols() != 4)
+    throw std::invalid_argument("sensor outputs are " + std::to_string(m_um.rows()) + "x" +
+                                std::to_string(m_um.cols()) + ", configuration needs " +
+                                std::to_string(P) + "x4 (P = N - s2 - s3 - s4 slide positions)");
+  PinnedSystem sys;
+  sys.pinned_middle = middle_sample(cfg);
+  sys.f_index.assign(static_cast<std::size_t>(N), -1);
+  int m = 0;
+  for (int i = 1; i < N - 1; ++i)
+    if (i != sys.pinned_middle) sys.f_index[static_cast<std::size_t>(i)] = m++;
+  sys.band_unknowns = m;
+  sys.border = with_bow_unknown ? 3 : 2;
+  const Eigen::Matrix<double, 4, 2> Q = reading_combinations(cfg);
+  const auto k = cfg.offsets_samples();
+  std::vector<Eigen::Triplet<double>> trip;
+  trip.reserve(static_cast<std::size_t>(P) * 12);
+  sys.b.resize(2 * P);
+  for (int n = 0; n < P; ++n)
+    for (int r = 0; r < 2; ++r) {
+      const int row = 2 * n + r;
+      for (int j = 0; j < 4; ++j) {
+        const int col = sys.f_index[static_cast<std::size_t>(n + k[static_cast<std::size_t>(j)])];
+        if (col >= 0) trip.emplace_back(row, col, Q(j, r));
+      }
+      trip.emplace_back(row, m + r, 1.0);  // η̃_r
+      sys.b(row) = Q.col(r).dot(m_um.row(n).transpose());
+    }
+  sys.A.resize(2 * P, m + sys.border);  // the bow unknown β, if any, has an empty column
+  sys.A.setFromTriplets(trip.begin(), trip.end());
+  sys.A.makeCompressed();
+  return sys;
+}
+
+Eigen::SparseMatrix<double> penalty_operator(const FourSensorConfig& cfg, Penalty penalty,
+                                             const PinnedSystem& sys) {
+  if (penalty == Penalty::none || sys.border < 3)
+    throw std::invalid_argument("penalty_operator: needs a prior and the bow unknown");
+  const int N = cfg.N, m = sys.band_unknowns, beta = m + 2;
+  const Eigen::VectorXd bow = reference_bow(cfg);
+  // L acts on f = f̃ + β·bow (ends zero): each row of L as coefficients on the unknowns.
+  std::vector<Eigen::Triplet<double>> lt;
+  int rows = 0;
+  auto add_row = [&](const std::vector<std::pair<int, double>>& f_coef) {
+    double on_beta = 0.0;
+    for (const auto& [i, c] : f_coef) {
+      const int col = sys.f_index[static_cast<std::size_t>(i)];
+      if (col >= 0) lt.emplace_back(rows, col, c);
+      on_beta += c * bow(i);
+    }
+    if (on_beta != 0.0) lt.emplace_back(rows, beta, on_beta);
+    ++rows;
+  };
+  if (penalty == Penalty::second_difference) {
+    for (int i = 0; i + 2 < N; ++i)
+      add_row({{i, 1.0}, {i + 1, -2.0}, {i + 2, 1.0}});
+  } else {
+    for (int i = 1; i < N - 1; ++i)
+      add_row({{i, 1.0}});
+  }
+  Eigen::SparseMatrix<double> L(rows, m + sys.border);
+  L.setFromTriplets(lt.begin(), lt.end());
+  L.makeCompressed();
+  return L;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Covariance of functionals.
+
+struct FourSensorCovariance::Parts {
+  FourSensorConfig cfg;
+  std::unique_ptr<TikhonovSolver> solver;  // factorised at the result's λ
+  std::vector<int> f_index;
+  int m = 0;      // band unknowns; η̃ at m, m + 1
+  int n_all = 0;  // all unknowns (β included)
+  double sigma2 = 0.0;
+  Eigen::Vector4d w_S, w_g;       // S = w_S·r, γ [µm/mm] = w_g·r, r = m − f(x + O) − e
+  Eigen::Matrix<double, 4, 2> E;  // e = E·η
+  Eigen::VectorXd bow;            // N
+  Eigen::Vector2d n_eta;          // Qᵀ(O²)/L₀²
+  double gn = 0.0;                // Σ bow²
+  Eigen::SparseMatrix<double> L;  // the prior's operator (empty without a prior)
+  double lambda = 0.0;
+  Eigen::Matrix4d span_projector;  // onto span{1, O}: the noise S and γ take directly
+
+  // Coefficients on the unknowns (and n·h of the full vector) of the functional
+  // Σ a_n S_n + Σ b_n γ_n + Σ c_i f_i, and its direct noise part Σ‖v_n‖².
+  void functional(const Eigen::VectorXd& a, const Eigen::VectorXd& b, const Eigen::VectorXd& c,
+                  Eigen::VectorXd& h, double& nh, double& noise) const {
+    const int P = cfg.positions(), N = cfg.N;
+    const auto k = cfg.offsets_samples();
+    h = Eigen::VectorXd::Zero(n_all);
+    nh = 0.0;
+    noise = 0.0;
+    for (int n = 0; n < P; ++n) {
+      const double an = a.size() ? a(n) : 0.0, bn = b.size() ? b(n) : 0.0;
+      if (an == 0.0 && bn == 0.0) continue;
+      const Eigen::Vector4d v = an * w_S + 1e-3 * bn * w_g;  // γ in rad = 1e-3 · µm/mm
+      noise += v.squaredNorm();
+      for (int j = 0; j < 4; ++j) {
+        const int i = n + k[static_cast<std::size_t>(j)];
+        const int col = f_index[static_cast<std::size_t>(i)];
+        if (col >= 0) h(col) -= v(j);
+        nh -= v(j) * bow(i);
+      }
+      const Eigen::Vector2d ev = E.transpose() * v;
+      h.segment<2>(m) -= ev;
+      nh -= ev.dot(n_eta);
+    }
+    for (int i = 0; i < N && c.size(); ++i) {
+      if (c(i) == 0.0) continue;
+      const int col = f_index[static_cast<std::size_t>(i)];
+      if (col >= 0) h(col) += c(i);
+      nh += c(i) * bow(i);
+    }
+  }
+  // h − a·g with a = n·h/g·n: the functional of the gauge-fixed unknowns (see the file comment).
+  void to_gauge(Eigen::VectorXd& h, double nh) const {
+    const double a = nh / gn;
+    for (int i = 0; i < cfg.N; ++i) {
+      const int col = f_index[static_cast<std::size_t>(i)];
+      if (col >= 0) h(col) -= a * bow(i);
+    }
+  }
+};
+
+FourSensorCovariance::FourSensorCovariance(std::unique_ptr<Parts> parts) : p_(std::move(parts)) {}
+FourSensorCovariance::~FourSensorCovariance() = default;
+
+double FourSensorCovariance::variance(const Eigen::VectorXd& a_S, const Eigen::VectorXd& b_gamma,
+                                      const Eigen::VectorXd& c_f) {
+  const int P = p_->cfg.positions(), N = p_->cfg.N;
+  if ((a_S.size() && a_S.size() != P) || (b_gamma.size() && b_gamma.size() != P) ||
+      (c_f.size() && c_f.size() != N))
+    throw std::invalid_argument("FourSensorCovariance::variance: coefficient vectors need " +
+                                std::to_string(P) + " (S, gamma) and " + std::to_string(N) +
+                                " (f) entries");
+  Eigen::VectorXd h;
+  double nh = 0.0, noise = 0.0;
+  p_->functional(a_S, b_gamma, c_f, h, nh, noise);
+  p_->to_gauge(h, nh);
+  return p_->sigma2 * (noise + p_->solver->inverse_quadratic_form(h));
+}
+
+void FourSensorCovariance::sample(std::uint64_t seed, Eigen::VectorXd& dS_um,
+                                  Eigen::VectorXd& dgamma_rad) {
+  Parts& p = *p_;
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> nd(0.0, 1.0);
+  const double sigma = std::sqrt(p.sigma2);
+  const TikhonovSolver& s = *p.solver;
+  Eigen::VectorXd e1(s.A().rows());
+  for (Eigen::Index i = 0; i < e1.size(); ++i)
+    e1(i) = nd(rng);
+  Eigen::VectorXd rhs = s.A().transpose() * (sigma * e1);
+  if (p.L.rows() > 0) {
+    Eigen::VectorXd e2(p.L.rows());
+    for (Eigen::Index i = 0; i < e2.size(); ++i)
+      e2(i) = nd(rng);
+    rhs += (p.lambda * sigma) * (p.L.transpose() * e2);
+  }
+  const Eigen::VectorXd dx = p.solver->solve_normal(rhs);
+  // The gauge: d f_G = d f̃ − a·bow, d η_G = d η̃ − a·n_η, a = bow·d f̃/‖bow‖².
+  const int N = p.cfg.N, P = p.cfg.positions();
+  Eigen::VectorXd df = Eigen::VectorXd::Zero(N);
+  for (int i = 0; i < N; ++i) {
+    const int col = p.f_index[static_cast<std::size_t>(i)];
+    if (col >= 0) df(i) = dx(col);
+  }
+  const double a = p.bow.dot(df) / p.gn;
+  df -= a * p.bow;
+  const Eigen::Vector4d de = p.E * (dx.segment<2>(p.m) - a * p.n_eta);
+  const auto k = p.cfg.offsets_samples();
+  dS_um.resize(P);
+  dgamma_rad.resize(P);
+  for (int n = 0; n < P; ++n) {
+    Eigen::Vector4d eps;
+    for (int j = 0; j < 4; ++j)
+      eps(j) = sigma * nd(rng);
+    Eigen::Vector4d r = -p.span_projector * eps;  // the truth's own noise, unknown to the data
+    for (int j = 0; j < 4; ++j)
+      r(j) -= df(n + k[static_cast<std::size_t>(j)]) + de(j);
+    dS_um(n) = p.w_S.dot(r);
+    dgamma_rad(n) = 1e-3 * p.w_g.dot(r);
+  }
+}
+
+Eigen::MatrixXd FourSensorCovariance::covariance_S(const std::vector<int>& positions) {
+  const int P = p_->cfg.positions();
+  const auto q = static_cast<Eigen::Index>(positions.size());
+  Eigen::MatrixXd H(p_->n_all, q), MH(p_->n_all, q);
+  for (Eigen::Index j = 0; j < q; ++j) {
+    const int n = positions[static_cast<std::size_t>(j)];
+    if (n < 0 || n >= P)
+      throw std::invalid_argument("FourSensorCovariance::covariance_S: position " +
+                                  std::to_string(n) + " outside 0.." + std::to_string(P - 1));
+    Eigen::VectorXd a = Eigen::VectorXd::Zero(P), h;
+    a(n) = 1.0;
+    double nh = 0.0, noise = 0.0;
+    p_->functional(a, {}, {}, h, nh, noise);
+    p_->to_gauge(h, nh);
+    H.col(j) = h;
+    MH.col(j) = p_->solver->solve_normal(h);
+  }
+  Eigen::MatrixXd V = H.transpose() * MH;
+  V.diagonal().array() += p_->w_S.squaredNorm();  // the readings' own noise, independent per n
+  return p_->sigma2 * V;
+}
+
+// ---------------------------------------------------------------------------------------------
+// λ search.
+
+namespace {
+
+struct Criterion {
+  double value = std::numeric_limits<double>::infinity();
+  bool ok = false;
+};
+
+// REML, σ held at σ̂ (issue 15: "σ fixed at the σ̂ of the redundant equations"):
+//   −2 log L_R(λ) = (‖b − Ax‖² + λ²xᵀPx)/σ̂² + log det(AᵀA + λ²P) − r·log λ² + const,
+// r = rank P (the unknowns that carry the prior).  log det P and the terms of the fixed effects
+// (η̃) that do not depend on λ are constants.
+Criterion reml_at(TikhonovSolver& s, const Eigen::VectorXd& Atb, double bb, double sigma2, int rank,
+                  double lambda) {
+  Criterion c;
+  Eigen::VectorXd x;
+  if (s.factorize_and_solve(lambda, Atb, x) != SolverStatus::success) return c;
+  const Eigen::VectorXd Px = s.apply_penalty(x);
+  const double pen = x.dot(Px), l2 = lambda * lambda;
+  const double rss = std::max(0.0, bb - x.dot(Atb) - l2 * pen);
+  c.value = (rss + l2 * pen) / sigma2 + s.log_det() - rank * std::log(l2);
+  c.ok = std::isfinite(c.value);
+  return c;
+}
+
+// GCV: n·‖b − Ax‖²/(n − edf)², edf = n_unknowns − λ²·tr(M⁻¹P) from the selected inverse.
+Criterion gcv_at(TikhonovSolver& s, const Eigen::VectorXd& b, const Eigen::VectorXd& Atb,
+                 double lambda) {
+  Criterion c;
+  Eigen::VectorXd x;
+  if (s.factorize_and_solve(lambda, Atb, x) != SolverStatus::success) return c;
+  const double rss = (s.A() * x - b).squaredNorm();
+  const double edf = static_cast<double>(s.A().cols()) -
+                     lambda * lambda * s.trace_inverse_penalty(s.selected_inverse());
+  const auto n = static_cast<double>(b.size());
+  if (!(n - edf > 0)) return c;
+  c.value = n * rss / ((n - edf) * (n - edf));
+  c.ok = std::isfinite(c.value);
+  return c;
+}
+
+struct SearchOutcome {
+  double lambda = 0.0;
+  bool at_edge = false;
+  int worker_factorizations = 0;  ///< done by the worker threads (not in the solver's stats)
+};
+
+// Grid in log λ (on `threads` threads, each with its own factor), then golden section between the
+// neighbours of the best grid point.
+template <class F>
+SearchOutcome minimise_over_lambda(TikhonovSolver& solver, const LambdaSearchOptions& o, F&& crit) {
+  const double lmax = solver.sigma_max_bound() * std::pow(10.0, o.decades_above);
+  const double lmin = solver.sigma_max_bound() * std::pow(10.0, -o.decades_below);
+  const int count = o.count;
+  std::vector<double> grid(static_cast<std::size_t>(count)), val(grid.size());
+  for (int i = 0; i < count; ++i)
+    grid[static_cast<std::size_t>(i)] =
+        std::log10(lmin) + (std::log10(lmax) - std::log10(lmin)) * i / (count - 1);
+  const int threads = std::max(1, std::min(o.threads, count));
+  std::vector<std::unique_ptr<TikhonovSolver>> workers;
+  for (int t = 1; t < threads; ++t)
+    workers.push_back(solver.worker());
+  auto sweep = [&](int t, TikhonovSolver& s) {
+    for (int i = t; i < count; i += threads)
+      val[static_cast<std::size_t>(i)] =
+          crit(s, std::pow(10.0, grid[static_cast<std::size_t>(i)])).value;
+  };
+  {
+    std::vector<std::thread> pool;
+    std::exception_ptr err;
+    for (int t = 1; t < threads; ++t)
+      pool.emplace_back([&, t] {
+        try {
+          sweep(t, *workers[static_cast<std::size_t>(t - 1)]);
+        } catch (...) {
+          err = std::current_exception();
+        }
+      });
+    sweep(0, solver);
+    for (auto& th : pool)
+      th.join();
+    if (err) std::rethrow_exception(err);
+  }
+  SearchOutcome out;
+  for (const auto& w : workers)
+    out.worker_factorizations += w->stats().factorizations;
+  const auto best = static_cast<int>(std::min_element(val.begin(), val.end()) - val.begin());
+  if (!std::isfinite(val[static_cast<std::size_t>(best)]))
+    throw std::runtime_error("lambda search: the factorisation failed at every lambda of the grid");
+  out.at_edge = best == 0 || best == count - 1;
+  double a = grid[static_cast<std::size_t>(std::max(0, best - 1))];
+  double b = grid[static_cast<std::size_t>(std::min(count - 1, best + 1))];
+  double best_l = grid[static_cast<std::size_t>(best)],
+         best_v = val[static_cast<std::size_t>(best)];
+  const double g = 0.5 * (std::sqrt(5.0) - 1.0);
+  double c = b - g * (b - a), d = a + g * (b - a);
+  double fc = crit(solver, std::pow(10.0, c)).value, fd = crit(solver, std::pow(10.0, d)).value;
+  for (int it = 0; it < o.refine_iterations; ++it) {
+    if (fc < fd) {
+      b = d;
+      d = c;
+      fd = fc;
+      c = b - g * (b - a);
+      fc = crit(solver, std::pow(10.0, c)).value;
+    } else {
+      a = c;
+      c = d;
+      fc = fd;
+      d = a + g * (b - a);
+      fd = crit(solver, std::pow(10.0, d)).value;
+    }
+  }
+  if (fc < best_v) best_l = c, best_v = fc;
+  if (fd < best_v) best_l = d, best_v = fd;
+  out.lambda = std::pow(10.0, best_l);
+  return out;
+}
+
+// Least-squares line S + O·γ through the four residuals: the weights of S and γ (µm/mm).
+void line_weights(const FourSensorConfig& cfg, Eigen::Vector4d& w_S, Eigen::Vector4d& w_g) {
+  const auto O = cfg.offsets_mm();
+  Eigen::Matrix<double, 4, 2> X;
+  for (int j = 0; j < 4; ++j)
+    X.row(j) << 1.0, O[static_cast<std::size_t>(j)];
+  const Eigen::Matrix<double, 2, 4> W = (X.transpose() * X).inverse() * X.transpose();
+  w_S = W.row(0).transpose();
+  w_g = W.row(1).transpose();
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+
+FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
+                                    const FourSensorOptions& opts) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const int N = cfg.N, P = cfg.positions();
+  FourSensorResult res;
+  res.config = cfg;
+  res.rule = opts.rule;
+  res.estimator = Estimator::posterior;
+  res.gauge = CurvatureGauge::reference_without_curvature;
+
+  // σ̂ from the redundancy: the unregularised fit leaves 2P rows explained by N − 1 unknowns.
+  PinnedSystem ls_sys = assemble_pinned_system(cfg, m_um, false);
+  const Eigen::VectorXd b = ls_sys.b;
+  auto ls = std::make_unique<TikhonovSolver>(std::move(ls_sys.A), ls_sys.border);
+  if (ls->factorize(0.0) != SolverStatus::success)
+    throw std::runtime_error(
+        "the four-sensor system is rank-deficient beyond the gauge (spacings s = (" +
+        std::to_string(cfg.s2) + ", " + std::to_string(cfg.s3) + ", " + std::to_string(cfg.s4) +
+        ") with N = " + std::to_string(N) + ")");
+  const Eigen::VectorXd x_ls = ls->solve(b);
+  res.redundancy_dof = 2 * P - (N - 1);
+  if (res.redundancy_dof < 1)
+    throw std::invalid_argument("N = " + std::to_string(N) +
+                                " leaves no redundant readings to estimate the noise from");
+  res.sigma_um = std::sqrt((ls->A() * x_ls - b).squaredNorm() / res.redundancy_dof);
+  const double sigma2 = std::max(res.sigma_um * res.sigma_um, 1e-30);
+
+  const bool prior = opts.penalty != Penalty::none && opts.rule != LambdaRule::least_squares;
+  std::unique_ptr<TikhonovSolver> solver;
+  PinnedSystem sys;
+  FourSensorCovariance::Parts parts;
+  int extra_factorizations = 0;
+  double lambda = 0.0;
+  res.penalty = prior ? opts.penalty : Penalty::none;
+  if (prior) {
+    sys = assemble_pinned_system(cfg, m_um, true);
+    parts.L = penalty_operator(cfg, opts.penalty, sys);
+    Eigen::SparseMatrix<double> Pm = parts.L.transpose() * parts.L;
+    Pm.prune(0.0);
+    solver = std::make_unique<TikhonovSolver>(std::move(sys.A), sys.border, Pm);
+    const Eigen::VectorXd Atb = solver->A().transpose() * b;
+    const double bb = b.squaredNorm();
+    const int rank = sys.band_unknowns + 1;  // f̃ and β carry the prior
+    switch (opts.rule) {
+      case LambdaRule::reml: {
+        const auto o = minimise_over_lambda(*solver, opts.search, [&](TikhonovSolver& s, double l) {
+          return reml_at(s, Atb, bb, sigma2, rank, l);
+        });
+        lambda = o.lambda;
+        res.lambda_at_edge = o.at_edge;
+        extra_factorizations = o.worker_factorizations;
+        break;
+      }
+      case LambdaRule::gcv: {
+        const auto o = minimise_over_lambda(*solver, opts.search, [&](TikhonovSolver& s, double l) {
+          return gcv_at(s, b, Atb, l);
+        });
+        lambda = o.lambda;
+        res.lambda_at_edge = o.at_edge;
+        extra_factorizations = o.worker_factorizations;
+        break;
+      }
+      case LambdaRule::lcurve: {
+        LCurveOptions lo = opts.lcurve;
+        if (lo.lambda_max <= 0)
+          lo.lambda_max = solver->sigma_max_bound() * std::pow(10.0, opts.search.decades_above);
+        if (lo.lambda_min <= 0)
+          lo.lambda_min = solver->sigma_max_bound() * std::pow(10.0, -opts.search.decades_below);
+        res.lcurve = lcurve_corner(*solver, b, lo);
+        lambda = res.lcurve.lambda_corner;
+        if (!res.lcurve.has_corner) {
+          const double delta = res.sigma_um * std::sqrt(2.0 * P);
+          lambda = discrepancy_lambda(*solver, b, opts.discrepancy_tau * delta, lo.lambda_min,
+                                      lo.lambda_max);
+          res.lambda_fallback = LambdaFallback::discrepancy;
+        }
+        break;
+      }
+      case LambdaRule::discrepancy: {
+        const double delta = res.sigma_um * std::sqrt(2.0 * P);
+        lambda = discrepancy_lambda(
+            *solver, b, opts.discrepancy_tau * delta,
+            solver->sigma_max_bound() * std::pow(10.0, -opts.search.decades_below),
+            solver->sigma_max_bound() * std::pow(10.0, opts.search.decades_above));
+        break;
+      }
+      case LambdaRule::fixed:
+        lambda = opts.fixed_lambda;
+        break;
+      case LambdaRule::least_squares:
+        break;
+    }
+    if (solver->factorize(lambda) != SolverStatus::success)
+      throw std::runtime_error("factorisation failed at the chosen lambda = " +
+                               std::to_string(lambda));
+  }
+  if (prior) {
+    const SelectedInverse z = solver->selected_inverse();
+    res.edf = static_cast<double>(solver->A().cols()) -
+              lambda * lambda * solver->trace_inverse_penalty(z);
+    res.edf_f = res.edf - 2.0;  // η̃ is not penalised: 2 of them
+    // A collapse: the prior swallowed f (issue 15).  The λ at the top of the range, or f with
+    // (almost) no degrees of freedom left: S would carry f's amplitude with a small stated u.
+    const bool top_edge = res.lambda_at_edge && lambda > solver->sigma_max_bound();
+    if ((opts.rule == LambdaRule::reml || opts.rule == LambdaRule::gcv ||
+         opts.rule == LambdaRule::lcurve) &&
+        (top_edge || res.edf_f < opts.collapse_edf)) {
+      res.lambda_fallback = LambdaFallback::collapse_least_squares;
+      res.penalty = Penalty::none;
+    }
+  }
+  const bool use_ls = res.penalty == Penalty::none;
+  if (use_ls) {
+    solver = std::move(ls);
+    lambda = 0.0;
+    parts.L.resize(0, 0);
+    sys = std::move(ls_sys);
+    sys.A.resize(0, 0);
+    if (!prior) {
+      res.edf = static_cast<double>(N - 1);
+      res.edf_f = res.edf - 2.0;
+    }
+  } else {
+    ls.reset();
+  }
+  res.lambda = lambda;
+
+  // The solution in the gauge of the report: f̃ → f_G = f̃ − a·bow, η̃ → η_G = η̃ − a·n_η.
+  const Eigen::Matrix<double, 4, 2> Q = reading_combinations(cfg);
+  const Eigen::VectorXd x = solver->solve(b);
+  res.residual_norm = (solver->A() * x - b).norm();
+  res.solution_norm = std::sqrt(std::max(0.0, x.dot(solver->apply_penalty(x))));
+  parts.cfg = cfg;
+  parts.lambda = lambda;
+  {
+    const Eigen::Matrix<double, 4, 2> Qc = Q;
+    parts.span_projector = Eigen::Matrix4d::Identity() - Qc * Qc.transpose();
+  }
+  parts.f_index = sys.f_index;
+  parts.m = sys.band_unknowns;
+  parts.n_all = static_cast<int>(solver->A().cols());
+  parts.sigma2 = sigma2;
+  line_weights(cfg, parts.w_S, parts.w_g);
+  {
+    // e = (0, e2, e3, 0) with Qᵀe = η: the constants of S and γ set by e_1 = e_4 = 0, as
+    // Eq. (19) leaves them.
+    Eigen::Matrix2d K;
+    K << Q(1, 0), Q(2, 0), Q(1, 1), Q(2, 1);
+    const Eigen::Matrix2d Ki = K.inverse();
+    parts.E.setZero();
+    parts.E.row(1) = Ki.row(0);
+    parts.E.row(2) = Ki.row(1);
+  }
+  parts.bow = reference_bow(cfg);
+  parts.n_eta = bow_eta(cfg, Q);
+  parts.gn = parts.bow.squaredNorm();
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(N);
+  for (int i = 0; i < N; ++i) {
+    const int col = parts.f_index[static_cast<std::size_t>(i)];
+    if (col >= 0) f(i) = x(col);
+  }
+  const double a = parts.bow.dot(f) / parts.gn;
+  f -= a * parts.bow;
+  const Eigen::Vector2d eta = x.segment<2>(parts.m) - a * parts.n_eta;
+  const Eigen::Vector4d e = parts.E * eta;
+  res.f_um = f;
+  res.e_um = e;
+  res.delta_e_um = combination_matrix(cfg) * e;
+  res.f_x_mm = Eigen::VectorXd::LinSpaced(N, 0.0, (N - 1) * cfg.dx_mm);
+  res.x_mm = res.f_x_mm.head(P);
+  res.S_um.resize(P);
+  res.gamma_rad.resize(P);
+  res.sensor_residual_um.resize(P, 4);
+  const auto k = cfg.offsets_samples();
+  const auto O = cfg.offsets_mm();
+  for (int n = 0; n < P; ++n) {
+    Eigen::Vector4d r;
+    for (int j = 0; j < 4; ++j)
+      r(j) = m_um(n, j) - f(n + k[static_cast<std::size_t>(j)]) - e(j);
+    const double S = parts.w_S.dot(r), g = parts.w_g.dot(r);  // g in µm/mm
+    res.S_um(n) = S;
+    res.gamma_rad(n) = 1e-3 * g;
+    for (int j = 0; j < 4; ++j)
+      res.sensor_residual_um(n, j) = r(j) - S - O[static_cast<std::size_t>(j)] * g;
+  }
+
+  if (opts.compute_uncertainty) {
+    // Per point from the selected inverse Z of the factor: u² = σ̂²(‖w‖² + tᵀZt) with t = h − a_h·g
+    // the gauge-fixed coefficients of the quantity (at most 4 f-unknowns and η̃: inside the band).
+    const SelectedInverse z = solver->selected_inverse();
+    Eigen::VectorXd g_red = Eigen::VectorXd::Zero(parts.n_all);
+    for (int i = 0; i < N; ++i) {
+      const int col = parts.f_index[static_cast<std::size_t>(i)];
+      if (col >= 0) g_red(col) = parts.bow(i);
+    }
+    const Eigen::VectorXd Zg = solver->solve_normal(g_red);
+    const double gZg = g_red.dot(Zg);
+    // tᵀZt for t = h − a·g, h given by (unknown, coefficient) pairs.
+    auto quad = [&](const std::vector<std::pair<int, double>>& h, double nh) {
+      const double ah = nh / parts.gn;
+      double hZh = 0.0, hZg = 0.0;
+      for (const auto& [i, ci] : h) {
+        hZg += ci * Zg(i);
+        for (const auto& [j, cj] : h)
+          hZh += ci * cj * z(i, j);
+      }
+      return hZh - 2.0 * ah * hZg + ah * ah * gZg;
+    };
+    res.u_S_um.resize(P);
+    res.u_gamma_rad.resize(P);
+    res.u_f_um = Eigen::VectorXd::Zero(N);
+    std::vector<std::pair<int, double>> h;
+    for (int which = 0; which < 2; ++which) {
+      const Eigen::Vector4d& w = which == 0 ? parts.w_S : parts.w_g;
+      const Eigen::Vector2d ew = parts.E.transpose() * w;
+      for (int n = 0; n < P; ++n) {
+        h.clear();
+        double nh = 0.0;
+        for (int j = 0; j < 4; ++j) {
+          const int i = n + k[static_cast<std::size_t>(j)];
+          const int col = parts.f_index[static_cast<std::size_t>(i)];
+          if (col >= 0) h.emplace_back(col, w(j));
+          nh += w(j) * parts.bow(i);
+        }
+        h.emplace_back(parts.m, ew(0));
+        h.emplace_back(parts.m + 1, ew(1));
+        nh += ew.dot(parts.n_eta);
+        const double u = std::sqrt(std::max(0.0, sigma2 * (w.squaredNorm() + quad(h, nh))));
+        if (which == 0)
+          res.u_S_um(n) = u;
+        else
+          res.u_gamma_rad(n) = 1e-3 * u;
+      }
+    }
+    for (int i = 1; i < N - 1; ++i) {
+      const int col = parts.f_index[static_cast<std::size_t>(i)];
+      h.clear();
+      if (col >= 0) h.emplace_back(col, 1.0);
+      res.u_f_um(i) = std::sqrt(std::max(0.0, sigma2 * quad(h, parts.bow(i))));
+    }
+    res.solver_stats = solver->stats();
+    parts.solver = std::move(solver);
+    res.covariance = std::make_shared<FourSensorCovariance>(
+        std::make_unique<FourSensorCovariance::Parts>(std::move(parts)));
+  } else {
+    res.solver_stats = solver->stats();
+  }
+  res.solver_stats.factorizations += extra_factorizations;
+
+  // What the data could not determine.
+  char note[512];
+  std::snprintf(note, sizeof note,
+                "one scan cannot see the constant, line and bow of f: f(x_0) = f(x_end) = 0 and "
+                "f has no bow (the reference is taken as free of curvature), so the bow of S is "
+                "measured relative to the reference's");
+  res.determination_note = note;
+  if (res.lambda_fallback == LambdaFallback::collapse_least_squares) {
+    const double umax = res.u_S_um.size() ? res.u_S_um.maxCoeff() : 0.0;
+    std::snprintf(note, sizeof note,
+                  "; the %s prior left f with %.2g effective degrees of freedom (lambda %.3g): "
+                  "not used, the unregularised separation is reported, and S is undetermined at "
+                  "the level of u_S up to %.3g um",
+                  to_string(opts.penalty), res.edf_f, res.lambda, umax);
+    res.determination_note += note;
+  }
+  res.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return res;
+}
+
+}  // namespace errsep::core
