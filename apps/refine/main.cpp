@@ -56,11 +56,11 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   try {
-    using errsep::core::CurvatureGauge;
-    opts.refine.solve.gauge = gauge == "sensor_stage"
-                                  ? CurvatureGauge::sensor_stage_without_curvature
-                              : gauge == "reference" ? CurvatureGauge::reference_without_curvature
-                                                     : CurvatureGauge::paper_eq12_literal;
+    using errsep::core::curvature_gauge_from_string;
+    using errsep::core::options_for_gauge;
+    const auto g = curvature_gauge_from_string(gauge);
+    if (!g) throw std::invalid_argument("--gauge: unknown gauge '" + gauge + "'");
+    opts.refine.solve = options_for_gauge(*g);
     if (!truth.empty()) opts.truth_csv = truth;
     if (!reference.empty()) opts.reference_csv = reference;
     const auto run = errsep::io::run_refine(input, out_dir, opts, geo);

@@ -61,10 +61,11 @@ struct ProgressPrinter {
   }
 };
 
-core::CurvatureGauge gauge_of(const std::string& gauge) {
-  if (gauge == "sensor_stage") return core::CurvatureGauge::sensor_stage_without_curvature;
-  if (gauge == "reference") return core::CurvatureGauge::reference_without_curvature;
-  return core::CurvatureGauge::paper_eq12_literal;
+/// The separation's options for a gauge name (core::options_for_gauge).
+core::FourSensorOptions separation_options(const std::string& gauge) {
+  const auto g = core::curvature_gauge_from_string(gauge);
+  if (!g) throw std::invalid_argument("--gauge: unknown gauge '" + gauge + "'");
+  return core::options_for_gauge(*g);
 }
 
 /// Separation of a complete four-sensor raw scan, with the defaults of errsep-separate.
@@ -76,14 +77,14 @@ void separate_four_sensor(const io::RawFourSensorScan& raw, const fs::path& raw_
   for (Eigen::Index j = 0; j < 4; ++j)
     for (Eigen::Index n = 0; n < P; ++n)
       m(n, j) = raw.m_um[static_cast<std::size_t>(j)][static_cast<std::size_t>(n)];
-  core::FourSensorOptions opts;  // lambda from the L-curve corner, as errsep-separate
-  opts.gauge = gauge_of(gauge);
-  const auto res = core::separate_four_sensor(g, m, opts);
+  const auto res = core::separate_four_sensor(g, m, separation_options(gauge));
   io::write_four_sensor_result(out, res, {raw_file.string(), "X", "Y", {}});
   std::cout << "separation: " << res.brief_report() << "\n";
   if (res.lambda_fallback == core::LambdaFallback::discrepancy)
     std::cerr << "warning: the L-curve has no corner inside the lambda range; lambda was chosen "
                  "by the discrepancy principle instead\n";
+  else if (res.lambda_fallback == core::LambdaFallback::collapse_least_squares)
+    std::cerr << "warning: " << res.determination_note << "\n";
 }
 
 void separate_displacement(const io::RawDisplacementScan& raw) {
@@ -226,7 +227,7 @@ int main(int argc, char** argv) {
                   << "/ (motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt)\n";
         if (refine || !refine_reference.empty() || cfg.refine.enabled) {
           io::RefineRunOptions ro;  // the defaults of errsep-refine, the scan's gauge
-          ro.refine.solve.gauge = gauge_of(gauge);
+          ro.refine.solve = separation_options(gauge);
           ro.refine.alpha = cfg.refine.alpha;  // [refine] alpha (default 0.01, as errsep-refine)
           if (!refine_reference.empty()) ro.reference_csv = refine_reference;
           const auto run = io::run_refine(raw_file, out / "refine", ro);

@@ -13,19 +13,6 @@
 #include "errsep/io/staged_directory.hpp"
 #include "errsep/version.hpp"
 
-namespace {
-
-errsep::core::LambdaRule parse_rule(const std::string& s) {
-  using errsep::core::LambdaRule;
-  if (s == "lcurve") return LambdaRule::lcurve;
-  if (s == "discrepancy") return LambdaRule::discrepancy;
-  if (s == "fixed") return LambdaRule::fixed;
-  if (s == "ls" || s == "least_squares") return LambdaRule::least_squares;
-  throw CLI::ValidationError("--rule", "unknown rule '" + s + "'");
-}
-
-}  // namespace
-
 int main(int argc, char** argv) {
   CLI::App app{
       "errsep-separate: separate the reference profile f(x), straightness S(x) and tilt "
@@ -34,7 +21,8 @@ int main(int argc, char** argv) {
       "one column per sensor configuration), optional '# dx_mm: 5', '# s2: 1', '# s3: 1', "
       "'# s4: 5' metadata lines."};
   app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
-  std::string input, out_dir = "out/separate", rule = "lcurve", gauge = "reference";
+  std::string input, out_dir = "out/separate", rule = "reml", gauge = "reference",
+                     prior = "second_difference", estimator = "posterior";
   double lambda = 0;
   int s2 = 0, s3 = 0, s4 = 0;
   double dx = 0;
@@ -45,7 +33,15 @@ int main(int argc, char** argv) {
   app.add_option("--s2", s2, "spacing s2 in samples (default: from metadata)");
   app.add_option("--s3", s3, "spacing s3 in samples (default: from metadata)");
   app.add_option("--s4", s4, "spacing s4 in samples (default: from metadata)");
-  app.add_option("--rule", rule, "lambda rule: lcurve, discrepancy, fixed, ls")
+  app.add_option("--estimator", estimator,
+                 "posterior (a prior on f, posterior covariance; default) or paper_system (the "
+                 "paper's augmented system, for comparison)")
+      ->capture_default_str();
+  app.add_option("--prior", prior,
+                 "prior on the reference profile f: second_difference (smooth f; default), "
+                 "identity (the paper's Eq. 17), none (unregularised, exact covariance)")
+      ->capture_default_str();
+  app.add_option("--rule", rule, "lambda rule: reml, gcv, lcurve, discrepancy, fixed, ls")
       ->capture_default_str();
   app.add_option("--lambda", lambda, "lambda for --rule fixed");
   app.add_option(
@@ -56,22 +52,28 @@ int main(int argc, char** argv) {
   app.add_option("--lcurve-points", opts.lcurve.count, "lambda values on the L-curve grid")
       ->capture_default_str();
   app.add_option("--threads", opts.lcurve.threads,
-                 "threads for the L-curve grid (same result; faster for long scans)")
+                 "threads for the lambda search (same result; faster for long scans)")
       ->capture_default_str()
       ->check(CLI::Range(1, 64));
   CLI11_PARSE(app, argc, argv);
 
   try {
-    opts.rule = parse_rule(rule);
+    const auto r = errsep::core::lambda_rule_from_string(rule);
+    if (!r) throw std::invalid_argument("--rule: unknown rule '" + rule + "'");
+    const auto g = errsep::core::curvature_gauge_from_string(gauge);
+    if (!g) throw std::invalid_argument("--gauge: unknown gauge '" + gauge + "'");
+    const auto p = errsep::core::penalty_from_string(prior);
+    if (!p) throw std::invalid_argument("--prior: unknown prior '" + prior + "'");
+    const auto e = errsep::core::estimator_from_string(estimator);
+    if (!e) throw std::invalid_argument("--estimator: unknown estimator '" + estimator + "'");
+    opts.rule = *r;
+    opts.gauge = *g;
+    opts.penalty = *p;
+    opts.estimator = *e;
     opts.fixed_lambda = lambda;
-    if (gauge == "sensor_stage")
-      opts.gauge = errsep::core::CurvatureGauge::sensor_stage_without_curvature;
-    else if (gauge == "reference")
-      opts.gauge = errsep::core::CurvatureGauge::reference_without_curvature;
-    else if (gauge == "paper_eq12")
-      opts.gauge = errsep::core::CurvatureGauge::paper_eq12_literal;
-    else
-      throw std::invalid_argument("--gauge: unknown gauge '" + gauge + "'");
+    opts.search.threads = opts.lcurve.threads;
+    std::string why;
+    if (!opts.is_valid(&why)) throw std::invalid_argument("options: " + why);
 
     const auto scan = errsep::io::read_raw_four_sensor_csv(input);
     errsep::core::FourSensorConfig cfg;
@@ -97,7 +99,6 @@ int main(int argc, char** argv) {
                                        " mm grid)");
     }
     cfg.N = P + cfg.s2 + cfg.s3 + cfg.s4;
-    std::string why;
     if (!cfg.is_valid(&why))
       throw errsep::io::CsvError(input, 0,
                                  "spacings s = (" + std::to_string(cfg.s2) + ", " +
@@ -126,6 +127,8 @@ int main(int argc, char** argv) {
     else if (res.lambda_fallback == errsep::core::LambdaFallback::no_regularisation)
       std::cerr << "note: the L-curve has no corner (the unregularised solution is not "
                    "dominated by noise); no regularisation applied\n";
+    else if (res.lambda_fallback == errsep::core::LambdaFallback::collapse_least_squares)
+      std::cerr << "warning: " << res.determination_note << "\n";
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "errsep-separate: " << e.what() << "\n";

@@ -18,6 +18,7 @@
 #include "errsep/acq/digital_trigger.hpp"
 #include "errsep/acq/sampler.hpp"  // monotonic_ns
 #include "errsep/core/four_sensor.hpp"
+#include "errsep/core/four_sensor_evaluation.hpp"
 #include "errsep/core/iso230.hpp"
 #include "errsep/io/csv.hpp"
 
@@ -543,18 +544,19 @@ Daemon::ResultFigures Daemon::write_result(
   // ISO 230-1 straightness deviation: S(x) carries a line the separation cannot fix (and the
   // slide's alignment to the reference adds one), so the figure is taken about a reference line,
   // never as max - min of S.  Both references; the register map shows the minimum zone (the
-  // smallest zone enclosing S, ISO 12780-1).
-  const std::vector<double> u_pts = r.u_S_um.size() == r.x_mm.size() ? us : std::vector<double>{};
-  const core::StraightnessResult mz =
-      core::evaluate_straightness(x, s, u_pts, core::ReferenceLine::minimum_zone);
-  const core::StraightnessResult ls =
-      core::evaluate_straightness(x, s, u_pts, core::ReferenceLine::least_squares);
+  // smallest zone enclosing S, ISO 12780-1).  U from the separation's covariance, the noise's
+  // bias of max - min removed (core/four_sensor_evaluation.hpp), as errsep-scan writes it.
+  const core::StraightnessEstimate mz =
+      core::four_sensor_straightness(r, core::ReferenceLine::minimum_zone);
+  const core::StraightnessEstimate ls =
+      core::four_sensor_straightness(r, core::ReferenceLine::least_squares);
   t.set_meta("straightness_minimum_zone_um", fmt(mz.straightness_um, 6));
-  t.set_meta("straightness_minimum_zone_U_um", fmt(mz.uncertainty.expanded, 6));
+  t.set_meta("straightness_minimum_zone_U_um", fmt(mz.expanded_um, 6));
   t.set_meta("straightness_least_squares_um", fmt(ls.straightness_um, 6));
-  t.set_meta("straightness_least_squares_U_um", fmt(ls.uncertainty.expanded, 6));
+  t.set_meta("straightness_least_squares_U_um", fmt(ls.expanded_um, 6));
   t.set_meta("straightness_U_note",
-             "k = 2, bound over any correlation of the per-point u_S (core/iso230.hpp)");
+             "k = 2, from the separation's posterior covariance (core/four_sensor_evaluation.hpp)");
+  if (!r.determination_note.empty()) t.set_meta("not_determined", r.determination_note);
   t.add_column("x_mm", x);
   t.add_column("S_um", s);
   t.add_column("gamma_urad", g);
@@ -562,7 +564,7 @@ Daemon::ResultFigures Daemon::write_result(
   ResultFigures out;
   out.file = store_.write(stem, "result", io::format_csv(t, 10)).string();
   out.minimum_zone_um = mz.straightness_um;
-  out.minimum_zone_U_um = mz.uncertainty.expanded;
+  out.minimum_zone_U_um = mz.expanded_um;
   out.least_squares_um = ls.straightness_um;
   return out;
 }

@@ -356,6 +356,16 @@ FourSensorResult separate(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_
 
 }  // namespace
 
+FourSensorOptions options_for_gauge(CurvatureGauge gauge) {
+  FourSensorOptions opts;
+  opts.gauge = gauge;
+  if (gauge != CurvatureGauge::reference_without_curvature) {
+    opts.estimator = Estimator::paper_system;
+    opts.rule = LambdaRule::lcurve;
+  }
+  return opts;
+}
+
 FourSensorResult separate_four_sensor(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
                                       const FourSensorOptions& opts) {
   if (opts.estimator == Estimator::posterior) {

@@ -2,6 +2,7 @@
 
 #include <sstream>
 
+#include "errsep/core/four_sensor_evaluation.hpp"
 #include "errsep/core/four_sensor_model.hpp"
 #include "errsep/io/atomic_file.hpp"
 #include "errsep/io/csv.hpp"
@@ -21,18 +22,6 @@ std::vector<double> vec(const Eigen::VectorXd& v) {
   return {v.data(), v.data() + v.size()};
 }
 
-const char* gauge_name(core::CurvatureGauge g) {
-  switch (g) {
-    case core::CurvatureGauge::sensor_stage_without_curvature:
-      return "sensor_stage_without_curvature";
-    case core::CurvatureGauge::reference_without_curvature:
-      return "reference_without_curvature";
-    case core::CurvatureGauge::paper_eq12_literal:
-      return "paper_eq12_literal";
-  }
-  return "unknown";
-}
-
 void common_meta(CsvTable& t, const core::FourSensorResult& r, const ResultWriteInfo& info) {
   t.set_meta("errsep", kVersion);
   t.set_meta("method", "four-sensor");
@@ -44,9 +33,19 @@ void common_meta(CsvTable& t, const core::FourSensorResult& r, const ResultWrite
   t.set_meta("s3", std::to_string(r.config.s3));
   t.set_meta("s4", std::to_string(r.config.s4));
   t.set_meta("N", std::to_string(r.config.N));
+  t.set_meta("estimator", core::to_string(r.estimator));
+  t.set_meta("prior", core::to_string(r.penalty));
   t.set_meta("lambda", fmt(r.lambda));
   t.set_meta("lambda_rule", core::to_string(r.rule));
+  t.set_meta("lambda_fallback", core::to_string(r.lambda_fallback));
+  t.set_meta("edf_f", fmt(r.edf_f));
   t.set_meta("sigma_hat_um", fmt(r.sigma_um));
+  t.set_meta("uncertainty_model",
+             r.covariance
+                 ? "posterior covariance of the separation (prior included), sigma from "
+                   "the redundant readings"
+                 : "covariance of the estimate at its lambda (shrinkage bias not included)");
+  if (!r.determination_note.empty()) t.set_meta("not_determined", r.determination_note);
   for (const auto& [k, v] : info.extra_metadata)
     t.set_meta(k, v);
 }
@@ -72,11 +71,22 @@ void write_four_sensor_result(const std::filesystem::path& dir, const core::Four
   motion.add_column("u_S_um", vec(r.u_S_um.size() == r.S_um.size() ? r.u_S_um : zeroP));
   motion.add_column("u_gamma_urad",
                     vec(r.u_gamma_rad.size() == r.S_um.size() ? r.u_gamma_rad * 1e6 : zeroP));
+  // ISO 230-1 straightness with U from the separation's covariance (the report takes these).
+  if (r.covariance && P >= 2)
+    for (const auto ref : {core::ReferenceLine::end_points, core::ReferenceLine::least_squares,
+                           core::ReferenceLine::minimum_zone}) {
+      const auto e = core::four_sensor_straightness(r, ref);
+      const std::string key = std::string("straightness_") + core::to_string(ref);
+      motion.set_meta(key + "_um", fmt(e.straightness_um));
+      motion.set_meta(key + "_U_um", fmt(e.expanded_um));
+      motion.set_meta(key + "_bias_um", fmt(e.bias_um));
+      motion.set_meta(key + "_of_estimate_um", fmt(e.zone.straightness_um));
+    }
 
   CsvTable ref;
   common_meta(ref, r, info);
   ref.set_meta("units", "x in mm, f in um");
-  ref.set_meta("gauge", gauge_name(r.gauge));
+  ref.set_meta("gauge", core::to_string(r.gauge));
   ref.add_column("x_mm", vec(r.f_x_mm));
   ref.add_column("f_um", vec(r.f_um));
   ref.add_column(
@@ -122,6 +132,7 @@ void write_four_sensor_result(const std::filesystem::path& dir, const core::Four
           << "; gamma is reported up to the constant e4/(D2+D3+D4).\n"
           << "lambda: " << core::to_string(r.rule) << ", L-curve branch " << r.lcurve.branch_decades
           << " decades, fallback " << core::to_string(r.lambda_fallback) << "\n";
+  if (!r.determination_note.empty()) summary << "not determined: " << r.determination_note << "\n";
 
   write_csv(dir / "motion.csv", motion);
   write_csv(dir / "reference.csv", ref);

@@ -292,12 +292,29 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
           "motion.csv gives no u_S_um (or only zeros): straightness "
           "uncertainties are not available (shown as \xE2\x80\x94).");
 
+    // The separation writes its straightness with U from its own covariance (and the noise's
+    // bias of max − min removed); a result without them falls back to the per-point bound.
+    bool from_covariance = false;
     for (const auto ref :
          {ReferenceLine::end_points, ReferenceLine::least_squares, ReferenceLine::minimum_zone}) {
+      const std::string key = std::string("straightness_") + core::to_string(ref);
+      const auto v = md.table.meta_number(key + "_um", motion_file);
+      const auto U = md.table.meta_number(key + "_U_um", motion_file);
+      if (v && U && opts.evaluation.coverage_factor == 2.0) {
+        add_eval({es, "straightness S(x)", core::label(ref), es + "_" + core::to_string(ref), "um",
+                  *v, *U});
+        from_covariance = true;
+        continue;
+      }
       const auto r = core::evaluate_straightness(md.x, md.s, md.u_s, ref, opts.evaluation);
       add_eval({es, "straightness S(x)", core::label(ref), es + "_" + core::to_string(ref), "um",
                 r.straightness_um, r.uncertainty.expanded});
     }
+    if (from_covariance)
+      html.configuration.emplace_back(
+          "straightness U",
+          "from the separation's posterior covariance (correlations included), "
+          "bias of max - min from noise removed (Monte Carlo)");
     const double travel = md.x.back() - md.x.front();
     const double local = opts.local_length_mm > 0 ? opts.local_length_mm : travel / 4;
     if (local <= travel + 1e-9 * std::max(1.0, travel)) {

@@ -90,33 +90,33 @@ TEST_CASE("scan on the device simulator, separated: S and gamma match the simula
   const auto x = motion.column("x_mm");
   const auto S = motion.column("S_um");
   const auto g = motion.column("gamma_urad");
+  const auto uS = motion.column("u_S_um");
+  const auto ug = motion.column("u_gamma_urad");
   REQUIRE(x.size() == 33);
-  // γ is determined up to the constant e_4/(D2+D3+D4) (Eq. 19): compare after removing the mean
-  // difference.
-  double mean_dg = 0;
-  for (std::size_t n = 0; n < x.size(); ++n)
-    mean_dg += g[n] - 1e6 * truth.gamma_rad(x[n]);
-  mean_dg /= static_cast<double>(x.size());
-  double max_dS = 0, max_dg = 0, range_S = 0, range_g = 0;
+  // Bounds from the run's own stated uncertainty (issue 15): every point within 4 u of the truth
+  // (a calibrated u exceeds that at one of 33 points in well under 1 % of runs; the coverage of u
+  // itself is tested over random profiles in tests/core/four_sensor_coverage).  γ is determined up
+  // to the constant e_4/(D2+D3+D4) (Eq. 19): e_4 = 0.07 µm here, which the simulator plays and
+  // the gauge e_4 = 0 moves into γ as a constant e_4/O_4, known exactly.
+  const auto& off = cfg.scan.geometry.offsets_mm();
+  const double dg_const = 1e6 * cfg.simulator.e_um[3] / (1000.0 * off[3]);
+  double worst_S = 0, worst_g = 0, max_dS = 0, max_dg = 0;
   for (std::size_t n = 0; n < x.size(); ++n) {
-    max_dS = std::max(max_dS, std::fabs(S[n] - truth.S_um(x[n])));
-    max_dg = std::max(max_dg, std::fabs(g[n] - 1e6 * truth.gamma_rad(x[n]) - mean_dg));
-    range_S = std::max(range_S, std::fabs(truth.S_um(x[n])));
-    range_g = std::max(range_g, std::fabs(1e6 * truth.gamma_rad(x[n])));
+    REQUIRE(uS[n] > 0);
+    REQUIRE(ug[n] > 0);
+    const double dS = S[n] - truth.S_um(x[n]);
+    const double dg = g[n] - 1e6 * truth.gamma_rad(x[n]) - dg_const;
+    max_dS = std::max(max_dS, std::fabs(dS));
+    max_dg = std::max(max_dg, std::fabs(dg));
+    worst_S = std::max(worst_S, std::fabs(dS) / uS[n]);
+    worst_g = std::max(worst_g, std::fabs(dg) / ug[n]);
   }
   std::printf(
-      "scan end to end: max |S - S_true| = %.3f um (|S| up to %.1f um), "
-      "max |gamma - gamma_true - const| = %.3f urad (|gamma| up to %.1f urad)\n",
-      max_dS, range_S, max_dg, range_g);
-  // Tolerance: the simulator's noise σ = 0.05 µm averaged over K = 5 readings (σ/√5 ≈ 0.022 µm)
-  // propagates into S with the gain the paper reports (ΔS_max ≈ 11·σ at σ = 0.1 µm, Sec. 3.2),
-  // ≈ 0.25 µm; 0.5 µm is 3 % of the 15 µm range of S here.  γ: the paper's Δγ_max ≈ 1.8e-3° at
-  // σ = 0.1 µm would give ≈ 7 µrad here, but errsep's solver does not reach the paper's γ gain:
-  // tests/core/four_sensor_zhao2019 measures Δγ_max = 5.0e-3° = 87 µrad at σ = 0.1 µm (20 runs),
-  // which scales to ≈ 19 µrad at 0.022 µm.  The bound was 15 µrad until a CI run measured 17.7;
-  // it is now 30 µrad (8 % of γ's range), from the measured gain, and the gap is on issue 2.
-  CHECK(max_dS < 0.5);
-  CHECK(max_dg < 30.0);
+      "scan end to end: max |S - S_true| = %.3f um, largest |S - S_true|/u_S = %.2f; "
+      "max |gamma - gamma_true| = %.3f urad, largest |gamma - gamma_true|/u_gamma = %.2f\n",
+      max_dS, worst_S, max_dg, worst_g);
+  CHECK(worst_S <= 4.0);
+  CHECK(worst_g <= 4.0);
 }
 
 TEST_CASE("SIGINT during the scan: stages stopped, raw data kept and marked incomplete, exit 130") {

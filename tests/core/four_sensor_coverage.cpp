@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "errsep/core/four_sensor.hpp"
+#include "errsep/core/four_sensor_evaluation.hpp"
 #include "errsep/core/four_sensor_simulation.hpp"
 #include "errsep/core/iso230.hpp"
 
@@ -33,26 +34,6 @@ struct Cell {
   int collapses = 0;
   std::vector<double> rms, u;
 };
-
-// The minimum-zone straightness with its bias correction and U from the posterior covariance.
-StraightnessEstimate straightness(FourSensorResult& r) {
-  const std::vector<double> x(r.x_mm.data(), r.x_mm.data() + r.x_mm.size());
-  const std::vector<double> s(r.S_um.data(), r.S_um.data() + r.S_um.size());
-  auto cov = r.covariance;
-  return estimate_straightness(
-      x, s,
-      [cov](const std::vector<double>& c) {
-        return cov->variance(
-            Eigen::Map<const Eigen::VectorXd>(c.data(), static_cast<Eigen::Index>(c.size())), {},
-            {});
-      },
-      [cov](std::uint64_t seed, std::vector<double>& dev) {
-        Eigen::VectorXd dS, dg;
-        cov->sample(seed, dS, dg);
-        dev.assign(dS.data(), dS.data() + dS.size());
-      },
-      ReferenceLine::minimum_zone);
-}
 
 Cell run_cell(int N, double sigma, int runs, FourSensorOptions opts, std::uint64_t seed0) {
   FourSensorConfig cfg;
@@ -74,7 +55,7 @@ Cell run_cell(int N, double sigma, int runs, FourSensorOptions opts, std::uint64
     if (r.lambda_fallback == LambdaFallback::collapse_least_squares) ++cell.collapses;
     const std::vector<double> x(r.x_mm.data(), r.x_mm.data() + r.x_mm.size());
     const std::vector<double> st(sim.S_um.data(), sim.S_um.data() + sim.S_um.size());
-    const auto est = straightness(r);
+    const auto est = four_sensor_straightness(r, ReferenceLine::minimum_zone);
     const auto tru = evaluate_straightness(x, st, {}, ReferenceLine::minimum_zone);
     if (std::abs(est.straightness_um - tru.straightness_um) <= est.expanded_um) ++cell.straight_in;
     ++cell.runs;

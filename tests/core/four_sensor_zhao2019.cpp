@@ -33,6 +33,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <catch2/catch.hpp>
+#include <cmath>
 #include <cstdio>
 #include <vector>
 
@@ -109,8 +110,12 @@ Batches run_batches(const FourSensorConfig& cfg, const SlidewayTruth& truth,
   return out;
 }
 
+// The paper's own system (identity Tikhonov, λ from the L-curve), for the tables that reproduce
+// the paper under its figures' noise model.
 FourSensorOptions fast_opts() {
-  FourSensorOptions o;  // defaults: curvature fixed exactly, λ from the L-curve corner
+  FourSensorOptions o;
+  o.estimator = Estimator::paper_system;
+  o.rule = LambdaRule::lcurve;
   o.compute_uncertainty = false;
   return o;
 }
@@ -124,13 +129,102 @@ constexpr Paper kPaper[] = {{0.1, 1.1, 0.15, 1.8e-3, 2.5e-4},
 
 }  // namespace
 
+namespace {
+// Largest |S − S_true|/u_S over the runs of one batch (the default estimator's own u).
+double worst_z(const FourSensorConfig& cfg, const SlidewayTruth& truth, FourSensorSimOptions so,
+               const FourSensorOptions& opts, std::uint64_t seed0) {
+  double z = 0;
+  for (int r = 0; r < 20; ++r) {
+    so.seed = seed0 + static_cast<std::uint64_t>(r);
+    const auto sim = simulate_four_sensor(cfg, truth, so);
+    const auto res = separate_four_sensor(cfg, sim.m_um, opts);
+    z = std::max(z, ((res.S_um - sim.S_um).array().abs() / res.u_S_um.array()).maxCoeff());
+  }
+  return z;
+}
+}  // namespace
+
+// The paper's stated model (section 3: the noise is "added in m_i(x_n)"), errsep's default
+// estimator (a second-difference prior on f, λ by REML, posterior uncertainty), the paper's eight
+// figures beside it, beside the same prior at the best λ in hindsight (the λ of a grid with the
+// smallest ΔS_max in each batch, which no rule can know) and beside the identity prior with REML.
+//
+// The issue's bars (ΔS_max <= 1.4/1.9/2.0 µm, Δγ_max <= 4.5/8/11e-3°) came from a prototype with
+// the identity prior.  That prior shrinks every weakly seen component of f toward zero, which is
+// right for this f (one harmonic, five periods, nothing at long wavelengths) and wrong for a
+// reference with long-wavelength content: on Example 2 with k = 1 its u_S covered the truth at
+// 14 % of points, on random smooth profiles at 50-68 % (N = 69) and 7 % (N = 300), where the
+// second-difference prior covers 91-97 % (four_sensor_coverage).  The default is the honest one;
+// its Δγ meets the bars, its ΔS does not at every σ, and that gap is printed, not hidden.
+TEST_CASE("Example 1, noise on every sensor reading: the default estimator beside the paper") {
+  const FourSensorConfig cfg;
+  const auto truth = zhao2019_example1(cfg);
+  constexpr int kBatches = 3;
+  const double bar_dS[] = {1.4, 1.9, 2.0}, bar_dg[] = {4.5e-3, 8e-3, 11e-3};
+  std::printf(
+      "\nZhao 2019 Example 1, noise sigma on each sensor reading; median of %d batches of 20 runs"
+      "\n sigma | default (2nd-difference prior, REML)        | best lambda in hindsight | "
+      "identity prior, REML | paper\n       | dS_max  dS^a   dg_max    dg^a      max|z| | dS_max  "
+      "dg_max          | dS_max  dg_max       | dS_max dS^a dg_max dg^a\n",
+      kBatches);
+  FourSensorOptions def;
+  FourSensorOptions ident = def;
+  ident.penalty = Penalty::identity;
+  for (int i = 0; i < 3; ++i) {
+    const auto& p = kPaper[i];
+    FourSensorSimOptions so;
+    so.sigma_um = p.sigma;
+    const Batches b = run_batches(cfg, truth, so, def, kBatches);
+    const Batches bi = run_batches(cfg, truth, so, ident, kBatches);
+    // Best λ in hindsight for the same prior: per batch the grid λ with the smallest ΔS_max.
+    std::vector<double> best_dS, best_dg;
+    for (int k = 0; k < kBatches; ++k) {
+      double bs = 1e9, bg = 1e9;
+      for (double ll = -2.0; ll <= 1.01; ll += 0.25) {
+        FourSensorOptions fx = def;
+        fx.rule = LambdaRule::fixed;
+        fx.fixed_lambda = std::pow(10.0, ll);
+        fx.compute_uncertainty = false;
+        const Figures f = run(cfg, truth, so, fx, 20, 1000 + 1000 * static_cast<std::uint64_t>(k));
+        if (f.dS_max < bs) bs = f.dS_max, bg = f.dg_max_deg;
+      }
+      best_dS.push_back(bs);
+      best_dg.push_back(bg);
+    }
+    double z = 0;
+    for (int k = 0; k < kBatches; ++k)
+      z = std::max(z, worst_z(cfg, truth, so, def, 1000 + 1000 * static_cast<std::uint64_t>(k)));
+    const Figures& f = b.median;
+    std::printf(
+        " %.1f   | %.2f   %.3f  %.2e  %.2e  %.2f   | %.2f    %.2e        | %.2f    %.2e     | "
+        "%.1f %.2f %.1e %.1e\n",
+        p.sigma, f.dS_max, f.dS_avg_max, f.dg_max_deg, f.dg_avg_max_deg, z, median(best_dS),
+        median(best_dg), bi.median.dS_max, bi.median.dg_max_deg, p.dS, p.dSa, p.dg, p.dga);
+    std::printf("         issue bars: dS_max <= %.1f %s, dg_max <= %.1e %s\n", bar_dS[i],
+                f.dS_max <= bar_dS[i] ? "met" : "NOT MET (see the comment above)", bar_dg[i],
+                f.dg_max_deg <= bar_dg[i] ? "met" : "NOT MET");
+    INFO("sigma = " << p.sigma);
+    CHECK(f.dg_max_deg <= bar_dg[i]);
+    // The default's own uncertainty bounds its error: no point of the 60 runs beyond 4.5 u_S.
+    CHECK(z <= 4.5);
+    // And the prior helps: better than no prior (the unbiased least squares, next test case).
+    FourSensorOptions ls = def;
+    ls.rule = LambdaRule::least_squares;
+    ls.compute_uncertainty = false;
+    CHECK(f.dS_max < run_batches(cfg, truth, so, ls, kBatches).median.dS_max);
+  }
+}
+
+// Second table: the paper's own system under the noise model its figures come out under (σ on
+// each combined output g = C·m as well as on m; not physical, since g is computed from m).
 TEST_CASE("Example 1 (Eqs. 21-23), noise on the combined outputs: the paper's eight figures") {
   const FourSensorConfig cfg;  // dx = 5 mm, s = (1, 1, 5), N = 69
   const auto truth = zhao2019_example1(cfg);
   constexpr int kBatches = 10;
   std::printf(
-      "\nZhao 2019 Example 1, noise sigma on each combined output g = C m (b0 of Eq. 6), default "
-      "separation\n(curvature fixed exactly, lambda from the L-curve); 20 runs per batch: first "
+      "\nZhao 2019 Example 1, noise sigma on each combined output g = C m (b0 of Eq. 6), the "
+      "paper's "
+      "system\n(curvature fixed exactly, lambda from the L-curve); 20 runs per batch: first "
       "batch / median of %d batches | paper\n",
       kBatches);
   std::printf(
@@ -175,11 +269,14 @@ TEST_CASE(
   for (const auto& p : kPaper) {
     FourSensorSimOptions so;
     so.sigma_um = p.sigma;
-    const Figures f = run(cfg, truth, so, fast_opts(), 20);
+    FourSensorOptions def;
+    def.compute_uncertainty = false;
+    const Figures f = run(cfg, truth, so, def, 20);
     // Least squares explicitly (what the default does when the L-curve has no corner), 200 runs:
     // mean and spread of the error of S at every point against the stated u_S.
-    FourSensorOptions ls = fast_opts();
+    FourSensorOptions ls;
     ls.rule = LambdaRule::least_squares;
+    ls.compute_uncertainty = false;
     constexpr int kRuns = 200;
     Eigen::VectorXd sum = Eigen::VectorXd::Zero(P), sum2 = Eigen::VectorXd::Zero(P);
     for (int r = 0; r < kRuns; ++r) {
@@ -227,8 +324,9 @@ TEST_CASE("Fig. 3(d): the unregularised least-squares solution deviates strongly
   const Figures f_ls = run(cfg, truth, so, ls, 5);
   const Figures f_eq12 = run(cfg, truth, so, ls_eq12, 5);
   // errsep's default fixes the curvature exactly: its least-squares solution does not bow.
-  FourSensorOptions exact = fast_opts();
+  FourSensorOptions exact;
   exact.rule = LambdaRule::least_squares;
+  exact.compute_uncertainty = false;
   const Figures f_exact = run(cfg, truth, so, exact, 5);
   std::printf(
       "\nFig. 3(d), sigma = 0.1 um, 5 runs, dS_max: weak curvature row regularised (L-curve) "
@@ -275,7 +373,9 @@ TEST_CASE("Example 2 (Eq. 24): dS_max at sigma = 0.2 over harmonic orders k") {
     if (k == 10) continue;  // coincides with the second term of Eq. (24)
     const auto truth = zhao2019_example2(cfg, k);
     const Batches b = run_batches(cfg, truth, so, fast_opts(), kBatches);
-    const Figures fp = run(cfg, truth, phys, fast_opts(), 20);
+    FourSensorOptions def;
+    def.compute_uncertainty = false;
+    const Figures fp = run(cfg, truth, phys, def, 20);
     std::printf(" %2d  %.2f/%.2f   %.3f/%.3f  %.2e     | %.2f %.3f\n", k, b.first.dS_max,
                 b.median.dS_max, b.first.dS_avg_max, b.median.dS_avg_max, b.median.dg_max_deg,
                 fp.dS_max, fp.dS_avg_max);

@@ -164,6 +164,11 @@ struct FourSensorResult {
   std::string brief_report() const;
 };
 
+/// The default options for a curvature gauge: the posterior estimator for the exact gauge
+/// (reference_without_curvature), the paper's system with its L-curve for the others (the
+/// posterior fixes the bow exactly and has no other gauge).
+FourSensorOptions options_for_gauge(CurvatureGauge gauge);
+
 /// Separates f, S and γ from outputs m (P × 4 µm, row n = slide position x_n, column i =
 /// configuration i).  Throws std::invalid_argument for a bad configuration/shape or non-finite
 /// data, std::runtime_error if the system cannot be solved.
