@@ -3,6 +3,7 @@
 // 1-3, 10-19, 27), on random stages; and against the paper's row-by-row path at the paper's noise.
 #include <Eigen/Dense>
 #include <Eigen/SparseCore>
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdio>
@@ -102,8 +103,7 @@ DenseTwoAxis dense_two_axis(const TwoAxisScan& s, const TwoAxisOptions& o, bool 
 
 }  // namespace
 
-TEST_CASE(
-    "sparse least squares equals a dense solve; inverse diagonal equals the dense inverse's") {
+TEST_CASE("sparse least squares equals a dense solve, its inverse diagonal the dense inverse's") {
   std::mt19937_64 rng(11);
   std::normal_distribution<double> nd;
   std::uniform_int_distribution<int> col(0, 39);
@@ -368,4 +368,71 @@ TEST_CASE("the joint fit's sigma_hat is the residual file's reference-piece sigm
   REQUIRE(res.families[0].kind == RedundancyKind::reference_pieces);
   CHECK(res.families[0].dof == j.dof_reference);
   CHECK(std::abs(res.families[0].sigma_um - j.sigma_reference_um) < 1e-9);
+}
+
+TEST_CASE("figures of the paper that the physics does not give (README): Fig. 6 and sigma_mwxe") {
+  // Fig. 6: "maximum error approximately 4 µm" of r at σ = 2 µm (section 2.3.1, Fig. 5 inputs,
+  // 120 mm at 5 mm, d = 5 mm), noise on every reading.  Eq. (9) sums 24 differences of two
+  // readings: the error at x_k has sd σ√(2k), 13.9 µm at the end, so a maximum of 4 µm is rare.
+  constexpr int kRuns = 1000;
+  std::vector<double> max_err;
+  int at_most_4 = 0;
+  for (int run = 0; run < kRuns; ++run) {
+    OneAxisSimOptions so;
+    so.workpiece_sensor.noise_sigma_um = so.reference_sensor.noise_sigma_um = 2.0;
+    so.seed = 60000 + static_cast<std::uint64_t>(run);
+    const auto sim = simulate_one_axis(haramiishi2024_fig5_truth(), so);
+    const auto res = separate_displacement(sim.s1_1_um, sim.s2_1_um, sim.s2_2_um, {});
+    max_err.push_back((res.r_um - sim.r_um).cwiseAbs().maxCoeff());
+    at_most_4 += max_err.back() <= 4.0 ? 1 : 0;
+  }
+  std::sort(max_err.begin(), max_err.end());
+  const double median = max_err[kRuns / 2];
+  std::printf(
+      "Fig. 6 (sigma 2 um per reading, %d runs): median max |r error| %.1f um, %.1f %% of "
+      "runs at most 4 um\n",
+      kRuns, median, 100.0 * at_most_4 / kRuns);
+  CHECK(median > 10.0);
+  CHECK(at_most_4 < kRuns / 20);
+
+  // Table 2's σ_mwxe = 1.72 µm, "the mean of the standard deviation" of m_wxe (Eq. 24) over
+  // repeated measurements, against what the sensors' noise alone gives (σ_se = 0.16 µm, 25 x 25,
+  // the paper's 30/165 mm levers): row by row m_k(x_i) has variance σ²(1 + 2i), so m_wxe =
+  // 5.5·(m2 − m1) has sd 5.5·σ·√(2(1 + 2i)), mean over the grid ≈ 5.9 µm.
+  constexpr int kRepeats = 200;
+  const auto truth = random_two_axis_truth(5, 30.0);
+  Eigen::MatrixXd sum[2], sum2[2];
+  double mean_u = 0;
+  for (int q = 0; q < 2; ++q)
+    sum[q] = sum2[q] = Eigen::MatrixXd::Zero(25, 25);
+  for (int run = 0; run < kRepeats; ++run) {
+    TwoAxisSimOptions so;
+    so.eddy_sensor.noise_sigma_um = kSigmaEddy;
+    so.contact_sensor.noise_sigma_um = kSigmaContact;
+    so.seed = 70000 + static_cast<std::uint64_t>(run);
+    const auto sim = simulate_two_axis(truth, so);
+    for (int q = 0; q < 2; ++q) {
+      TwoAxisOptions o;
+      o.rotation = RotationCorrection::on;
+      o.solver = q == 0 ? TwoAxisSolver::joint : TwoAxisSolver::row_by_row;
+      const auto res = separate_two_axis(sim.scan, o);
+      sum[q] += res.m_wxe_um;
+      sum2[q] += res.m_wxe_um.cwiseProduct(res.m_wxe_um);
+      if (q == 0) mean_u += res.u_m_wxe_um.mean() / kRepeats;
+    }
+  }
+  double sd_mean[2];
+  for (int q = 0; q < 2; ++q)
+    sd_mean[q] =
+        ((sum2[q] - sum[q].cwiseProduct(sum[q]) / kRepeats) / (kRepeats - 1)).cwiseSqrt().mean();
+  double predicted = 0;
+  for (int i = 0; i < 25; ++i)
+    predicted += 5.5 * kSigmaEddy * std::sqrt(2.0 * (1 + 2 * i)) / 25;
+  std::printf(
+      "sigma_mwxe (mean sd over the grid, %d repeats, sigma_se 0.16 um): row by row %.2f "
+      "um (propagation %.2f), joint %.2f um (its mean u %.2f); the paper's Table 2: "
+      "1.72 um\n",
+      kRepeats, sd_mean[1], predicted, sd_mean[0], mean_u);
+  CHECK(std::abs(sd_mean[1] / predicted - 1) < 0.1);
+  CHECK(std::abs(sd_mean[0] / mean_u - 1) < 0.1);
 }
