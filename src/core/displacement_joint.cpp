@@ -4,6 +4,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "errsep/core/model_effect.hpp"  // grid_derivative
+
 namespace errsep::core {
 namespace {
 
@@ -16,17 +18,6 @@ struct TrackLayout {
   /// Index of r(a_k), or -1 for the gauge-fixed r(a_0 … a_{p−1}).
   Eigen::Index r(Eigen::Index k) const { return k < p ? -1 : r0 + k - p; }
 };
-
-/// r′(a_k) per mm from r̂ by central differences (one-sided at the ends).
-Eigen::VectorXd derivative_per_mm(const Eigen::VectorXd& r, double spacing_mm) {
-  const Eigen::Index n = r.size();
-  Eigen::VectorXd d(n);
-  for (Eigen::Index k = 0; k < n; ++k) {
-    const Eigen::Index lo = std::max<Eigen::Index>(0, k - 1), hi = std::min(n - 1, k + 1);
-    d(k) = (r(hi) - r(lo)) / ((hi - lo) * spacing_mm);
-  }
-  return d;
-}
 
 }  // namespace
 
@@ -118,7 +109,9 @@ JointReferenceFit fit_reference_tracks(const std::vector<ReferenceTrackScan>& tr
     f.m_um.resize(l.na, l.nb);
     f.var_m.resize(l.na, l.nb);
     f.rss_um2 = 0;
-    const Eigen::VectorXd dr = derivative_per_mm(f.r_um, tracks[t].spacing_mm);
+    Eigen::VectorXd dr(f.r_um.size());  // r′ per mm from r̂ (central inside, one-sided at ends)
+    for (Eigen::Index k = 0; k < dr.size(); ++k)
+      dr(k) = grid_derivative(f.r_um, tracks[t].spacing_mm, k);
     for (Eigen::Index j = 0; j < l.nb; ++j)
       for (Eigen::Index i = 0; i < l.na; ++i) {
         const double m = x(l.m(i, j));

@@ -330,6 +330,13 @@ bool TwoAxisOptions::is_valid(std::string* why) const {
                 ": must be finite and non-zero");
   if (!std::isfinite(g.l_xw_mm) || !std::isfinite(g.l_yw_mm) || !std::isfinite(g.l_yw_per_x))
     return fail("geometry: l_xw_mm, l_yw_mm and l_yw_per_x must be finite");
+  if (!std::isnan(workpiece_sigma_um) &&
+      !(std::isfinite(workpiece_sigma_um) && workpiece_sigma_um > 0))
+    return fail("workpiece_sigma_um = " + std::to_string(workpiece_sigma_um) +
+                ": must be > 0 (or NaN: estimated)");
+  if (!(std::isfinite(displacement_sigma_mm) && displacement_sigma_mm >= 0))
+    return fail("displacement_sigma_mm = " + std::to_string(displacement_sigma_mm) +
+                ": must be finite and >= 0");
   return true;
 }
 
