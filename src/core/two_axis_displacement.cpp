@@ -18,10 +18,6 @@ DisplacementOptions axis_options(double dx, double d, ChainJoin join) {
   return o;
 }
 
-double mean_sq(const Eigen::MatrixXd& m) {
-  return m.squaredNorm() / static_cast<double>(m.size());
-}
-
 /// Shifts a fitted track along its gauge so that its p chains join with least roughness
 /// (ChainJoin::least_roughness, p > 1): r + c_{i mod p}, m − c_{i mod p}.
 void join_chains(ReferenceTrackFit& f, int p) {
@@ -106,25 +102,23 @@ TwoAxisResult joint(const TwoAxisScan& scan, const TwoAxisOptions& opts) {
   struct Coeffs {
     Eigen::MatrixXd c[4];
   };
-  auto coeffs = [&](double a1, double a2, double b3, double b4, bool use_ky) {
-    // m_w = a1·kx·m1 + ... written out per sensor below; use_ky scales the y terms by ky(i).
+  // Coefficients of m1, m2 (constant) and of m3, m4 (c + k·ky(x_i): l_yw may vary with x).
+  auto coeffs = [&](double a1, double a2, double c3, double k3, double c4, double k4) {
     Coeffs c;
     for (auto& m : c.c)
       m.resize(nx, ny);
     for (Eigen::Index i = 0; i < nx; ++i) {
-      const double k = use_ky ? ky(i) : 1.0;
       c.c[0].row(i).setConstant(a1);
       c.c[1].row(i).setConstant(a2);
-      c.c[2].row(i).setConstant(b3 * k);
-      c.c[3].row(i).setConstant(b4 * k);
+      c.c[2].row(i).setConstant(c3 + k3 * ky(i));
+      c.c[3].row(i).setConstant(c4 + k4 * ky(i));
     }
     return c;
   };
-  Coeffs c_on = coeffs(kx, 1.0 - kx, 1.0, -1.0, true);  // y terms: ky·m3 + (1 − ky)·m4
-  for (Eigen::Index i = 0; i < nx; ++i)
-    c_on.c[3].row(i).array() += 1.0;
-  const Coeffs c_off = coeffs(0.0, 1.0, 0.0, 1.0, false);
-  const Coeffs c_b = coeffs(kx, -kx, 1.0, -1.0, true);
+  // Eq. (27): m_w = kx·m1 + (1 − kx)·m2 + ky·m3 + (1 − ky)·m4; Eqs. (20)-(21): m2 + m4.
+  const Coeffs c_on = coeffs(kx, 1.0 - kx, 0.0, 1.0, 1.0, -1.0);
+  const Coeffs c_off = coeffs(0.0, 1.0, 0.0, 0.0, 1.0, 0.0);
+  const Coeffs c_b = coeffs(kx, -kx, 0.0, 1.0, 0.0, -1.0);
 
   // Tracks 0-3 = sensors 1-4; sensors 3, 4 along y: their matrices transposed (rows along y).
   const std::vector<ReferenceTrackScan> tracks = {
@@ -216,11 +210,10 @@ TwoAxisResult joint(const TwoAxisScan& scan, const TwoAxisOptions& opts) {
   const Combined off = combine(c_off, fit.functional_var[1]);
   const Combined b = combine(c_b, fit.functional_var[2]);
   // Predicted mean squared error of w's shape (header).
-  const double e_on = mean_sq(on.var.cwiseSqrt()) + s02 / n0 - on.var_mean - s02 / (n0 * N);
+  const double e_on = on.var.mean() + s02 / n0 - on.var_mean - s02 / (n0 * N);
   const double b_shape = (b.value.array() - b.value.mean()).square().mean();
   const double bias2 = std::max(0.0, b_shape - (b.var.mean() - b.var_mean));
-  const double e_off =
-      mean_sq(off.var.cwiseSqrt()) + s02 / n0 - off.var_mean - s02 / (n0 * N) + bias2;
+  const double e_off = off.var.mean() + s02 / n0 - off.var_mean - s02 / (n0 * N) + bias2;
   res.predicted_rms_on_um = std::sqrt(std::max(0.0, e_on));
   res.predicted_rms_off_um = std::sqrt(std::max(0.0, e_off));
   res.rotation_corrected = opts.rotation == RotationCorrection::on ||
