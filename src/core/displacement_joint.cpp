@@ -127,13 +127,23 @@ JointReferenceFit fit_reference_tracks(const std::vector<ReferenceTrackScan>& tr
       }
     f.dof = static_cast<int>(l.na * (l.nb - 1));
   }
-  // One solve for the traverse sensitivity of every track (the blocks share no unknown) and one
-  // per requested functional.
-  Eigen::MatrixXd rhs =
-      Eigen::MatrixXd::Zero(unknowns, 1 + static_cast<Eigen::Index>(functionals.size()));
-  rhs.col(0) = rhs_d;
+  // One solve for the traverse sensitivity of every track (the blocks share no unknown), then
+  // one per requested functional (a column at a time: a 1000 x 1000 grid has 4·10⁶ unknowns).
+  const Eigen::VectorXd sens = ls.solve_normal(rhs_d);
+  for (std::size_t t = 0; t < tracks.size(); ++t) {
+    const auto& l = lay[t];
+    auto& f = out.tracks[t];
+    f.dr_dd_um_per_mm = Eigen::VectorXd::Zero(l.na + l.p);
+    for (Eigen::Index k = l.p; k < l.na + l.p; ++k)
+      f.dr_dd_um_per_mm(k) = sens(l.r(k));
+    f.dm_dd_um_per_mm.resize(l.na, l.nb);
+    for (Eigen::Index j = 0; j < l.nb; ++j)
+      for (Eigen::Index i = 0; i < l.na; ++i)
+        f.dm_dd_um_per_mm(i, j) = sens(l.m(i, j));
+  }
   for (std::size_t q = 0; q < functionals.size(); ++q) {
     const auto& g = functionals[q];
+    rhs_d.setZero();
     for (std::size_t t = 0; t < tracks.size() && t < g.size(); ++t) {
       if (g[t].size() == 0) continue;
       const auto& l = lay[t];
@@ -142,24 +152,10 @@ JointReferenceFit fit_reference_tracks(const std::vector<ReferenceTrackScan>& tr
                                     " does not match track " + std::to_string(t));
       for (Eigen::Index j = 0; j < l.nb; ++j)
         for (Eigen::Index i = 0; i < l.na; ++i)
-          rhs(l.m(i, j), 1 + static_cast<Eigen::Index>(q)) = g[t](i, j);
+          rhs_d(l.m(i, j)) = g[t](i, j);
     }
+    out.functional_var.push_back(rhs_d.dot(ls.solve_normal(rhs_d).col(0)));
   }
-  const Eigen::MatrixXd sol = ls.solve_normal(rhs);
-  for (std::size_t t = 0; t < tracks.size(); ++t) {
-    const auto& l = lay[t];
-    auto& f = out.tracks[t];
-    f.dr_dd_um_per_mm = Eigen::VectorXd::Zero(l.na + l.p);
-    for (Eigen::Index k = l.p; k < l.na + l.p; ++k)
-      f.dr_dd_um_per_mm(k) = sol(l.r(k), 0);
-    f.dm_dd_um_per_mm.resize(l.na, l.nb);
-    for (Eigen::Index j = 0; j < l.nb; ++j)
-      for (Eigen::Index i = 0; i < l.na; ++i)
-        f.dm_dd_um_per_mm(i, j) = sol(l.m(i, j), 0);
-  }
-  for (std::size_t q = 0; q < functionals.size(); ++q)
-    out.functional_var.push_back(
-        rhs.col(1 + static_cast<Eigen::Index>(q)).dot(sol.col(1 + static_cast<Eigen::Index>(q))));
   out.stats = ls.stats();
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return out;
