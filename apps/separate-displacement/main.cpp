@@ -42,9 +42,13 @@ sN_scanK_um = sensor N, scan K, as in the raw-scan CSV that errsep-scan records)
   -i may be given several times (one-axis, two-axis): repeated runs of the same measurement on
   the same grid; the separation uses their mean, and the repeats are a residual of their own.
 Output CSV:
-  one-axis     x_mm, r_um, m_um, w_um
+  one-axis     x_mm, r_um, m_um, w_um [, u_r_um, u_m_um, u_w_um: standard uncertainties, when
+               sigma is known: --reading-sigma-um or s1_scan2_um]
   two-axis     x_mm, y_mm, w_um, m_w_um, m1x_um, m2x_um, m3y_um, m4y_um, m_wxe_um, m_wye_um,
-               r1x_um, r2x_um, r3y_um, r4y_um   (x fastest); with the yaw diagnosis also
+               r1x_um, r2x_um, r3y_um, r4y_um   (x fastest); with the joint solver (default)
+               also u_w_um, u_m_w_um, u_m1x_um, ..., u_m_wxe_um, u_m_wye_um, u_r1x_um, ...,
+               u_r4y_um (standard uncertainties, k = 1; the gauge, sigma_hat and the rotation
+               decision in the metadata); with the yaw diagnosis also
                yaw_urad and w_before_yaw_um (w_um is then corrected for a significant yaw)
   three-point  x_mm, f_um; with --motion-out also x_mm, S_um, gamma_urad
   residuals    (one-axis, two-axis; --residuals-out, default <out>.residuals.csv beside the
@@ -117,6 +121,9 @@ int main(int argc, char** argv) {
   double r0_um = 0;
   errsep::core::TwoAxisGeometry geo;
   bool no_rotation = false;
+  std::string rotation = "auto", solver = "joint";
+  double d_sigma_mm = 0;
+  std::optional<double> reading_sigma_um, workpiece_sigma_um;
   int s1 = 1, s2 = 1;
 
   auto* one = app.add_subcommand("one-axis", "one-axis displacement method, Eqs. (1)-(9)");
@@ -142,6 +149,15 @@ int main(int argc, char** argv) {
         ->capture_default_str()
         ->check(CLI::Range(0.001, 0.5));
   }
+  for (auto* sc : {one, two})
+    sc->add_option("--d-sigma-mm", d_sigma_mm,
+                   "standard uncertainty of the traverse d (added to the stated u; 0 = exact)")
+        ->capture_default_str()
+        ->check(CLI::NonNegativeNumber);
+  one->add_option("--reading-sigma-um", reading_sigma_um,
+                  "sigma of one sensor reading for u (default: from sensor 1 read in both "
+                  "scans; without it and without this option no u is given)")
+      ->check(CLI::PositiveNumber);
   one->add_option(
       "--d-mm", d_mm,
       "traverse d of the reference piece (default: the file's d_mm, else the sampling interval)");
@@ -159,8 +175,24 @@ int main(int argc, char** argv) {
                   "change of l_yw per mm of x travel (0 = paper; -1 or +1 when sensor 0 is on "
                   "the base and sensors 3, 4 ride on the x table)")
       ->capture_default_str();
-  two->add_flag("--no-rotation-correction", no_rotation,
-                "use Eqs. (20)-(21) (m_w = m2_x + m4_y) instead of (22)-(27)");
+  two->add_option("--rotation-correction", rotation,
+                  "roll/pitch correction of Eqs. (22)-(27): on, off (Eqs. 20-21, m_w = m2_x + "
+                  "m4_y), or auto (on when the predicted error of w falls; both predictions "
+                  "are reported)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"on", "off", "auto"}));
+  two->add_flag("--no-rotation-correction", no_rotation, "same as --rotation-correction off")
+      ->excludes("--rotation-correction");
+  two->add_option("--solver", solver,
+                  "joint: every reading in one least-squares system, with per-point "
+                  "uncertainty; row-by-row: the paper's Eq. (9) per row and column, for "
+                  "comparison (no uncertainty)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"joint", "row-by-row"}));
+  two->add_option("--workpiece-sigma-um", workpiece_sigma_um,
+                  "sigma of one sensor-0 reading (default: from s0_scan2_um when present, else "
+                  "taken equal to the reference sensors' sigma_hat, said in the result)")
+      ->check(CLI::PositiveNumber);
   two->add_flag("--yaw", yaw_on,
                 "diagnose the x table's yaw (needs the lateral pair columns sa_/sb_scanK_um; "
                 "default: whenever they are present)");
@@ -221,23 +253,32 @@ int main(int argc, char** argv) {
       o.displacement_mm = d_mm ? *d_mm : in.d_mm.value_or(in.dx_mm);
       o.initial_um = r0_um;
       o.chain_join = chain_join_from(chain);
+      o.displacement_sigma_mm = d_sigma_mm;
+      if (reading_sigma_um) o.reading_sigma_um = *reading_sigma_um;
       std::string why;
       if (!o.is_valid(&why)) throw std::invalid_argument(input + ": " + why);
       std::vector<errsep::core::OneAxisRun> runs;
       for (const auto& a : all)
         runs.push_back({a.s1_1_um, a.s2_1_um, a.s2_2_um, a.s1_2_um});
       const auto mean = errsep::core::mean_of_runs(runs);
-      const auto res =
-          errsep::core::separate_displacement(mean.s1_1_um, mean.s2_1_um, mean.s2_2_um, o);
+      const auto joint = errsep::core::separate_displacement_joint(mean.s1_1_um, mean.s2_1_um,
+                                                                   mean.s2_2_um, mean.s1_2_um, o);
+      const auto& res = joint.estimate;
       const auto resid = errsep::core::displacement_residuals_one_axis(in.x_mm, runs, ropt);
       const std::string rpath = residuals_path(output, residuals_out);
-      auto table = errsep::io::one_axis_result_csv(in.x_mm, res);
+      auto table = errsep::io::one_axis_result_csv(in.x_mm, joint);
       if (runs.size() > 1) table.set_meta("runs", std::to_string(runs.size()) + " (mean)");
       residual_meta(table, resid, rpath);
       const auto rtable = errsep::io::displacement_residuals_csv(resid, false);
       errsep::io::write_csv(rpath, rtable);
       errsep::io::write_csv(output, table);
       std::cout << res.brief_report() << "\n"
+                << (joint.u_w_um.size()
+                        ? "u(w) " + fmt(joint.u_w_um.minCoeff()) + ".." +
+                              fmt(joint.u_w_um.maxCoeff()) + " um, sigma " + fmt(joint.sigma_um) +
+                              " um (" + joint.sigma_source + ")"
+                        : "no uncertainty: " + joint.sigma_source)
+                << "\ngauge: " << joint.gauge << "\n"
                 << resid.brief_report() << "\nwrote " << output << " and " << rpath << "\n";
     } else if (two->parsed()) {
       const std::string& input = inputs.front();
@@ -261,7 +302,14 @@ int main(int argc, char** argv) {
       o.displacement_x_mm = d_x_mm.value_or(in.dx_mm);
       o.displacement_y_mm = d_y_mm.value_or(in.dy_mm);
       o.geometry = geo;
-      o.correct_rotation = !no_rotation;
+      o.rotation = no_rotation || rotation == "off"
+                       ? errsep::core::RotationCorrection::off
+                       : (rotation == "on" ? errsep::core::RotationCorrection::on
+                                           : errsep::core::RotationCorrection::automatic);
+      o.solver = solver == "row-by-row" ? errsep::core::TwoAxisSolver::row_by_row
+                                        : errsep::core::TwoAxisSolver::joint;
+      o.displacement_sigma_mm = d_sigma_mm;
+      if (workpiece_sigma_um) o.workpiece_sigma_um = *workpiece_sigma_um;
       o.chain_join = chain_join_from(chain);
       std::string why;
       if (!o.is_valid(&why)) throw std::invalid_argument(input + ": " + why);
@@ -331,7 +379,9 @@ int main(int argc, char** argv) {
       const auto rtable = errsep::io::displacement_residuals_csv(resid, true);
       errsep::io::write_csv(rpath, rtable);
       errsep::io::write_csv(output, table);
-      std::cout << res.brief_report() << "\n" << resid.brief_report() << "\n";
+      std::cout << res.brief_report() << "\n";
+      if (!res.gauge.empty()) std::cout << "gauge: " << res.gauge << "\n";
+      std::cout << resid.brief_report() << "\n";
       if (yres) std::cout << yres->brief_report() << "\n";
       std::cout << "wrote " << output << " and " << rpath << "\n";
     } else {

@@ -23,6 +23,12 @@ bool DisplacementOptions::is_valid(std::string* why) const {
   if (!(integer_tolerance >= 0 && integer_tolerance < 0.5))
     return fail("integer_tolerance = " + std::to_string(integer_tolerance) +
                 ": must be in [0, 0.5)");
+  if (!std::isnan(reading_sigma_um) && !(std::isfinite(reading_sigma_um) && reading_sigma_um > 0))
+    return fail("reading_sigma_um = " + std::to_string(reading_sigma_um) +
+                ": must be > 0 (or NaN: estimated from the redundant readings)");
+  if (!(std::isfinite(displacement_sigma_mm) && displacement_sigma_mm >= 0))
+    return fail("displacement_sigma_mm = " + std::to_string(displacement_sigma_mm) +
+                ": must be finite and >= 0");
   const double ratio = displacement_mm / sample_interval_mm;
   if (std::abs(ratio - std::round(ratio)) > integer_tolerance || std::round(ratio) < 1) {
     std::ostringstream s;
@@ -36,6 +42,23 @@ bool DisplacementOptions::is_valid(std::string* why) const {
 
 int DisplacementOptions::step_ratio() const {
   return static_cast<int>(std::lround(displacement_mm / sample_interval_mm));
+}
+
+Eigen::VectorXd least_roughness_offsets(const Eigen::VectorXd& r, int p) {
+  if (p <= 1) return {};
+  // Offsets c_j (j = 1..p-1; c_0 = 0) minimising sum_k (r_{k+1} + c_{(k+1)%p} - r_k - c_{k%p})^2:
+  // a (p-1)-unknown linear least-squares problem, solved densely (p is small).
+  const Eigen::Index n = r.size();
+  const Eigen::Index rows = n - 1;
+  Eigen::MatrixXd a = Eigen::MatrixXd::Zero(rows, p - 1);
+  Eigen::VectorXd b(rows);
+  for (Eigen::Index k = 0; k + 1 < n; ++k) {
+    const int j0 = static_cast<int>(k % p), j1 = static_cast<int>((k + 1) % p);
+    if (j1 > 0) a(k, j1 - 1) += 1.0;
+    if (j0 > 0) a(k, j0 - 1) -= 1.0;
+    b(k) = -(r(k + 1) - r(k));
+  }
+  return a.colPivHouseholderQr().solve(b);
 }
 
 ReferenceResult separate_reference(const Eigen::VectorXd& s_first_um,
@@ -64,18 +87,7 @@ ReferenceResult separate_reference(const Eigen::VectorXd& s_first_um,
     r(k) = r(k - p) + (s_second_um(k - p) - s_first_um(k - p));
 
   if (p > 1 && opts.chain_join == ChainJoin::least_roughness) {
-    // Offsets c_j (j = 1..p-1; c_0 = 0) minimising sum_k (r_{k+1} + c_{(k+1)%p} - r_k - c_{k%p})^2:
-    // a (p-1)-unknown linear least-squares problem, solved densely (p is small).
-    const Eigen::Index rows = n - 1;
-    Eigen::MatrixXd a = Eigen::MatrixXd::Zero(rows, p - 1);
-    Eigen::VectorXd b(rows);
-    for (Eigen::Index k = 0; k + 1 < n; ++k) {
-      const int j0 = static_cast<int>(k % p), j1 = static_cast<int>((k + 1) % p);
-      if (j1 > 0) a(k, j1 - 1) += 1.0;
-      if (j0 > 0) a(k, j0 - 1) -= 1.0;
-      b(k) = -(r(k + 1) - r(k));
-    }
-    const Eigen::VectorXd c = a.colPivHouseholderQr().solve(b);
+    const Eigen::VectorXd c = least_roughness_offsets(r, p);
     for (Eigen::Index k = 0; k < n; ++k) {
       const int j = static_cast<int>(k % p);
       if (j > 0) r(k) += c(j - 1);

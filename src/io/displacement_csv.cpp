@@ -318,10 +318,28 @@ CsvTable one_axis_result_csv(const Eigen::VectorXd& x_mm, const core::Displaceme
   return t;
 }
 
+CsvTable one_axis_result_csv(const Eigen::VectorXd& x_mm, const core::OneAxisJointResult& j) {
+  CsvTable t = one_axis_result_csv(x_mm, j.estimate);
+  t.set_meta("solver", "joint least squares (core/displacement_joint.hpp)");
+  t.set_meta("gauge", j.gauge);
+  t.set_meta("reading_sigma_um", std::isfinite(j.sigma_um) ? std::to_string(j.sigma_um) : "none");
+  t.set_meta("sigma_source", j.sigma_source);
+  if (j.u_w_um.size()) {
+    t.set_meta("uncertainty", "u_*: standard uncertainty (k = 1) of each value in the gauge");
+    for (const auto& [n, v] : {std::pair{"u_r_um", &j.u_r_um}, std::pair{"u_m_um", &j.u_m_um},
+                               std::pair{"u_w_um", &j.u_w_um}})
+      t.add_column(n, std::vector<double>(v->data(), v->data() + v->size()));
+  }
+  return t;
+}
+
 CsvTable two_axis_result_csv(const core::TwoAxisScan& scan, const core::TwoAxisResult& r) {
   CsvTable t;
   t.set_meta("errsep", "displacement method, two axes (Haramiishi 2024 Eqs. 10-27)");
   t.set_meta("rotation_correction", r.rotation_corrected ? "on" : "off");
+  t.set_meta("solver", core::to_string(r.solver));
+  if (!r.rotation_note.empty()) t.set_meta("rotation_decision", r.rotation_note);
+  if (!r.gauge.empty()) t.set_meta("gauge", r.gauge);
   const Eigen::Index nx = scan.x_mm.size(), ny = scan.y_mm.size();
   auto flat = [&](const Eigen::MatrixXd& m) {
     std::vector<double> v;
@@ -349,6 +367,24 @@ CsvTable two_axis_result_csv(const core::TwoAxisScan& scan, const core::TwoAxisR
   t.add_column("r2x_um", flat(r.r2x_um));
   t.add_column("r3y_um", flat(r.r3y_um));
   t.add_column("r4y_um", flat(r.r4y_um));
+  if (r.u_w_um.size()) {
+    t.set_meta("uncertainty",
+               "u_*: standard uncertainty (k = 1) of each value in the gauge, from the joint "
+               "system's covariance with sigma_hat of the redundant reference readings" +
+                   std::string(" and the traverse's u"));
+    t.set_meta("sigma_reference_um", std::to_string(r.sigma_reference_um) + " (dof " +
+                                         std::to_string(r.dof_reference) + ")");
+    t.set_meta("sigma_workpiece_um",
+               std::to_string(r.sigma_workpiece_um) + " (" + r.sigma_workpiece_source + ")");
+    for (const auto& [n, m] :
+         {std::pair{"u_w_um", &r.u_w_um}, std::pair{"u_m_w_um", &r.u_m_w_um},
+          std::pair{"u_m1x_um", &r.u_m1x_um}, std::pair{"u_m2x_um", &r.u_m2x_um},
+          std::pair{"u_m3y_um", &r.u_m3y_um}, std::pair{"u_m4y_um", &r.u_m4y_um},
+          std::pair{"u_m_wxe_um", &r.u_m_wxe_um}, std::pair{"u_m_wye_um", &r.u_m_wye_um},
+          std::pair{"u_r1x_um", &r.u_r1x_um}, std::pair{"u_r2x_um", &r.u_r2x_um},
+          std::pair{"u_r3y_um", &r.u_r3y_um}, std::pair{"u_r4y_um", &r.u_r4y_um}})
+      t.add_column(n, flat(*m));
+  }
   return t;
 }
 

@@ -10,6 +10,7 @@
 #include "errsep/core/two_axis_yaw.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
+#include "support/displacement_cases.hpp"
 #include "support/support.hpp"
 
 using namespace errsep;
@@ -39,6 +40,18 @@ void write_one_axis(const std::filesystem::path& p, const core::OneAxisSimData& 
   t.add_column("s2_scan1_um", vec(s.s2_1_um));
   t.add_column("s2_scan2_um", vec(s.s2_2_um));
   io::write_csv(p, t);
+}
+
+/// A 13 x 11 grid at the paper's noise (σ_se 0.16 µm, σ_sc 0.29 µm), sensor 0 read in both scans.
+core::TwoAxisSimOptions noisy_grid(std::uint64_t seed) {
+  core::TwoAxisSimOptions so;
+  so.nx = 13;
+  so.ny = 11;
+  so.eddy_sensor.noise_sigma_um = 0.16;
+  so.contact_sensor.noise_sigma_um = 0.29;
+  so.record_s0_scan2 = true;
+  so.seed = seed;
+  return so;
 }
 
 /// Two-axis grid in long format, rows in reverse raster order (the reader must not care);
@@ -175,6 +188,81 @@ TEST_CASE("two-axis: the app recovers w(x, y) on a grid, with and without rotati
                   (dir / "w0.csv").string(),
               &out) == 0);
   CHECK(io::read_csv(dir / "w0.csv").meta("rotation_correction").value() == "off");
+}
+
+TEST_CASE("two-axis: per-point u columns, the rotation decision and the row-by-row solver") {
+  TempDir dir;
+  const auto so = noisy_grid(12);
+  const auto truth = test::random_two_axis_truth(12, 60.0);
+  const auto sim = core::simulate_two_axis(truth, so);
+  write_two_axis(dir / "grid.csv", sim.scan);
+  std::string out;
+  REQUIRE(run("two-axis --rotation-correction on -i " + (dir / "grid.csv").string() + " -o " +
+                  (dir / "w.csv").string(),
+              &out) == 0);
+  CHECK(out.find("gauge:") != std::string::npos);
+  const auto t = io::read_csv(dir / "w.csv");
+  CHECK(t.meta("rotation_correction").value() == "on");
+  CHECK(t.meta("solver").value() == "joint");
+  CHECK(t.meta("gauge").value().find("r1_x") != std::string::npos);
+  CHECK(t.meta("sigma_workpiece_um").value().find("sensor 0 repeat") != std::string::npos);
+  CHECK(t.meta("rotation_decision").value().find("predicted") != std::string::npos);
+  const auto gt = test::gauged_truth(truth, sim, so.geometry, true);
+  const auto x = t.column("x_mm"), y = t.column("y_mm"), w = t.column("w_um"),
+             u = t.column("u_w_um"), m2 = t.column("m2x_um"), um2 = t.column("u_m2x_um");
+  for (const char* c : {"u_m_w_um", "u_m1x_um", "u_m3y_um", "u_m4y_um", "u_m_wxe_um", "u_m_wye_um",
+                        "u_r1x_um", "u_r2x_um", "u_r3y_um", "u_r4y_um"})
+    CHECK(t.find_column(c));
+  double worst_z = 0;
+  for (std::size_t r = 0; r < w.size(); ++r) {
+    const auto i = static_cast<Eigen::Index>(std::lround(x[r] / 5.0));
+    const auto j = static_cast<Eigen::Index>(std::lround(y[r] / 5.0));
+    REQUIRE(u[r] > 0);
+    REQUIRE(um2[r] > 0);
+    worst_z = std::max(
+        {worst_z, std::abs(w[r] - gt.w(i, j)) / u[r], std::abs(m2[r] - gt.m[1](i, j)) / um2[r]});
+  }
+  INFO("worst |error| / u over " << w.size() << " points: " << worst_z);
+  CHECK(worst_z < 5.0);
+  // The paper's path for comparison: no uncertainty columns; auto means on there.
+  REQUIRE(run("two-axis --solver row-by-row -i " + (dir / "grid.csv").string() + " -o " +
+                  (dir / "wr.csv").string(),
+              &out) == 0);
+  const auto tr = io::read_csv(dir / "wr.csv");
+  CHECK(tr.meta("solver").value() == "row-by-row");
+  CHECK_FALSE(tr.find_column("u_w_um"));
+  // Default auto: the decision and both predictions in the metadata.
+  REQUIRE(run("two-axis -i " + (dir / "grid.csv").string() + " -o " + (dir / "wa.csv").string(),
+              &out) == 0);
+  CHECK(io::read_csv(dir / "wa.csv").meta("rotation_decision").value().find("(auto)") !=
+        std::string::npos);
+  CHECK(run("two-axis --rotation-correction sideways -i " + (dir / "grid.csv").string() + " -o " +
+                (dir / "wx.csv").string(),
+            &out) != 0);
+}
+
+TEST_CASE("one-axis: u columns when sigma is known, none (and said why) when it is not") {
+  TempDir dir;
+  core::OneAxisSimOptions so;
+  so.workpiece_sensor.noise_sigma_um = so.reference_sensor.noise_sigma_um = 0.1;
+  so.seed = 3;
+  const auto sim = core::simulate_one_axis(core::haramiishi2024_fig5_truth(), so);
+  write_one_axis(dir / "scan.csv", sim);
+  std::string out;
+  REQUIRE(run("one-axis -i " + (dir / "scan.csv").string() + " -o " + (dir / "a.csv").string(),
+              &out) == 0);
+  CHECK(out.find("no uncertainty") != std::string::npos);
+  CHECK_FALSE(io::read_csv(dir / "a.csv").find_column("u_w_um"));
+  REQUIRE(run("one-axis --reading-sigma-um 0.1 -i " + (dir / "scan.csv").string() + " -o " +
+                  (dir / "b.csv").string(),
+              &out) == 0);
+  const auto t = io::read_csv(dir / "b.csv");
+  const auto u = t.column("u_w_um"), ur = t.column("u_r_um");
+  REQUIRE(u.size() == 25);
+  // Eq. (9): r's error at x_k has sd σ√(2k); w adds m's and sensor 1's own reading.
+  CHECK(ur[24] == Approx(0.1 * std::sqrt(48.0)).epsilon(1e-9));
+  CHECK(u[0] == Approx(0.1 * std::sqrt(2.0)).epsilon(1e-9));
+  CHECK(t.meta("sigma_source").value() == "given");
 }
 
 TEST_CASE("three-point: the app writes profile and motion") {
@@ -357,13 +445,7 @@ TEST_CASE("one-axis: the residuals are written beside the result, with sigma_hat
 
 TEST_CASE("two-axis: residuals of the reference pieces and sensor 0, a thermal drift reported") {
   TempDir dir;
-  core::TwoAxisSimOptions so;
-  so.nx = 13;
-  so.ny = 11;
-  so.eddy_sensor.noise_sigma_um = 0.16;
-  so.contact_sensor.noise_sigma_um = 0.29;
-  so.record_s0_scan2 = true;
-  so.seed = 5;
+  auto so = noisy_grid(5);
   const auto sim = core::simulate_two_axis(core::example_two_axis_truth(), so);
   write_two_axis(dir / "grid.csv", sim.scan);
   std::string out;

@@ -26,23 +26,27 @@ TEST_CASE(
   const TwoAxisTruth truth = example_two_axis_truth();
   TwoAxisSimOptions so;  // 25 x 25 at 5 mm, d = 5 mm, paper's lever arms 30/165 mm
   const auto sim = simulate_two_axis(truth, so);
-  TwoAxisOptions o;
-  const auto on = separate_two_axis(sim.scan, o);
-  const Eigen::MatrixXd e_on = centred_error(on.w_um, sim.w_um);
-  CHECK(e_on.cwiseAbs().maxCoeff() < 1e-9);
-  o.correct_rotation = false;
-  const auto off = separate_two_axis(sim.scan, o);
-  const Eigen::MatrixXd e_off = centred_error(off.w_um, sim.w_um);
-  // Without Eqs. (22)-(27) the error is the tilt times the lever arm to sensor 0.
-  Eigen::MatrixXd tilt(25, 25);
-  for (int i = 0; i < 25; ++i)
-    for (int j = 0; j < 25; ++j) {
-      const double x = 5.0 * i, y = 5.0 * j;
-      tilt(i, j) = 1000.0 * (truth.roll_x_rad(x, y) * 165.0 + truth.pitch_y_rad(x, y) * 165.0);
-    }
-  tilt.array() -= tilt.mean();
-  CHECK((e_off - tilt).cwiseAbs().maxCoeff() < 1e-9);  // w_off = w + tilt + const
-  CHECK(off.m_wxe_um.cwiseAbs().maxCoeff() == 0.0);
+  for (const auto solver : {TwoAxisSolver::joint, TwoAxisSolver::row_by_row}) {
+    TwoAxisOptions o;
+    o.solver = solver;
+    o.rotation = RotationCorrection::on;
+    const auto on = separate_two_axis(sim.scan, o);
+    const Eigen::MatrixXd e_on = centred_error(on.w_um, sim.w_um);
+    CHECK(e_on.cwiseAbs().maxCoeff() < 1e-9);
+    o.rotation = RotationCorrection::off;
+    const auto off = separate_two_axis(sim.scan, o);
+    const Eigen::MatrixXd e_off = centred_error(off.w_um, sim.w_um);
+    // Without Eqs. (22)-(27) the error is the tilt times the lever arm to sensor 0.
+    Eigen::MatrixXd tilt(25, 25);
+    for (int i = 0; i < 25; ++i)
+      for (int j = 0; j < 25; ++j) {
+        const double x = 5.0 * i, y = 5.0 * j;
+        tilt(i, j) = 1000.0 * (truth.roll_x_rad(x, y) * 165.0 + truth.pitch_y_rad(x, y) * 165.0);
+      }
+    tilt.array() -= tilt.mean();
+    CHECK((e_off - tilt).cwiseAbs().maxCoeff() < 1e-9);  // w_off = w + tilt + const
+    CHECK(off.m_wxe_um.cwiseAbs().maxCoeff() == 0.0);
+  }
 }
 
 TEST_CASE("noisy stage: w within the stated tolerance with rotation correction, worse without") {
@@ -57,8 +61,10 @@ TEST_CASE("noisy stage: w within the stated tolerance with rotation correction, 
   so.seed = 7;
   const auto sim = simulate_two_axis(truth, so);
   TwoAxisOptions o;
+  o.solver = TwoAxisSolver::row_by_row;  // the paper's figures; the joint estimate is better
+  o.rotation = RotationCorrection::on;
   const auto on = separate_two_axis(sim.scan, o);
-  o.correct_rotation = false;
+  o.rotation = RotationCorrection::off;
   const auto off = separate_two_axis(sim.scan, o);
   const Eigen::MatrixXd e_on = centred_error(on.w_um, sim.w_um);
   const Eigen::MatrixXd e_off = centred_error(off.w_um, sim.w_um);
@@ -82,6 +88,8 @@ TEST_CASE("two-axis error statistics follow the propagation of Eqs. (9), (24), (
   const TwoAxisTruth truth = example_two_axis_truth();
   TwoAxisSimOptions so;
   TwoAxisOptions o;
+  o.solver = TwoAxisSolver::row_by_row;  // the paper's propagation is of the row-by-row path
+  o.rotation = RotationCorrection::on;
   const auto ref = separate_two_axis(simulate_two_axis(truth, so).scan, o);
   so.eddy_sensor.noise_sigma_um = 0.02;
   so.contact_sensor.noise_sigma_um = 0.1;
@@ -115,6 +123,7 @@ TEST_CASE("lever arm of the y correction changing with x (sensor 0 on the base)"
   so.geometry.l_yw_per_x = -1.0;
   const auto sim = simulate_two_axis(truth, so);
   TwoAxisOptions o;  // paper: constant l_yw
+  o.rotation = RotationCorrection::on;
   const double err_const =
       centred_error(separate_two_axis(sim.scan, o).w_um, sim.w_um).cwiseAbs().maxCoeff();
   o.geometry.l_yw_per_x = -1.0;

@@ -15,6 +15,7 @@
 // by the curvature of r).  For p > 1 the differences link only samples p apart, so r splits into
 // p interleaved chains, each with its own unknown initial value; see ChainJoin.
 #include <Eigen/Core>
+#include <limits>
 #include <string>
 
 namespace errsep::core {
@@ -40,6 +41,12 @@ struct DisplacementOptions {
   /// |d/Δx - round(d/Δx)| above this is "not an integer multiple" (covers decimal rounding of
   /// values read from files).
   double integer_tolerance = 1e-6;
+  /// σ of one sensor reading for the joint estimate's uncertainty (displacement_joint.hpp); NaN:
+  /// estimated from the redundant readings.
+  double reading_sigma_um = std::numeric_limits<double>::quiet_NaN();
+  /// Standard uncertainty of the traverse d (one draw per measurement; the paper's micrometer):
+  /// its contribution is added to the joint estimate's uncertainty.  0 = d exact.
+  double displacement_sigma_mm = 0.0;
 
   /// True if the options can be used; otherwise *why names the field, its value and the rule.
   bool is_valid(std::string* why = nullptr) const;
@@ -71,6 +78,10 @@ struct DisplacementResult {
 ReferenceResult separate_reference(const Eigen::VectorXd& s_first_um,
                                    const Eigen::VectorXd& s_second_um,
                                    const DisplacementOptions& opts);
+
+/// Offsets c_1..c_{p−1} (c_0 = 0) of the chains k mod p of r (r_k += c_{k mod p}) that minimise
+/// the sum of squared first differences of r (ChainJoin::least_roughness).  Empty for p = 1.
+Eigen::VectorXd least_roughness_offsets(const Eigen::VectorXd& r_um, int p);
 
 /// The full one-axis method, Eqs. (1)-(9).  s1_first = S1_1 (workpiece), s2_first = S2_1,
 /// s2_second = S2_2 (reference piece).  Throws std::invalid_argument as separate_reference.

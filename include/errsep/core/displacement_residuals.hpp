@@ -43,11 +43,12 @@
 // row y_j is a repetition of Eq. (4) along x: nx·ny equations for the nx unknown first
 // differences of each of r1_x, r2_x (dof nx(ny − 1) each), and ny·nx for r3_y, r4_y (dof ny(nx − 1)
 // each).  Residual = D_k minus its mean over the rows (sensors 1, 2) or columns (3, 4), the
-// least-squares fit of the shared first differences.  errsep's separate_two_axis, as the paper,
-// solves Eq. (9) row by row and does not use this redundancy; summing the row means instead
-// (r k from the fitted first differences, once per piece) would cut the w error of the example
-// stage at the paper's noise from 8.0 to 1.8 µm rms (measured over 20 seeds, not done here), and
-// this residual is the test of the assumption that would rest on.  Sensor 0 read during scan 2 as
+// least-squares fit of the shared first differences.  This is exactly the residual of the joint
+// estimate that separate_two_axis uses by default (displacement_joint.hpp: per reading ∓(D − D̄)/2,
+// the same σ̂ and dof; tests/core/displacement_joint.cpp), which cuts the w error at the paper's
+// noise about 4x against the paper's row-by-row Eq. (9) (TwoAxisSolver::row_by_row, which does
+// not use this redundancy); this residual is the test of the assumption the joint estimate rests
+// on (one profile per reference piece).  Sensor 0 read during scan 2 as
 // well (optional) gives the workpiece repeat of Eq. (10), dof nx·ny − 1; repeated runs as above.
 // The sensor pairs 1-2 and 3-4 are not redundant once roll and pitch are corrected (Eqs. 22-27):
 // their difference per point is the roll (pitch), free per point.

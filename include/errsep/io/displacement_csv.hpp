@@ -22,6 +22,7 @@
 #include <filesystem>
 #include <optional>
 
+#include "errsep/core/displacement_joint.hpp"
 #include "errsep/core/displacement_method.hpp"
 #include "errsep/core/displacement_residuals.hpp"
 #include "errsep/core/three_point_method.hpp"
@@ -63,8 +64,12 @@ ThreePointInput read_three_point_csv(const std::filesystem::path& file);
 
 /// x_mm, r_um, m_um, w_um.
 CsvTable one_axis_result_csv(const Eigen::VectorXd& x_mm, const core::DisplacementResult& r);
+/// The joint estimate: the columns above, then u_r_um, u_m_um, u_w_um when a σ is known;
+/// metadata: gauge, σ and where it came from.
+CsvTable one_axis_result_csv(const Eigen::VectorXd& x_mm, const core::OneAxisJointResult& r);
 /// x_mm, y_mm, w_um, m_w_um, m1x_um, m2x_um, m3y_um, m4y_um, m_wxe_um, m_wye_um, r1x_um, r2x_um,
-/// r3y_um, r4y_um; rows with x fastest, then y.
+/// r3y_um, r4y_um; with the joint solver also u_w_um, u_m_w_um, u_m1x_um … u_r4y_um (standard
+/// uncertainties), σ̂, gauge and rotation decision in the metadata; rows with x fastest, then y.
 CsvTable two_axis_result_csv(const core::TwoAxisScan& scan, const core::TwoAxisResult& r);
 /// The residuals of the redundant equations, one row per equation:
 ///   family, sensor, scan, run, order, x_mm[, y_mm], value_um, residual_um
