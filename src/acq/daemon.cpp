@@ -552,8 +552,10 @@ Daemon::ResultFigures Daemon::write_result(
       core::four_sensor_straightness(r, core::ReferenceLine::least_squares);
   t.set_meta("straightness_minimum_zone_um", fmt(mz.straightness_um, 6));
   t.set_meta("straightness_minimum_zone_U_um", fmt(mz.expanded_um, 6));
+  t.set_meta("straightness_minimum_zone_of_estimate_um", fmt(mz.zone.straightness_um, 6));
   t.set_meta("straightness_least_squares_um", fmt(ls.straightness_um, 6));
   t.set_meta("straightness_least_squares_U_um", fmt(ls.expanded_um, 6));
+  t.set_meta("straightness_least_squares_of_estimate_um", fmt(ls.zone.straightness_um, 6));
   t.set_meta("straightness_U_note",
              "k = 2, from the separation's posterior covariance (core/four_sensor_evaluation.hpp)");
   if (!r.determination_note.empty()) t.set_meta("not_determined", r.determination_note);

@@ -296,6 +296,7 @@ namespace {
 struct Criterion {
   double value = std::numeric_limits<double>::infinity();
   bool ok = false;
+  double rss = 0.0, penalty = 0.0;  // ‖b − Ax‖², xᵀPx: the L-curve's coordinates at this λ
 };
 
 // REML, σ held at σ̂ (issue 15: "σ fixed at the σ̂ of the redundant equations"):
@@ -312,6 +313,8 @@ Criterion reml_at(TikhonovSolver& s, const Eigen::VectorXd& Atb, double bb, doub
   const double rss = std::max(0.0, bb - x.dot(Atb) - l2 * pen);
   c.value = (rss + l2 * pen) / sigma2 + s.log_det() - rank * std::log(l2);
   c.ok = std::isfinite(c.value);
+  c.rss = rss;
+  c.penalty = pen;
   return c;
 }
 
@@ -322,6 +325,8 @@ Criterion gcv_at(TikhonovSolver& s, const Eigen::VectorXd& b, const Eigen::Vecto
   Eigen::VectorXd x;
   if (s.factorize_and_solve(lambda, Atb, x) != SolverStatus::success) return c;
   const double rss = (s.A() * x - b).squaredNorm();
+  c.rss = rss;
+  c.penalty = x.dot(s.apply_penalty(x));
   const double edf = static_cast<double>(s.A().cols()) -
                      lambda * lambda * s.trace_inverse_penalty(s.selected_inverse());
   const auto n = static_cast<double>(b.size());
@@ -334,6 +339,8 @@ Criterion gcv_at(TikhonovSolver& s, const Eigen::VectorXd& b, const Eigen::Vecto
 struct SearchOutcome {
   double lambda = 0.0;
   bool at_edge = false;
+  std::vector<LCurvePoint> grid;  // λ, ‖r‖, ‖Lx‖ of every grid point (curvature not computed)
+  std::vector<double> criterion;  // the rule's value there
   int worker_factorizations = 0;  ///< done by the worker threads (not in the solver's stats)
 };
 
@@ -345,6 +352,7 @@ SearchOutcome minimise_over_lambda(TikhonovSolver& solver, const LambdaSearchOpt
   const double lmin = solver.sigma_max_bound() * std::pow(10.0, -o.decades_below);
   const int count = o.count;
   std::vector<double> grid(static_cast<std::size_t>(count)), val(grid.size());
+  std::vector<LCurvePoint> pts(grid.size());
   for (int i = 0; i < count; ++i)
     grid[static_cast<std::size_t>(i)] =
         std::log10(lmin) + (std::log10(lmax) - std::log10(lmin)) * i / (count - 1);
@@ -353,9 +361,15 @@ SearchOutcome minimise_over_lambda(TikhonovSolver& solver, const LambdaSearchOpt
   for (int t = 1; t < threads; ++t)
     workers.push_back(solver.worker());
   auto sweep = [&](int t, TikhonovSolver& s) {
-    for (int i = t; i < count; i += threads)
-      val[static_cast<std::size_t>(i)] =
-          crit(s, std::pow(10.0, grid[static_cast<std::size_t>(i)])).value;
+    for (int i = t; i < count; i += threads) {
+      const auto q = static_cast<std::size_t>(i);
+      const double l = std::pow(10.0, grid[q]);
+      const Criterion c = crit(s, l);
+      val[q] = c.value;
+      pts[q].lambda = l;
+      pts[q].residual_norm = std::sqrt(c.rss);
+      pts[q].solution_norm = std::sqrt(c.penalty);
+    }
   };
   {
     std::vector<std::thread> pool;
@@ -374,6 +388,11 @@ SearchOutcome minimise_over_lambda(TikhonovSolver& solver, const LambdaSearchOpt
     if (err) std::rethrow_exception(err);
   }
   SearchOutcome out;
+  for (std::size_t q = 0; q < pts.size(); ++q)
+    if (std::isfinite(val[q])) {
+      out.grid.push_back(pts[q]);
+      out.criterion.push_back(val[q]);
+    }
   for (const auto& w : workers)
     out.worker_factorizations += w->stats().factorizations;
   const auto best = static_cast<int>(std::min_element(val.begin(), val.end()) - val.begin());
@@ -474,6 +493,8 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         lambda = o.lambda;
         res.lambda_at_edge = o.at_edge;
         extra_factorizations = o.worker_factorizations;
+        res.lcurve.points = o.grid;
+        res.lambda_criterion = o.criterion;
         break;
       }
       case LambdaRule::gcv: {
@@ -483,6 +504,8 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         lambda = o.lambda;
         res.lambda_at_edge = o.at_edge;
         extra_factorizations = o.worker_factorizations;
+        res.lcurve.points = o.grid;
+        res.lambda_criterion = o.criterion;
         break;
       }
       case LambdaRule::lcurve: {

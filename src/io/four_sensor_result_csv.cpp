@@ -106,9 +106,17 @@ void write_four_sensor_result(const std::filesystem::path& dir, const core::Four
     sn.push_back(p.solution_norm);
     k.push_back(p.curvature);
   }
+  const bool with_criterion = r.lambda_criterion.size() == l.size() && !l.empty();
   lc.columns = {"lambda", "residual_norm", "solution_norm", "curvature"};
-  for (std::size_t i = 0; i < l.size(); ++i)
+  if (with_criterion) {
+    lc.columns.push_back(std::string(core::to_string(r.rule)) + "_criterion");
+    lc.set_meta("curve", "the lambda search grid of rule " + std::string(core::to_string(r.rule)) +
+                             " (solution_norm = |L x|, curvature not computed: 0)");
+  }
+  for (std::size_t i = 0; i < l.size(); ++i) {
     lc.rows.push_back({l[i], rn[i], sn[i], k[i]});
+    if (with_criterion) lc.rows.back().push_back(r.lambda_criterion[i]);
+  }
 
   CsvTable res;
   common_meta(res, r, info);

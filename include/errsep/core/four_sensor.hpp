@@ -10,6 +10,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "errsep/core/four_sensor_config.hpp"
 #include "errsep/core/four_sensor_posterior.hpp"
@@ -143,7 +144,10 @@ struct FourSensorResult {
   /// What the data could not determine, in words (empty when nothing is to be said): the
   /// gauge, and after a collapse the level at which S is undetermined.
   std::string determination_note;
-  LCurveResult lcurve;  ///< the whole curve (filled for rule lcurve)
+  /// The whole L-curve for rule lcurve; for reml and gcv the (λ, ‖r‖, ‖Lx‖) of the search grid,
+  /// curvature not computed (0), with the rule's value in lambda_criterion.
+  LCurveResult lcurve;
+  std::vector<double> lambda_criterion;  ///< reml/gcv: the criterion at each lcurve point
   /// Rule lcurve found no corner (lcurve.has_corner false): what was done instead.
   LambdaFallback lambda_fallback = LambdaFallback::none;
   double residual_norm = 0;  ///< ‖A·X_λ − b‖
