@@ -226,6 +226,9 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     res.warnings.push_back(dir.string() + " has no " + kManifestName +
                            " (written by hand or by an older errsep): its files cannot be "
                            "checked to be whole and of one run.");
+  for (const auto& e : check_result_set(dir).extra)
+    res.warnings.push_back(e + " is not part of the result set of " + dir.string() +
+                           " (added after its run): used as found.");
   // Raw scans of the set are read as every reader of raw scans reads them (plausibility of each
   // reading, position and time), incomplete ones included.
   RawReadOptions inspect;

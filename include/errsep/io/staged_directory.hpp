@@ -100,11 +100,14 @@ struct ResultSetCheck {
   std::vector<std::string> run_ids;   ///< run_id, then the runs that extended the set
   std::vector<std::string> files;     ///< relative paths the manifest lists (nested sets: "dir/")
   std::vector<std::string> problems;  ///< each names a file and what is wrong with it
+  /// Files in the folder that the manifest does not list: added after the run (by hand, or a
+  /// tool that is not errsep).  They do not make the set incomplete; readers that use them say so.
+  std::vector<std::string> extra;
   bool whole() const { return has_manifest && problems.empty(); }
 };
 
-/// Reads the manifest of `dir` and checks every file it lists (present, size, CRC-32), every
-/// nested set (recursively), and that the folder holds nothing else (files starting with '.' are
+/// Reads the manifest of `dir` and checks every file it lists (present, size, CRC-32) and every
+/// nested set (recursively), and lists what else the folder holds (files starting with '.' are
 /// passed over: they are temporaries, not results).  Never throws for what it finds; throws
 /// std::filesystem::filesystem_error only when `dir` cannot be listed.
 ResultSetCheck check_result_set(const std::filesystem::path& dir);
