@@ -10,10 +10,11 @@
 // leaves the earlier set (or none), and the simulator started for the embedded default dies with
 // the scan.  Ctrl-C / SIGTERM: the stages are stopped, the raw data measured so far is written
 // marked "complete: false" (the set then holds only it), nothing is separated, exit status 130.
-// Exit status: 0 complete, 1 usage/config/device set-up error, 3 scan failed (device fault), 130
-// aborted.
+// Exit status: 0 complete, 1 usage/config/device set-up error or a separation that failed (the
+// set then holds the raw data alone), 3 scan failed (device fault), 130 aborted.
 #include <unistd.h>
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <atomic>
 #include <csignal>
 #include <cstdio>
@@ -238,29 +239,44 @@ int main(int argc, char** argv) {
         break;
       }
       if (no_separate) continue;
-      if (res.four_sensor) {
-        separate_four_sensor(*res.four_sensor, raw_file, work, gauge, stage.run_id());
-        written.push_back("results: " + out.string() +
-                          "/ (motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt)");
-        if (refine || !refine_reference.empty() || cfg.refine.enabled) {
-          io::RefineRunOptions ro;  // the defaults of errsep-refine, the scan's gauge
-          ro.refine.solve.gauge = gauge_of(gauge);
-          ro.refine.alpha = cfg.refine.alpha;  // [refine] alpha (default 0.01, as errsep-refine)
-          if (!refine_reference.empty()) ro.reference_csv = refine_reference;
-          ro.source = raw_file.string();
-          // A set of its own inside the scan's (errsep-refine may replace it later).
-          const auto run = io::run_refine(work / raw_name, work / "refine", ro);
-          std::cout << run.result.brief_report() << "\n";
-          written.push_back("refine: " + (out / "refine").string() +
-                            "/ (refine_report.txt, refine_steps.csv, refined motion.csv, "
-                            "reference.csv, ...)");
-          if (!run.result.model_complete())
-            std::cerr << "warning: the refined model is incomplete (residual not white or "
-                         "implausible effects rejected): see "
-                      << (out / "refine" / "refine_report.txt").string() << "\n";
+      try {
+        if (res.four_sensor) {
+          separate_four_sensor(*res.four_sensor, raw_file, work, gauge, stage.run_id());
+          written.push_back(
+              "results: " + out.string() +
+              "/ (motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt)");
+          if (refine || !refine_reference.empty() || cfg.refine.enabled) {
+            io::RefineRunOptions ro;  // the defaults of errsep-refine, the scan's gauge
+            ro.refine.solve.gauge = gauge_of(gauge);
+            ro.refine.alpha = cfg.refine.alpha;  // [refine] alpha (default 0.01, as errsep-refine)
+            if (!refine_reference.empty()) ro.reference_csv = refine_reference;
+            ro.source = raw_file.string();
+            // A set of its own inside the scan's (errsep-refine may replace it later).
+            const auto run = io::run_refine(work / raw_name, work / "refine", ro);
+            std::cout << run.result.brief_report() << "\n";
+            written.push_back("refine: " + (out / "refine").string() +
+                              "/ (refine_report.txt, refine_steps.csv, refined motion.csv, "
+                              "reference.csv, ...)");
+            if (!run.result.model_complete())
+              std::cerr << "warning: the refined model is incomplete (residual not white or "
+                           "implausible effects rejected): see "
+                        << (out / "refine" / "refine_report.txt").string() << "\n";
+          }
+        } else {
+          separate_displacement(*res.displacement);
         }
-      } else {
-        separate_displacement(*res.displacement);
+      } catch (const std::exception& e) {
+        // The measurements are kept: the set holds the raw files alone (no result is better than
+        // some of them), and the error is reported.
+        for (const auto& entry : fs::directory_iterator(work))
+          if (entry.path().filename().string().rfind("raw", 0) != 0) fs::remove_all(entry.path());
+        written.erase(
+            std::remove_if(written.begin(), written.end(),
+                           [](const std::string& l) { return l.rfind("raw data: ", 0) != 0; }),
+            written.end());
+        std::cerr << "errsep-scan: separation failed: " << e.what() << "; the raw data is kept\n";
+        exit_code = 1;
+        break;
       }
     }
     dev.reset();  // close the buses before the simulator goes

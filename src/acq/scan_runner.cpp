@@ -1,7 +1,5 @@
 #include "errsep/acq/scan_runner.hpp"
 
-#include "errsep/io/plausibility.hpp"
-
 #include <algorithm>
 #include <cmath>
 #include <ctime>
@@ -10,6 +8,8 @@
 #include <sstream>
 #include <stdexcept>
 #include <thread>
+
+#include "errsep/io/plausibility.hpp"
 
 namespace errsep::acq {
 namespace {

@@ -72,6 +72,17 @@ std::optional<std::string> CsvTable::meta(const std::string& key) const {
   return std::nullopt;
 }
 
+std::optional<double> CsvTable::meta_number(const std::string& key,
+                                            const std::filesystem::path& file) const {
+  const auto v = meta(key);
+  if (!v) return std::nullopt;
+  double out = 0;
+  const auto [p, ec] = std::from_chars(v->data(), v->data() + v->size(), out);
+  if (ec != std::errc() || p != v->data() + v->size() || !std::isfinite(out))
+    throw CsvError(file, 0, "metadata '" + key + ": " + *v + "': not a number");
+  return out;
+}
+
 void CsvTable::set_meta(const std::string& key, const std::string& value) {
   for (auto& [k, v] : metadata)
     if (k == key) {

@@ -1,7 +1,6 @@
 #include "errsep/io/displacement_csv.hpp"
 
 #include <algorithm>
-#include <charconv>
 #include <cmath>
 #include <map>
 #include <sstream>
@@ -140,13 +139,7 @@ OneAxisInput read_one_axis_csv(const std::filesystem::path& file) {
     in.s2_1_um = to_vec(strict.column("s2_scan1_um", file));
     in.s2_2_um = to_vec(strict.column("s2_scan2_um", file));
     if (strict.find_column("s1_scan2_um")) in.s1_2_um = to_vec(strict.column("s1_scan2_um", file));
-    if (const auto d = strict.meta("d_mm")) {
-      double v = 0;
-      const auto [p, ec] = std::from_chars(d->data(), d->data() + d->size(), v);
-      if (ec != std::errc() || p != d->data() + d->size() || !std::isfinite(v))
-        throw CsvError(file, 0, "metadata 'd_mm: " + *d + "': not a number");
-      in.d_mm = v;
-    }
+    in.d_mm = strict.meta_number("d_mm", file);
   }
   in.dx_mm = uniform_interval(t, x, file, "x_mm");
   in.x_mm = to_vec(x);

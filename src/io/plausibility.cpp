@@ -1,6 +1,5 @@
 #include "errsep/io/plausibility.hpp"
 
-#include <charconv>
 #include <cmath>
 #include <cstdio>
 
@@ -15,15 +14,6 @@ std::string num(double v) {
 
 std::size_t line_of(const CsvTable& t, std::size_t row) {
   return row < t.row_line.size() ? t.row_line[row] : 0;
-}
-
-double meta_number(const CsvTable& t, const std::string& key, const std::filesystem::path& file) {
-  const std::string v = *t.meta(key);
-  double out = 0;
-  const auto [p, ec] = std::from_chars(v.data(), v.data() + v.size(), out);
-  if (ec != std::errc() || p != v.data() + v.size() || !std::isfinite(out))
-    throw CsvError(file, 0, "metadata '" + key + ": " + v + "': not a number");
-  return out;
 }
 
 std::size_t column_index(const CsvTable& t, const std::string& column,
@@ -51,7 +41,7 @@ ReadingRange reading_range(const CsvTable& t, const std::string& sensor,
     throw CsvError(file, 0,
                    "metadata has '" + (has_lo ? lo : hi) + "' but not '" + (has_lo ? hi : lo) +
                        "': give both ends of the sensor's range or neither");
-  ReadingRange r{meta_number(t, lo, file), meta_number(t, hi, file), true};
+  ReadingRange r{*t.meta_number(lo, file), *t.meta_number(hi, file), true};
   if (!(r.min_um < r.max_um))
     throw CsvError(file, 0,
                    "metadata range of sensor " + sensor + ": " + lo + " = " + num(r.min_um) +

@@ -71,16 +71,6 @@ int parse_int_meta(const CsvTable& t, const std::string& key, const std::filesys
   return out;
 }
 
-double parse_double_meta(const CsvTable& t, const std::string& key,
-                         const std::filesystem::path& file) {
-  const std::string v = *t.meta(key);
-  double out = 0;
-  const auto [p, ec] = std::from_chars(v.data(), v.data() + v.size(), out);
-  if (ec != std::errc() || p != v.data() + v.size() || !std::isfinite(out))
-    throw CsvError(file, 0, "metadata '" + key + ": " + v + "': not a number");
-  return out;
-}
-
 }  // namespace
 
 std::optional<std::string> RawFourSensorScan::meta(const std::string& key) const {
@@ -200,7 +190,7 @@ RawFourSensorScan read_raw_four_sensor_csv(const std::filesystem::path& file,
                        std::string("metadata has dx_mm but not '") + k +
                            "': give the whole geometry (dx_mm, s2, s3, s4, N) or none");
     core::FourSensorConfig g;
-    g.dx_mm = parse_double_meta(t, "dx_mm", file);
+    g.dx_mm = *t.meta_number("dx_mm", file);
     g.s2 = parse_int_meta(t, "s2", file);
     g.s3 = parse_int_meta(t, "s3", file);
     g.s4 = parse_int_meta(t, "s4", file);
@@ -232,7 +222,7 @@ RawDisplacementScan read_raw_displacement_csv(const std::filesystem::path& file,
   s.complete = read_complete(t, file);
   require_complete(s.complete, t, file, opts);
   if (!t.meta("d_mm")) throw CsvError(file, 0, "metadata 'd_mm' (displacement d) missing");
-  s.d_mm = parse_double_meta(t, "d_mm", file);
+  s.d_mm = *t.meta_number("d_mm", file);
   s.x_mm = t.column("x_mm", file);
   s.s1_scan1_um = t.column("s1_scan1_um", file);
   s.s2_scan1_um = t.column("s2_scan1_um", file);

@@ -314,6 +314,19 @@ std::string describe_swept(const std::vector<fs::path>& removed) {
          " left by an interrupted errsep run: " + names;
 }
 
+std::string sweep_beside(const std::vector<fs::path>& files) {
+  std::set<fs::path> dirs;
+  std::vector<fs::path> removed;
+  for (const auto& f : files) {
+    if (f.empty()) continue;
+    const fs::path d = f.has_parent_path() ? f.parent_path() : fs::path(".");
+    if (!dirs.insert(d.lexically_normal()).second) continue;
+    for (auto& p : remove_stale_temporaries(d))
+      removed.push_back(std::move(p));
+  }
+  return describe_swept(removed);
+}
+
 StagedDirectory::StagedDirectory(const fs::path& out, const std::string& kind)
     : StagedDirectory(out, StageOptions{kind, {}, false, {}}) {}
 

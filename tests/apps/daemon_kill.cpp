@@ -20,6 +20,7 @@
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <map>
 #include <random>
@@ -242,6 +243,18 @@ TEST_CASE("SIGKILL at the end of scans and mid-scan leaves only whole files") {
       break;
     }
   REQUIRE_FALSE(unresulted.empty());
+  // A result that is not of its raw file (its raw_crc32 differs): made again from the raw file.
+  std::string foreign;
+  for (const auto& f : io::ResultsStore({rig.results, 0, {}}).list())
+    if (f.kind == "result") {
+      io::CsvTable t = io::read_csv(f.path);
+      REQUIRE(t.meta("raw_crc32"));
+      t.set_meta("raw_crc32", "00000000");
+      io::write_csv(f.path, t);
+      foreign = f.stem;
+      break;
+    }
+  REQUIRE_FALSE(foreign.empty());
   rig.start_daemon();
   REQUIRE(rig.notify->wait_for("READY=1", 15s));
   std::set<std::string> raw_stems, result_stems;
@@ -266,6 +279,16 @@ TEST_CASE("SIGKILL at the end of scans and mid-scan leaves only whole files") {
     CHECK(test::check_result_file(rig.results / (stem + ".result.csv"), raw) == "");
   }
   CHECK(result_stems.count(unresulted) == 1);
+  // The result set to another raw file's CRC was made again from its own raw file.
+  {
+    char hex[16];
+    std::snprintf(hex, sizeof hex, "%08x",
+                  io::file_size_and_crc32(rig.results / (foreign + ".raw.csv")).second);
+    CHECK(io::read_csv(rig.results / (foreign + ".result.csv")).meta("raw_crc32") ==
+          std::optional<std::string>(hex));
+  }
+  std::map<std::string, int> kinds_after;
+  CHECK(check_store(rig.results, kinds_after) == "");
   REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1) == 0);
   // The quick machine may finish the scan between two reads: its id is then the last scan id.
   const auto r = rig.wait_regs(

@@ -30,7 +30,7 @@ void report(const test::KillCounts& k) {
 }  // namespace
 
 TEST_CASE("about 50 SIGKILLs of errsep-scan and errsep-daemon leave nothing that misleads") {
-  test::KillCampaignOptions o;  // 36 scan runs, 16 daemon lives, within ~50 s
+  test::KillCampaignOptions o;  // 32 kills of errsep-scan, 16 of the daemon, within ~50 s
   const test::KillCounts k = test::run_kill_campaign(o);
   report(k);
   INFO(k.table());

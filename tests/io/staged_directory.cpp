@@ -272,6 +272,19 @@ TEST_CASE("temporaries of dead errsep writers are removed, nothing else") {
   CHECK_FALSE(fs::exists(tmp / ".raw.csv.tmp.Ab12Cd"));
 }
 
+TEST_CASE("writers of single files sweep the folders of their outputs") {
+  test::TempDir tmp;
+  const auto dead = std::to_string(dead_pid());
+  fs::create_directories(tmp / "a");
+  std::ofstream(tmp / "a" / (".w.csv.tmp." + dead + ".Ab12Cd")) << "partial";
+  std::ofstream(tmp / "a" / "keep.csv") << "x";
+  const std::string line =
+      io::sweep_beside({tmp / "a" / "w.csv", tmp / "a" / "w.residuals.csv", fs::path()});
+  CHECK_THAT(line, Catch::StartsWith("removed 1 temporary left by an interrupted errsep run: "));
+  CHECK(names(tmp / "a") == std::set<std::string>{"keep.csv"});
+  CHECK(io::sweep_beside({tmp / "a" / "w.csv"}).empty());
+}
+
 TEST_CASE("a writer killed before its commit: the next writer removes its staging folder") {
   test::TempDir tmp;
   const fs::path out = tmp / "out";

@@ -567,8 +567,9 @@ KillCounts run_kill_campaign(const KillCampaignOptions& opts) {
   }
   const char* aims[] = {"random", "write", "commit", "write"};
   const auto scan_budget = opts.budget * 3 / 4;
-  for (int i = 0; i < opts.scan_kills; ++i) {
-    if (i >= 8 && clk::now() - t_start > scan_budget) break;
+  // Until the kills are made (a random moment may fall after a run's end: it is not a kill).
+  for (int i = 0; k.scan_kills < opts.scan_kills && i < 2 * opts.scan_kills; ++i) {
+    if (k.scan_kills >= 8 && clk::now() - t_start > scan_budget) break;
     Lane& lane = i % 2 == 0 ? fresh : over;
     const std::string aim = aims[(i / 2) % 4];
     scan_trial(lane, cfg, log, aim, rng, k, false);

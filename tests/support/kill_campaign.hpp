@@ -86,8 +86,8 @@ struct KillCounts {
 };
 
 struct KillCampaignOptions {
-  int scan_kills = 36;
-  int daemon_kills = 16;
+  int scan_kills = 32;    ///< kills of errsep-scan (runs that end before their kill do not count)
+  int daemon_kills = 16;  ///< kills of errsep-daemon (one per life)
   unsigned seed = 20261125;
   bool refine = true;               ///< errsep-scan --refine in the overwritten lane
   std::chrono::seconds budget{48};  ///< stop starting kills after this (at least 8 of each)

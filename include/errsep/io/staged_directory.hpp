@@ -136,9 +136,13 @@ long temporary_owner_pid(const std::string& name);
 std::vector<std::filesystem::path> remove_stale_temporaries(const std::filesystem::path& dir,
                                                             bool legacy_too = false);
 
-/// One line for the user: "removed 2 temporaries left by an interrupted errsep run in DIR: a, b";
-/// "" when nothing was removed.
+/// One line for the user: "removed 2 temporaries left by an interrupted errsep run: a, b"; ""
+/// when nothing was removed.
 std::string describe_swept(const std::vector<std::filesystem::path>& removed);
+
+/// For writers of single files (write_file_atomic, not a set): remove_stale_temporaries() in the
+/// folder of each of `files` (each folder once, empty paths skipped); returns describe_swept().
+std::string sweep_beside(const std::vector<std::filesystem::path>& files);
 
 /// CRC-32 (IEEE 802.3, as zlib) and size of a file.  Throws std::runtime_error when unreadable.
 std::pair<std::uintmax_t, std::uint32_t> file_size_and_crc32(const std::filesystem::path& file);
