@@ -331,7 +331,8 @@ StagedDirectory::StagedDirectory(const fs::path& out, const std::string& kind)
     : StagedDirectory(out, StageOptions{kind, {}, false, {}}) {}
 
 StagedDirectory::StagedDirectory(const fs::path& out, StageOptions opts)
-    : out_(out.lexically_normal()), opts_(std::move(opts)) {
+    : out_(fs::absolute(out).lexically_normal()), opts_(std::move(opts)) {
+  // Absolute: "--out ." names the current folder, whose staging folder goes beside it.
   if (!out_.has_filename()) out_ = out_.parent_path();
   if (opts_.kind.empty() || opts_.kind.find('/') != std::string::npos)
     throw std::invalid_argument("result set: kind '" + opts_.kind + "' must be a plain name");

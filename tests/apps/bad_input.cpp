@@ -44,18 +44,6 @@ io::RawFourSensorScan simulated_raw() {
   return raw;
 }
 
-/// 1-based line of data row n.
-std::size_t data_line(const fs::path& file, std::size_t n) {
-  std::ifstream in(file);
-  std::string line;
-  std::size_t k = 0;
-  while (std::getline(in, line)) {
-    ++k;
-    if (!line.empty() && line[0] != '#') return k + 1 + n;
-  }
-  return 0;
-}
-
 struct Bad {
   std::string name, what;
   std::size_t row;
@@ -85,7 +73,8 @@ TEST_CASE("impossible values in a raw scan: every app refuses them with file:lin
       fs::create_directories(tmp / "set");
       const fs::path file = tmp / "set" / "raw.csv";
       io::write_raw_four_sensor_csv(file, raw);
-      const std::string where = file.string() + ":" + std::to_string(data_line(file, c.row)) + ":";
+      const std::string where =
+          file.string() + ":" + std::to_string(errsep::test::data_line(file, c.row)) + ":";
       const std::vector<std::pair<std::string, std::string>> runs = {
           {"errsep-separate", test::app_path("separate").string() + " " + file.string() +
                                   " --out " + (tmp / "sep").string()},
@@ -133,7 +122,8 @@ TEST_CASE("impossible values in displacement scans: errsep-separate-displacement
   std::ofstream(three) << "x_mm,m1_um,m2_um,m3_um\n0,0.1,0.2,0.3\n5,0.2,0.1,0\n10,-8.7e10,0.3,0.1\n"
                           "15,0,0.2,0.2\n";
   const std::vector<std::tuple<std::string, std::string, std::string>> runs = {
-      {"one-axis -i " + raw.string(), raw.string() + ":" + std::to_string(data_line(raw, 3)) + ":",
+      {"one-axis -i " + raw.string(),
+       raw.string() + ":" + std::to_string(errsep::test::data_line(raw, 3)) + ":",
        "outside the sensor's range -100 to 100 um"},
       {"three-point -i " + three, three + ":4:", "beyond any displacement sensor"},
   };

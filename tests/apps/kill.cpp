@@ -7,7 +7,7 @@
 // some result files that a reader accepts, 0 errsep processes left running, 0 temporaries of a
 // killed run left after the next run, 0 failed next runs, nothing reported written then missing.
 //
-// The campaign of issue 21's note (1000 kills by default, ERRSEP_KILLS to change it; about 15
+// The campaign of issue 21's note (1000 kills by default, ERRSEP_KILLS to change it; about 10
 // minutes on the 2-core VM) is the hidden case:
 //   ERRSEP_KILLS=1000 build/tests/test_apps_kill "[.campaign]"
 #include <catch2/catch.hpp>

@@ -127,20 +127,8 @@ TEST_CASE("displacement raw scan round-trips with d") {
 
 namespace {
 
-/// 1-based line of data row `n` (0-based) of a CSV file written by errsep.
-std::size_t data_line(const std::filesystem::path& file, std::size_t n) {
-  std::ifstream in(file);
-  std::string line;
-  std::size_t k = 0;
-  while (std::getline(in, line)) {
-    ++k;
-    if (!line.empty() && line[0] != '#') return k + 1 + n;  // the header, then the rows
-  }
-  return 0;
-}
-
 std::string where(const std::filesystem::path& file, std::size_t n) {
-  return file.string() + ":" + std::to_string(data_line(file, n)) + ": ";
+  return file.string() + ":" + std::to_string(errsep::test::data_line(file, n)) + ": ";
 }
 
 }  // namespace

@@ -106,6 +106,22 @@ TEST_CASE("a writer replaces only a set of its own kind, an empty or an absent f
   CHECK(io::check_result_set(tmp / "empty").whole());
 }
 
+TEST_CASE("the current folder as the target: staged beside it") {
+  test::TempDir tmp;
+  fs::create_directories(tmp / "here");
+  const fs::path cwd = fs::current_path();
+  fs::current_path(tmp / "here");
+  {
+    io::StagedDirectory st(".", "scan");
+    CHECK(st.dir().parent_path() == tmp.path());
+    io::write_file_atomic(st.dir() / "raw.csv", "x_mm\n1\n");
+    st.commit();
+  }
+  fs::current_path(cwd);
+  CHECK(io::check_result_set(tmp / "here").whole());
+  CHECK(names(tmp.path()) == std::set<std::string>{"here"});
+}
+
 TEST_CASE("an error before commit leaves the target as it was and no staging folder") {
   test::TempDir tmp;
   make_set(tmp / "out", "scan", {{"raw.csv", "x_mm\n1\n"}});
