@@ -7,6 +7,7 @@
 #include <map>
 
 #include "errsep/io/scan_report.hpp"
+#include "errsep/io/staged_directory.hpp"
 #include "errsep/version.hpp"
 
 int main(int argc, char** argv) {
@@ -93,6 +94,8 @@ int main(int argc, char** argv) {
 
   try {
     const auto r = errsep::io::write_scan_report(dir, o);
+    if (const std::string swept = errsep::io::describe_swept(r.swept); !swept.empty())
+      std::cout << swept << "\n";
     std::cout << r.text;
     for (const auto& w : r.warnings)
       std::cerr << "warning: " << w << "\n";

@@ -5,11 +5,16 @@
 // then the result files of the separation (four-sensor: motion.csv, reference.csv, lcurve.csv,
 // residuals.csv, summary.txt).  --refine (or [refine] enabled = true in the config) also runs the
 // refine step of errsep-refine on the four-sensor scan and writes its files to OUT/refine/
-// (io/refine_run.hpp). Ctrl-C / SIGTERM: the stages are stopped, the raw data measured so far is
-// written marked "complete: false", nothing is separated, exit status 130. Exit status: 0 complete,
-// 1 usage/config/device set-up error, 3 scan failed (device fault), 130 aborted.
+// (io/refine_run.hpp).  OUT is one result set (io/staged_directory.hpp): written beside it and
+// moved into place whole at the end, replacing an earlier scan's set whole; a kill at any moment
+// leaves the earlier set (or none), and the simulator started for the embedded default dies with
+// the scan.  Ctrl-C / SIGTERM: the stages are stopped, the raw data measured so far is written
+// marked "complete: false" (the set then holds only it), nothing is separated, exit status 130.
+// Exit status: 0 complete, 1 usage/config/device set-up error or a separation that failed (the
+// set then holds the raw data alone), 3 scan failed (device fault), 130 aborted.
 #include <unistd.h>
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <atomic>
 #include <csignal>
 #include <cstdio>
@@ -28,6 +33,7 @@
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/refine_run.hpp"
+#include "errsep/io/staged_directory.hpp"
 #include "errsep/version.hpp"
 
 namespace {
@@ -68,9 +74,11 @@ core::FourSensorOptions separation_options(const std::string& gauge) {
   return core::options_for_gauge(*g);
 }
 
-/// Separation of a complete four-sensor raw scan, with the defaults of errsep-separate.
+/// Separation of a complete four-sensor raw scan, with the defaults of errsep-separate, written
+/// into `out`; `raw_file` and `run_id` go into the results' metadata.
 void separate_four_sensor(const io::RawFourSensorScan& raw, const fs::path& raw_file,
-                          const fs::path& out, const std::string& gauge) {
+                          const fs::path& out, const std::string& gauge,
+                          const std::string& run_id) {
   const auto& g = *raw.geometry;
   const auto P = static_cast<Eigen::Index>(raw.positions());
   Eigen::MatrixXd m(P, 4);
@@ -78,7 +86,7 @@ void separate_four_sensor(const io::RawFourSensorScan& raw, const fs::path& raw_
     for (Eigen::Index n = 0; n < P; ++n)
       m(n, j) = raw.m_um[static_cast<std::size_t>(j)][static_cast<std::size_t>(n)];
   const auto res = core::separate_four_sensor(g, m, separation_options(gauge));
-  io::write_four_sensor_result(out, res, {raw_file.string(), "X", "Y", {}});
+  io::write_four_sensor_result(out, res, {raw_file.string(), "X", "Y", {{"run_id", run_id}}});
   std::cout << "separation: " << res.brief_report() << "\n";
   if (res.lambda_fallback == core::LambdaFallback::discrepancy)
     std::cerr << "warning: the L-curve has no corner inside the lambda range; lambda was chosen "
@@ -158,6 +166,15 @@ int main(int argc, char** argv) {
     if (method == "displacement") m = io::ScanMethod::displacement;
     if (method == "both") m = io::ScanMethod::both;
     const fs::path out = out_dir.empty() ? cfg.scan.output_dir : fs::path(out_dir);
+    // The result folder is one set: everything is written into a staging folder beside it and
+    // moved into place in one rename at the end (io/staged_directory.hpp), so that a kill at any
+    // moment leaves the earlier result whole (or no folder), never files of two runs.  What is
+    // reported as written is reported once it is in place.
+    io::StagedDirectory stage(out, {"scan", std::string("errsep-scan ") + kVersion, false, {}});
+    if (const std::string swept = io::describe_swept(stage.swept()); !swept.empty())
+      std::cout << swept << "\n";
+    const fs::path work = stage.dir();
+    std::vector<std::string> written;
 
     // The embedded default: no machine, start the device simulator and talk to it.
     std::unique_ptr<drivers::SimulatorProcess> sim;
@@ -177,7 +194,6 @@ int main(int argc, char** argv) {
     std::optional<drivers::Devices> dev;  // destroyed (buses closed) before the simulator stops
     dev.emplace(drivers::make_devices(cfg));
     dev->configure();
-    fs::create_directories(out);
 
     std::vector<acq::ScanKind> kinds;
     if (m != io::ScanMethod::displacement) kinds.push_back(acq::ScanKind::four_sensor);
@@ -196,20 +212,23 @@ int main(int argc, char** argv) {
         std::fputc('\n', stderr);
 
       // The raw record first, whatever happened: complete or not, it is kept.
-      const fs::path raw_file =
-          out / (kind == acq::ScanKind::four_sensor ? "raw.csv" : "raw_displacement.csv");
+      const fs::path raw_name =
+          kind == acq::ScanKind::four_sensor ? "raw.csv" : "raw_displacement.csv";
+      const fs::path raw_file = out / raw_name;  // where it will be, named in the results
+      const std::vector<std::pair<std::string, std::string>> meta = {
+          {"config", fs::absolute(config_path).string()}, {"run_id", stage.run_id()}};
       if (res.four_sensor) {
-        res.four_sensor->metadata.insert(res.four_sensor->metadata.begin(),
-                                         {"config", fs::absolute(config_path).string()});
-        io::write_raw_four_sensor_csv(raw_file, *res.four_sensor);
+        res.four_sensor->metadata.insert(res.four_sensor->metadata.begin(), meta.begin(),
+                                         meta.end());
+        io::write_raw_four_sensor_csv(work / raw_name, *res.four_sensor);
       } else {
-        res.displacement->metadata.insert(res.displacement->metadata.begin(),
-                                          {"config", fs::absolute(config_path).string()});
-        io::write_raw_displacement_csv(raw_file, *res.displacement);
+        res.displacement->metadata.insert(res.displacement->metadata.begin(), meta.begin(),
+                                          meta.end());
+        io::write_raw_displacement_csv(work / raw_name, *res.displacement);
       }
-      std::cout << res.brief_report() << "\n"
-                << "raw data: " << raw_file.string()
-                << (res.complete() ? "" : " (marked incomplete)") << "\n";
+      std::cout << res.brief_report() << "\n";
+      written.push_back("raw data: " + raw_file.string() +
+                        (res.complete() ? "" : " (marked incomplete)"));
       for (const auto& s : res.samplers)
         if (!s.realtime.all_ok())
           std::cerr << "warning: real-time set-up: " << s.realtime.brief() << "\n";
@@ -221,31 +240,51 @@ int main(int argc, char** argv) {
         break;
       }
       if (no_separate) continue;
-      if (res.four_sensor) {
-        separate_four_sensor(*res.four_sensor, raw_file, out, gauge);
-        std::cout << "results: " << out.string()
-                  << "/ (motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt)\n";
-        if (refine || !refine_reference.empty() || cfg.refine.enabled) {
-          io::RefineRunOptions ro;  // the defaults of errsep-refine, the scan's gauge
-          ro.refine.solve = separation_options(gauge);
-          ro.refine.alpha = cfg.refine.alpha;  // [refine] alpha (default 0.01, as errsep-refine)
-          if (!refine_reference.empty()) ro.reference_csv = refine_reference;
-          const auto run = io::run_refine(raw_file, out / "refine", ro);
-          std::cout << run.result.brief_report() << "\n"
-                    << "refine: " << (out / "refine").string()
-                    << "/ (refine_report.txt, refine_steps.csv, refined motion.csv, reference.csv, "
-                       "...)\n";
-          if (!run.result.model_complete())
-            std::cerr << "warning: the refined model is incomplete (residual not white or "
-                         "implausible effects rejected): see "
-                      << (out / "refine" / "refine_report.txt").string() << "\n";
+      try {
+        if (res.four_sensor) {
+          separate_four_sensor(*res.four_sensor, raw_file, work, gauge, stage.run_id());
+          written.push_back(
+              "results: " + out.string() +
+              "/ (motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt)");
+          if (refine || !refine_reference.empty() || cfg.refine.enabled) {
+            io::RefineRunOptions ro;  // the defaults of errsep-refine, the scan's gauge
+            ro.refine.solve = separation_options(gauge);
+            ro.refine.alpha = cfg.refine.alpha;  // [refine] alpha (default 0.01, as errsep-refine)
+            if (!refine_reference.empty()) ro.reference_csv = refine_reference;
+            ro.source = raw_file.string();
+            // A set of its own inside the scan's (errsep-refine may replace it later).
+            const auto run = io::run_refine(work / raw_name, work / "refine", ro);
+            std::cout << run.result.brief_report() << "\n";
+            written.push_back("refine: " + (out / "refine").string() +
+                              "/ (refine_report.txt, refine_steps.csv, refined motion.csv, "
+                              "reference.csv, ...)");
+            if (!run.result.model_complete())
+              std::cerr << "warning: the refined model is incomplete (residual not white or "
+                           "implausible effects rejected): see "
+                        << (out / "refine" / "refine_report.txt").string() << "\n";
+          }
+        } else {
+          separate_displacement(*res.displacement);
         }
-      } else {
-        separate_displacement(*res.displacement);
+      } catch (const std::exception& e) {
+        // The measurements are kept: the set holds the raw files alone (no result is better than
+        // some of them), and the error is reported.
+        for (const auto& entry : fs::directory_iterator(work))
+          if (entry.path().filename().string().rfind("raw", 0) != 0) fs::remove_all(entry.path());
+        written.erase(
+            std::remove_if(written.begin(), written.end(),
+                           [](const std::string& l) { return l.rfind("raw data: ", 0) != 0; }),
+            written.end());
+        std::cerr << "errsep-scan: separation failed: " << e.what() << "; the raw data is kept\n";
+        exit_code = 1;
+        break;
       }
     }
     dev.reset();  // close the buses before the simulator goes
     if (sim) sim->stop();
+    stage.commit();  // the whole set, in one rename
+    for (const auto& line : written)
+      std::cout << line << "\n";
   } catch (const std::exception& e) {
     std::cerr << "errsep-scan: " << e.what() << "\n";
     return 1;

@@ -21,6 +21,7 @@
 #include "errsep/core/four_sensor_evaluation.hpp"
 #include "errsep/core/iso230.hpp"
 #include "errsep/io/csv.hpp"
+#include "errsep/io/staged_directory.hpp"
 
 namespace errsep::acq {
 namespace {
@@ -531,6 +532,15 @@ Daemon::ResultFigures Daemon::write_result(
   for (const auto& [k, v] : meta)
     t.set_meta(k, v);
   t.set_meta("raw_file", std::filesystem::path(raw_file).filename().string());
+  {
+    // The raw file this result is of, by content: the store's reader (recover_results) and any
+    // consumer can tell a result from its raw file's run from one that is not.
+    const auto [bytes, crc] = io::file_size_and_crc32(raw_file);
+    char hex[16];
+    std::snprintf(hex, sizeof hex, "%08x", crc);
+    t.set_meta("raw_bytes", std::to_string(bytes));
+    t.set_meta("raw_crc32", hex);
+  }
   t.set_meta("solver", r.brief_report());
   const auto n = static_cast<std::size_t>(r.x_mm.size());
   std::vector<double> x(n), s(n), g(n), us(n);
@@ -582,8 +592,24 @@ int Daemon::recover_results() {
     if (f.kind == "result") result_stems.insert(f.stem);
   }
   for (const auto& stem : raw_stems) {
-    if (result_stems.count(stem)) continue;
     const auto raw_path = store_.path(stem, "raw");
+    if (result_stems.count(stem)) {
+      // A result must be of its raw file (raw_bytes / raw_crc32, written since issue 21): one
+      // that is not is made again, as if missing.  Older results without them are kept.
+      try {
+        const io::CsvTable res = io::read_csv(store_.path(stem, "result"));
+        const auto want = res.meta("raw_crc32");
+        char hex[16];
+        std::snprintf(hex, sizeof hex, "%08x", io::file_size_and_crc32(raw_path).second);
+        if (!want || *want == hex) continue;
+        log(kWarning, "result of " + raw_path.filename().string() + " is of another raw file (" +
+                          "raw_crc32 " + *want + ", the raw file's is " + hex +
+                          "): made again from the raw file");
+      } catch (const std::exception& e) {
+        log(kWarning, "result of " + raw_path.filename().string() + " cannot be read (" + e.what() +
+                          "): made again from the raw file");
+      }
+    }
     try {
       const io::RawFourSensorScan raw = io::read_raw_four_sensor_csv(raw_path);
       if (!raw.geometry) throw std::runtime_error("no scan geometry in its metadata");

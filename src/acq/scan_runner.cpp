@@ -9,6 +9,8 @@
 #include <stdexcept>
 #include <thread>
 
+#include "errsep/io/plausibility.hpp"
+
 namespace errsep::acq {
 namespace {
 
@@ -333,6 +335,7 @@ ScanResult Runner::run() {
   for (auto* s : dev_.sensors)
     names += (names.empty() ? "" : " ") + s->name();
   md.emplace_back("sensors", names);
+  md.insert(md.end(), opts_.range_metadata.begin(), opts_.range_metadata.end());
   md.emplace_back("slide_start_mm", fmt(opts_.slide_start_mm));
   if (opts_.kind == ScanKind::four_sensor) {
     md.emplace_back("setup", ns == 1 ? "one sensor on a sensor stage" : "four sensors");
@@ -424,6 +427,29 @@ bool ScanOptions::is_valid(std::string* why) const {
   return sampler.is_valid(why);
 }
 
+std::vector<std::pair<std::string, std::string>> sensor_range_metadata(const io::MachineConfig& cfg,
+                                                                       ScanKind kind) {
+  const auto& sc = cfg.scan;
+  std::vector<std::pair<std::string, std::string>> md;
+  auto add = [&](const std::string& column_sensor, const std::string& name) {
+    for (const auto& s : cfg.sensors)
+      if (s.name == name) {
+        const auto r = io::range_metadata(column_sensor, s.range_min_um, s.range_max_um);
+        md.insert(md.end(), r.begin(), r.end());
+      }
+  };
+  if (kind == ScanKind::four_sensor) {
+    // One sensor on the sensor stage reads all four configurations; else one per configuration.
+    for (std::size_t i = 0; i < 4; ++i)
+      if (sc.sensors.size() == 1 || i < sc.sensors.size())
+        add("m" + std::to_string(i + 1), sc.sensors[sc.sensors.size() == 1 ? 0 : i]);
+  } else {
+    add("s1", sc.workpiece_sensor);
+    add("s2", sc.reference_sensor);
+  }
+  return md;
+}
+
 ScanOptions scan_options_from_config(const io::MachineConfig& cfg, ScanKind kind) {
   const auto& sc = cfg.scan;
   ScanOptions o;
@@ -446,6 +472,7 @@ ScanOptions scan_options_from_config(const io::MachineConfig& cfg, ScanKind kind
   }
   o.sampler.realtime.cpu = cfg.sampler.cpu_affinity;
   o.ring_capacity = cfg.sampler.ring_capacity;
+  o.range_metadata = sensor_range_metadata(cfg, kind);
   std::string why;
   if (!o.is_valid(&why)) throw std::invalid_argument(cfg.source.string() + ": [scan]: " + why);
   return o;

@@ -6,6 +6,7 @@
 #include <thread>
 
 #include "errsep/acq/sampler.hpp"
+#include "errsep/acq/scan_runner.hpp"
 
 namespace errsep::drivers {
 namespace {
@@ -121,6 +122,8 @@ ScanEnd DeviceScanBackend::run_scan(acq::ScanContext& ctx) {
                      {"slide_start_mm", std::to_string(sc.slide_start_mm)},
                      {"averages", std::to_string(sc.averages)},
                      {"single_sensor", sc.single_sensor ? "true" : "false"}};
+  const auto ranges = acq::sensor_range_metadata(cfg_, acq::ScanKind::four_sensor);
+  layout.metadata.insert(layout.metadata.end(), ranges.begin(), ranges.end());
   ctx.begin(layout);
 
   // Channels: scan sensors grouped by bus so that each bus's sampler gets contiguous channels.

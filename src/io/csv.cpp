@@ -66,6 +66,12 @@ std::vector<double> CsvTable::column(const std::string& name,
   return v;
 }
 
+std::optional<std::string> CsvTable::meta(const std::string& key) const {
+  for (const auto& [k, v] : metadata)
+    if (k == key) return v;
+  return std::nullopt;
+}
+
 std::optional<double> CsvTable::meta_number(const std::string& key,
                                             const std::filesystem::path& file) const {
   const auto v = meta(key);
@@ -75,12 +81,6 @@ std::optional<double> CsvTable::meta_number(const std::string& key,
   if (ec != std::errc() || p != v->data() + v->size() || !std::isfinite(out))
     throw CsvError(file, 0, "metadata '" + key + ": " + *v + "': not a number");
   return out;
-}
-
-std::optional<std::string> CsvTable::meta(const std::string& key) const {
-  for (const auto& [k, v] : metadata)
-    if (k == key) return v;
-  return std::nullopt;
 }
 
 void CsvTable::set_meta(const std::string& key, const std::string& value) {

@@ -13,6 +13,8 @@
 #include "errsep/io/atomic_file.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/html_report.hpp"
+#include "errsep/io/raw_scan_csv.hpp"
+#include "errsep/io/staged_directory.hpp"
 #include "errsep/version.hpp"
 
 namespace errsep::io {
@@ -209,13 +211,38 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
   if (!fs::is_directory(dir))
     throw std::runtime_error(dir.string() + ": not a directory (expected a result directory)");
   ScanReportResult res;
+  // The report, figures and tables become part of the result set: the set is checked whole
+  // (refused otherwise, naming what is missing), its files are linked into a staging folder
+  // beside DIR, the outputs written there, and the whole set moved into place at the end
+  // (io/staged_directory.hpp): a kill leaves the earlier set, never a report of another run.
+  StagedDirectory stage(
+      dir, {"result",
+            std::string("errsep-report ") + kVersion,
+            true,
+            {"evaluation.csv", "evaluation.txt", "report.html", "plots", "compensation"}});
+  res.swept = stage.swept();
+  const fs::path out = stage.dir();
+  if (!fs::exists(dir / kManifestName))
+    res.warnings.push_back(dir.string() + " has no " + kManifestName +
+                           " (written by hand or by an older errsep): its files cannot be "
+                           "checked to be whole and of one run.");
+  for (const auto& e : check_result_set(dir).extra)
+    res.warnings.push_back(e + " is not part of the result set of " + dir.string() +
+                           " (added after its run): used as found.");
+  // Raw scans of the set are read as every reader of raw scans reads them (plausibility of each
+  // reading, position and time), incomplete ones included.
+  RawReadOptions inspect;
+  inspect.require_complete = false;
+  if (fs::exists(dir / "raw.csv")) (void)read_raw_four_sensor_csv(dir / "raw.csv", inspect);
+  if (fs::exists(dir / "raw_displacement.csv"))
+    (void)read_raw_displacement_csv(dir / "raw_displacement.csv", inspect);
   const double k = opts.evaluation.coverage_factor;
   std::vector<Row> rows;
   HtmlReport html;
   html.result_dir = fs::absolute(dir).lexically_normal().string();
   html.generated_by = std::string("errsep-report ") + kVersion;
   html.raw_data_file = "unknown (no '# source:' metadata)";
-  const fs::path plot_dir = dir / "plots";
+  const fs::path plot_dir = out / "plots";
   bool plots = opts.plots;
   if (plots && !gnuplot_available(opts.plot)) {
     plots = false;
@@ -223,7 +250,7 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
                            "') cannot be run: the report has no figures (apt-get install "
                            "gnuplot-nox).");
   }
-  const fs::path comp_dir = dir / "compensation";
+  const fs::path comp_dir = out / "compensation";
   std::vector<HtmlFigure> figures;
   CsvTable eval_csv;
   eval_csv.set_meta("errsep evaluation", std::string("v") + kVersion);
@@ -701,14 +728,17 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
   html.files.insert(html.files.begin() + 1, {"evaluation.txt", "the evaluation as text"});
 
   res.text = text_table(rows, k);
-  outputs.emplace_back(dir / "evaluation.csv", format_csv(eval_csv, 12));
-  outputs.emplace_back(dir / "evaluation.txt", res.text);
-  outputs.emplace_back(dir / "report.html", render_html_report(html));
+  outputs.emplace_back(out / "evaluation.csv", format_csv(eval_csv, 12));
+  outputs.emplace_back(out / "evaluation.txt", res.text);
+  outputs.emplace_back(out / "report.html", render_html_report(html));
   for (const auto& [path, content] : outputs) {
     fs::create_directories(path.parent_path());
     write_file_atomic(path, content);
     res.written.push_back(path);
   }
+  stage.commit();
+  for (auto& p : res.written)  // where they are now
+    p = dir / p.lexically_relative(out);
   return res;
 }
 

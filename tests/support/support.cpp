@@ -6,6 +6,7 @@
 #include <array>
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
 #include <stdexcept>
 
 namespace errsep::test {
@@ -19,6 +20,17 @@ TempDir::TempDir() {
 TempDir::~TempDir() {
   std::error_code ec;
   std::filesystem::remove_all(path_, ec);
+}
+
+std::size_t data_line(const std::filesystem::path& csv, std::size_t row) {
+  std::ifstream in(csv);
+  std::string line;
+  std::size_t k = 0;
+  while (std::getline(in, line)) {
+    ++k;
+    if (!line.empty() && line[0] != '#') return k + 1 + row;  // the header, then the rows
+  }
+  return 0;
 }
 
 int run_command(const std::string& cmd, std::string* output) {

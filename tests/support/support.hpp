@@ -34,6 +34,10 @@ class TempDir {
   std::filesystem::path path_;
 };
 
+/// The 1-based line of data row `row` (0-based) of a CSV file written by errsep (metadata lines,
+/// then the header, then the rows), for "file:line" expectations; 0 when it has no header.
+std::size_t data_line(const std::filesystem::path& csv, std::size_t row);
+
 /// Runs a shell command, returns its exit status (-1 if it did not exit normally) and its
 /// combined stdout+stderr in `output`.
 int run_command(const std::string& cmd, std::string* output = nullptr);

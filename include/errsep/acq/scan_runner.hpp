@@ -23,6 +23,7 @@
 #include <functional>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "errsep/acq/displacement_sensor.hpp"
@@ -54,11 +55,21 @@ struct ScanOptions {
   int point_retries = 2;              ///< re-reads of a point before the scan fails
   SamplerOptions sampler;             ///< rate, real-time set-up (per bus sampler)
   std::size_t ring_capacity = 65536;  ///< samples per bus ring
+  /// The measuring range of each column's sensor, written into the raw file's metadata so that a
+  /// reader can refuse a reading no sensor can give (io/plausibility.hpp); sensor_range_metadata.
+  std::vector<std::pair<std::string, std::string>> range_metadata;
 
   /// Time allowed to collect one window of K readings: 4·K periods + 1 s.
   std::chrono::milliseconds window_timeout() const;
   bool is_valid(std::string* why = nullptr) const;
 };
+
+/// The raw file's metadata lines of the measuring range of each column's sensor, from the machine
+/// config's [[sensor]] range_min_um / range_max_um: m1..m4 for a four-sensor scan (one sensor on
+/// the sensor stage: its range for all four), s1 (workpiece) and s2 (reference piece) for a
+/// displacement scan (io/plausibility.hpp).  Sensors the config does not name are left out.
+std::vector<std::pair<std::string, std::string>> sensor_range_metadata(const io::MachineConfig& cfg,
+                                                                       ScanKind kind);
 
 /// The scan options a machine config describes (method "both" is the caller's loop; this takes
 /// `kind`).  Throws std::invalid_argument when the config's [scan] cannot give that kind.

@@ -39,8 +39,8 @@ struct CsvTable {
   std::vector<double> column(const std::string& name, const std::filesystem::path& file = {}) const;
   /// Value of a metadata key, or nullopt.
   std::optional<std::string> meta(const std::string& key) const;
-  /// A metadata value that must be a finite number, or nullopt when the key is absent; throws
-  /// CsvError(file, 0, "metadata 'key: value': not a number") otherwise.
+  /// Value of a metadata key as a finite number, or nullopt when the key is absent; throws
+  /// CsvError(file, 0, "metadata 'key: value': not a number") when it is not one.
   std::optional<double> meta_number(const std::string& key,
                                     const std::filesystem::path& file = {}) const;
   void set_meta(const std::string& key, const std::string& value);

@@ -17,7 +17,10 @@
 // At least one of them must be present.
 //
 // Outputs in DIR: evaluation.csv (one row, ISO 230-1 symbols in the column names),
-// evaluation.txt, plots/*.png|svg|gp|dat, report.html, compensation/* — each written atomically.
+// evaluation.txt, plots/*.png|svg|gp|dat, report.html, compensation/*.  DIR is a result set
+// (io/staged_directory.hpp): it is refused when its manifest says it is not whole, raw scans in it
+// are read with the plausibility checks, and the outputs join the set, which is committed anew
+// whole (outputs of an earlier report are replaced, never mixed with these).
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -56,6 +59,8 @@ struct ScanReportOptions {
 
 struct ScanReportResult {
   std::vector<std::filesystem::path> written;
+  /// Temporaries of interrupted errsep runs removed beside and in DIR (io::describe_swept).
+  std::vector<std::filesystem::path> swept;
   std::string text;  ///< evaluation.txt
   std::vector<std::string> warnings;
   bool four_sensor = false, grid = false;
