@@ -17,6 +17,7 @@
 #include <iostream>
 #include <memory>
 #include <optional>
+#include <thread>
 
 #include "errsep/acq/scan_runner.hpp"
 #include "errsep/core/displacement_method.hpp"
@@ -26,8 +27,11 @@
 #include "errsep/drivers/simulator_process.hpp"
 #include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/machine_config.hpp"
+#include "errsep/io/mqtt_messages.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/refine_run.hpp"
+#include "errsep/io/results_store.hpp"
+#include "errsep/service/plant_publisher.hpp"
 #include "errsep/version.hpp"
 
 namespace {
@@ -68,8 +72,9 @@ core::CurvatureGauge gauge_of(const std::string& gauge) {
 }
 
 /// Separation of a complete four-sensor raw scan, with the defaults of errsep-separate.
-void separate_four_sensor(const io::RawFourSensorScan& raw, const fs::path& raw_file,
-                          const fs::path& out, const std::string& gauge) {
+core::FourSensorResult separate_four_sensor(const io::RawFourSensorScan& raw,
+                                            const fs::path& raw_file, const fs::path& out,
+                                            const std::string& gauge) {
   const auto& g = *raw.geometry;
   const auto P = static_cast<Eigen::Index>(raw.positions());
   Eigen::MatrixXd m(P, 4);
@@ -84,6 +89,33 @@ void separate_four_sensor(const io::RawFourSensorScan& raw, const fs::path& raw_
   if (res.lambda_fallback == core::LambdaFallback::discrepancy)
     std::cerr << "warning: the L-curve has no corner inside the lambda range; lambda was chosen "
                  "by the discrepancy principle instead\n";
+  return res;
+}
+
+/// [mqtt]: the scan's summary (and alarms) into the disk queue beside OUT, then up to `wait_s`
+/// to deliver it; what is left stays queued for the next run (or the daemon sharing the queue).
+void publish_summary(const io::MqttConfig& mqtt, io::ScanSummary s, const fs::path& out,
+                     double wait_s) {
+  service::PlantPublisherOptions po;
+  po.mqtt = mqtt;
+  po.queue_dir = service::default_queue_dir(mqtt, out);
+  service::PlantPublisher pub(po, {});  // no status: the machine's status topic is the daemon's
+  s.machine = mqtt.machine;
+  pub.queue("scan/" + s.scan_id, io::to_json(s));
+  for (const auto& a : io::alarms_for(s, mqtt.straightness_tolerance_um))
+    pub.queue("alarm", io::to_json(a));
+  pub.start();
+  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(wait_s);
+  while (pub.queued() > 0 && std::chrono::steady_clock::now() < until)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  pub.stop(std::chrono::milliseconds(200));
+  const auto left = pub.queued();
+  std::cout << "mqtt: " << mqtt.topic_root() << "/scan/" << s.scan_id << ": "
+            << (left == 0
+                    ? std::string("delivered")
+                    : std::to_string(left) + " messages left queued in " + po.queue_dir.string() +
+                          " (" + pub.counters().last_error + "); sent by the next run")
+            << "\n";
 }
 
 void separate_displacement(const io::RawDisplacementScan& raw) {
@@ -112,6 +144,8 @@ int main(int argc, char** argv) {
   int averages = 0, settle_ms = -1;
   bool no_separate = false, refine = false;
   std::string refine_reference;
+  double mqtt_wait_s = 10;
+  bool no_mqtt = false;
   app.add_option("-c,--config", config_path, "machine config (TOML)")->capture_default_str();
   app.add_option("-o,--out", out_dir, "output directory (default: [scan] output_dir)");
   app.add_option("--method", method, "four_sensor, displacement or both (default: [scan] method)")
@@ -139,6 +173,12 @@ int main(int argc, char** argv) {
                  "zero-adjustment values have no quadratic part), paper_eq12")
       ->check(CLI::IsMember({"sensor_stage", "reference", "paper_eq12"}))
       ->capture_default_str();
+  app.add_option("--mqtt-wait-s", mqtt_wait_s,
+                 "[mqtt] in the config: wait this long for the broker to take the scan's summary "
+                 "(what is not delivered stays queued on disk for the next run)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 3600.0));
+  app.add_flag("--no-mqtt", no_mqtt, "do not publish, even with [mqtt] in the config");
   CLI11_PARSE(app, argc, argv);
 
   struct sigaction sa {};
@@ -190,6 +230,7 @@ int main(int argc, char** argv) {
       acq::ScanHooks hooks;
       hooks.progress = [&printer](const acq::ScanProgress& p) { printer(p); };
       hooks.abort = &g_abort;
+      const auto started = std::chrono::system_clock::now();
       auto res = acq::run_scan(devices, opts, hooks);
       if (printer.tty && res.counts.points_done != res.counts.points_total)
         std::fputc('\n', stderr);
@@ -221,7 +262,20 @@ int main(int argc, char** argv) {
       }
       if (no_separate) continue;
       if (res.four_sensor) {
-        separate_four_sensor(*res.four_sensor, raw_file, out, gauge);
+        const auto sep = separate_four_sensor(*res.four_sensor, raw_file, out, gauge);
+        io::ScanSummary summary;
+        // A scan id unique per machine: the start time and this process.
+        summary.scan_id = io::ResultsStore::stem(started, 0).substr(0, 16) + "_scan-app-" +
+                          std::to_string(::getpid());
+        summary.started_utc = io::utc_iso(started);
+        summary.ended_utc = io::utc_now_iso();
+        summary.trigger = "manual";
+        summary.outcome = "complete";
+        summary.points_measured =
+            std::to_string(res.counts.points_done) + "/" + std::to_string(res.counts.points_total);
+        summary.files = {"raw.csv",    "motion.csv",    "reference.csv",
+                         "lcurve.csv", "residuals.csv", "summary.txt"};
+        io::add_separation(summary, sep);
         std::cout << "results: " << out.string()
                   << "/ (motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt)\n";
         if (refine || !refine_reference.empty() || cfg.refine.enabled) {
@@ -238,7 +292,16 @@ int main(int argc, char** argv) {
             std::cerr << "warning: the refined model is incomplete (residual not white or "
                          "implausible effects rejected): see "
                       << (out / "refine" / "refine_report.txt").string() << "\n";
+          io::ScanSummary::Refine rf;
+          rf.model_complete = run.result.model_complete();
+          rf.verdict = run.result.brief_report();
+          rf.model = run.result.model_name;
+          for (std::size_t k = 1; k < run.result.steps.size(); ++k)
+            rf.steps.push_back(run.result.steps[k].effect);
+          summary.refine = rf;
+          summary.files.push_back("refine/refine_report.txt");
         }
+        if (cfg.mqtt && !no_mqtt) publish_summary(*cfg.mqtt, summary, out, mqtt_wait_s);
       } else {
         separate_displacement(*res.displacement);
       }

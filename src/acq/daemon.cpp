@@ -72,6 +72,8 @@ const char* to_string(TriggerSource s) noexcept {
       return "schedule";
     case TriggerSource::command:
       return "command";
+    case TriggerSource::mqtt:
+      return "mqtt";
   }
   return "unknown";
 }
@@ -531,6 +533,8 @@ Daemon::ResultFigures Daemon::write_result(
     t.set_meta(k, v);
   t.set_meta("raw_file", std::filesystem::path(raw_file).filename().string());
   t.set_meta("solver", r.brief_report());
+  t.set_meta("lambda", fmt(r.lambda, 6));
+  t.set_meta("sigma_hat_um", fmt(r.sigma_um, 6));
   const auto n = static_cast<std::size_t>(r.x_mm.size());
   std::vector<double> x(n), s(n), g(n), us(n);
   for (std::size_t k = 0; k < n; ++k) {
@@ -594,6 +598,7 @@ int Daemon::recover_results() {
                         "from the raw file, wrote " +
                         f.file);
       ++made;
+      if (const auto id = raw.meta("scan_id")) scan_committed(std::stoull(*id), stem);
     } catch (const std::exception& e) {
       log(kErr, "result of " + raw_path.filename().string() +
                     " is missing and could not be made: " + e.what());
@@ -662,14 +667,27 @@ void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd
     log(kWarning, "scan " + std::to_string(id) + ": its last checkpoint (" +
                       std::to_string(checkpoint_points_) + " points) stays on disk as " +
                       store_.path(scan_stem_, "raw-incomplete").string());
-  std::lock_guard<std::mutex> lock(mu_);
-  status_.last_scan_id = id;
-  status_.last_outcome = outcome;
-  status_.last_straightness_um = straightness;
-  status_.last_straightness_U_um = straightness_U;
-  status_.last_straightness_lsq_um = straightness_lsq;
-  if (!last_file.empty()) status_.last_file = last_file;
-  if (outcome == ScanOutcome::complete) ++status_.scans_completed;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    status_.last_scan_id = id;
+    status_.last_outcome = outcome;
+    status_.last_straightness_um = straightness;
+    status_.last_straightness_U_um = straightness_U;
+    status_.last_straightness_lsq_um = straightness_lsq;
+    if (!last_file.empty()) status_.last_file = last_file;
+    if (outcome == ScanOutcome::complete) ++status_.scans_completed;
+  }
+  // A scan whose files could not be written has nothing on disk to forward.
+  if (outcome != ScanOutcome::write_failed) scan_committed(id, scan_stem_);
+}
+
+void Daemon::scan_committed(std::uint64_t scan_id, const std::string& stem) {
+  if (!opts_.on_scan_committed) return;
+  try {
+    opts_.on_scan_committed(scan_id, stem);
+  } catch (const std::exception& e) {
+    log(kErr, "scan " + std::to_string(scan_id) + ": after writing: " + e.what());
+  }
 }
 
 void Daemon::finish_scan(bool stopping) {
