@@ -95,8 +95,8 @@ int mqtt_publish(const MqttBroker& broker, const std::string& user, const std::s
                  const std::string& payload, std::string* out = nullptr, bool tls = false,
                  int port = 0);
 
-/// Validates every payload against schema/mqtt-messages.schema.json; "" when all are valid,
-/// else the failures (payload and reason).
+/// Validates every payload errsep published against schema/mqtt-messages.schema.json (the
+/// plant's own cmd/scan messages are skipped); "" when all are valid, else the failures.
 std::string validate_payloads(const std::vector<MqttMessage>& messages);
 
 /// Field `key` of a JSON payload as text ("" when absent): strings bare, other values dumped.

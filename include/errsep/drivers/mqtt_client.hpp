@@ -13,6 +13,8 @@
 #include <functional>
 #include <string>
 
+struct mosquitto;  // libmosquitto's handle (global namespace)
+
 namespace errsep::drivers {
 
 struct MqttClientOptions {
@@ -60,7 +62,7 @@ class MqttClient {
  private:
   void destroy() noexcept;
   MqttClientOptions opts_;
-  struct mosquitto* mosq_ = nullptr;
+  ::mosquitto* mosq_ = nullptr;
   bool connected_ = false;
   int connack_ = -1;  ///< -1: none yet
   std::string last_error_;
