@@ -20,6 +20,7 @@
 #include "errsep/core/four_sensor.hpp"
 #include "errsep/core/iso230.hpp"
 #include "errsep/io/csv.hpp"
+#include "errsep/io/utc_time.hpp"
 
 namespace errsep::acq {
 namespace {
@@ -28,15 +29,6 @@ namespace {
 constexpr int kErr = 3, kWarning = 4, kInfo = 6;
 
 constexpr std::int64_t kMsNs = 1'000'000;
-
-std::string utc_iso(std::chrono::system_clock::time_point t) {
-  const std::time_t tt = std::chrono::system_clock::to_time_t(t);
-  std::tm tm{};
-  ::gmtime_r(&tt, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
 
 std::string fmt(double v, int prec = 4) {
   std::ostringstream os;
@@ -472,11 +464,11 @@ std::vector<std::pair<std::string, std::string>> Daemon::scan_metadata(
   std::vector<std::pair<std::string, std::string>> meta = {
       {"scan_id", std::to_string(ctx_->scan_id())},
       {"trigger", to_string(scan_source_)},
-      {"started_utc", utc_iso(scan_start_)}};
+      {"started_utc", io::utc_iso(scan_start_)}};
   if (outcome == "in_progress")
-    meta.emplace_back("checkpoint_utc", utc_iso(std::chrono::system_clock::now()));
+    meta.emplace_back("checkpoint_utc", io::utc_iso(std::chrono::system_clock::now()));
   else
-    meta.emplace_back("ended_utc", utc_iso(std::chrono::system_clock::now()));
+    meta.emplace_back("ended_utc", io::utc_iso(std::chrono::system_clock::now()));
   meta.emplace_back("outcome", outcome);
   if (!reason.empty()) meta.emplace_back("outcome_reason", reason);
   return meta;
@@ -591,7 +583,7 @@ int Daemon::recover_results() {
       for (const char* key : {"scan_id", "trigger", "started_utc", "ended_utc", "outcome",
                               "outcome_reason", "points_measured"})
         if (const auto v = raw.meta(key)) meta.emplace_back(key, *v);
-      meta.emplace_back("result_recovered_utc", utc_iso(std::chrono::system_clock::now()));
+      meta.emplace_back("result_recovered_utc", io::utc_iso(std::chrono::system_clock::now()));
       const ResultFigures f = write_result(stem, raw, meta, raw_path.string());
       log(kWarning, "result of " + raw_path.filename().string() +
                         " was missing (the daemon stopped before writing it): computed "

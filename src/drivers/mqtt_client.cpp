@@ -75,7 +75,8 @@ void MqttClient::destroy() noexcept {
   connected_ = false;
 }
 
-bool MqttClient::connect(std::chrono::milliseconds timeout, std::string* why) {
+bool MqttClient::connect(std::chrono::milliseconds timeout, std::string* why,
+                         const std::atomic<bool>* abort) {
   destroy();
   auto fail = [&](const std::string& m) {
     last_error_ = m;
@@ -111,7 +112,9 @@ bool MqttClient::connect(std::chrono::milliseconds timeout, std::string* why) {
   }
   connack_ = -1;
   connected_ = false;
-  rc = mosquitto_connect(mosq_, opts_.host.c_str(), opts_.port, opts_.keepalive_s);
+  // Non-blocking: a host that does not answer SYNs cannot hold the caller (a stop) for the
+  // kernel's connect timeout; the wait below is bounded by `timeout` and `abort`.
+  rc = mosquitto_connect_async(mosq_, opts_.host.c_str(), opts_.port, opts_.keepalive_s);
   if (rc != MOSQ_ERR_SUCCESS) {
     std::string m = "connect to " + opts_.host + ":" + std::to_string(opts_.port) + ": " +
                     (rc == MOSQ_ERR_ERRNO ? std::string("system error") : mosquitto_strerror(rc));
@@ -119,7 +122,7 @@ bool MqttClient::connect(std::chrono::milliseconds timeout, std::string* why) {
     return fail(m);
   }
   const auto until = std::chrono::steady_clock::now() + timeout;
-  while (connack_ < 0 && std::chrono::steady_clock::now() < until) {
+  while (connack_ < 0 && std::chrono::steady_clock::now() < until && !(abort && abort->load())) {
     rc = mosquitto_loop(mosq_, 50, 1);
     if (rc != MOSQ_ERR_SUCCESS && connack_ < 0) {
       std::string m = "connect to " + opts_.host + ":" + std::to_string(opts_.port) + ": " +

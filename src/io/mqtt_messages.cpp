@@ -11,6 +11,7 @@
 #include "errsep/core/iso230.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/results_store.hpp"
+#include "errsep/io/utc_time.hpp"
 
 namespace errsep::io {
 namespace {
@@ -39,19 +40,6 @@ json opt(const std::optional<double>& v) {
 }
 
 }  // namespace
-
-std::string utc_now_iso() {
-  return utc_iso(std::chrono::system_clock::now());
-}
-
-std::string utc_iso(std::chrono::system_clock::time_point t) {
-  const std::time_t tt = std::chrono::system_clock::to_time_t(t);
-  std::tm tm{};
-  ::gmtime_r(&tt, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
 
 ScanSummary summarize_stored_scan(const std::filesystem::path& store_dir, std::string_view stem,
                                   const std::string& machine) {

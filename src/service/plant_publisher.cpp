@@ -243,7 +243,7 @@ void PlantPublisher::run() {
         continue;
       }
       std::string why;
-      if (client.connect(opts_.connect_timeout, &why)) {
+      if (client.connect(opts_.connect_timeout, &why, &stop_)) {
         retry = opts_.retry_min;
         last_logged_error.clear();
         {

@@ -7,6 +7,7 @@
 // Each connect() starts from a fresh libmosquitto instance (clean session): nothing the library
 // kept of a dropped connection is re-sent behind the caller's back; the caller re-publishes
 // whatever was not acknowledged (at least once, duplicates carry their scan id).
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <filesystem>
@@ -39,10 +40,11 @@ class MqttClient {
   MqttClient(const MqttClient&) = delete;
   MqttClient& operator=(const MqttClient&) = delete;
 
-  /// Opens the connection and waits for the broker's CONNACK up to `timeout`.  False, with the
-  /// reason in `why` (refused: not authorised, TLS handshake failed, no broker, no answer), when
-  /// not connected.
-  bool connect(std::chrono::milliseconds timeout, std::string* why);
+  /// Opens the connection (non-blocking TCP connect) and waits for the broker's CONNACK up to
+  /// `timeout`, or until `*abort` becomes true.  False, with the reason in `why` (refused: not
+  /// authorised, TLS handshake failed, no broker, no answer), when not connected.
+  bool connect(std::chrono::milliseconds timeout, std::string* why,
+               const std::atomic<bool>* abort = nullptr);
   bool connected() const noexcept { return connected_; }
   /// Queues a PUBLISH; returns its message id (> 0), or 0 with the reason in `why`.  For QoS >=
   /// 1, on_ack(mid) is called from loop() when the broker acknowledged it (PUBACK / PUBCOMP).

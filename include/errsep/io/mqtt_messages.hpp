@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "errsep/core/four_sensor.hpp"
+#include "errsep/io/utc_time.hpp"  // utc_iso, utc_now_iso
 
 namespace errsep::io {
 
@@ -109,9 +110,5 @@ struct CommandReply {
   std::string time_utc;
 };
 std::string to_json(const CommandReply& r);
-
-/// "YYYY-mm-ddTHH:MM:SSZ" of `t`, and of now.
-std::string utc_iso(std::chrono::system_clock::time_point t);
-std::string utc_now_iso();
 
 }  // namespace errsep::io
