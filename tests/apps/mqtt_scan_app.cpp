@@ -14,7 +14,7 @@
 using namespace errsep;
 using namespace std::chrono_literals;
 
-TEST_CASE("errsep-scan publishes its summary; broker down: queued on disk, sent by the next run") {
+TEST_CASE("errsep-scan publishes its summary - broker down: queued on disk, sent by the next run") {
   if (const auto why = test::mqtt_tools_missing(); !why.empty()) {
     std::cout << "SKIPPED: " << why << "\n";
     return;

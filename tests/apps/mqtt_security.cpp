@@ -39,7 +39,7 @@ bool any_store_file(const std::filesystem::path& dir) {
 }  // namespace
 
 TEST_CASE(
-    "security: commands need the password and the ACL; malformed and busy requests are refused "
+    "security: commands need the password and the ACL, malformed and busy requests are refused "
     "with a reason") {
   if (const auto why = test::mqtt_tools_missing(); !why.empty()) {
     std::cout << "SKIPPED: " << why << "\n";
@@ -138,7 +138,7 @@ TEST_CASE(
 }
 
 TEST_CASE(
-    "security: with TLS configured errsep connects through TLS only; plain TCP to the TLS listener "
+    "security: with TLS configured errsep connects through TLS only, plain TCP to the TLS listener "
     "is refused") {
   if (const auto why = test::mqtt_tools_missing(); !why.empty()) {
     std::cout << "SKIPPED: " << why << "\n";

@@ -70,7 +70,7 @@ std::string stored_scan(const std::filesystem::path& dir, double mz_um, double U
 
 }  // namespace
 
-TEST_CASE("[mqtt] table: defaults and mistakes named with file, line and key") {
+TEST_CASE("mqtt table of the machine config: defaults and mistakes named with file, line and key") {
   const std::string cfg = base_config();
   const auto c = io::parse_machine_config(cfg + "\n[mqtt]\nmachine = \"mill-7\"\n", "t.toml");
   REQUIRE(c.mqtt);
@@ -98,7 +98,7 @@ TEST_CASE("[mqtt] table: defaults and mistakes named with file, line and key") {
              Catch::Contains("mqtt.broker: unknown key"));
 }
 
-TEST_CASE("cmd/scan payloads: only {\"request_id\": \"...\"}; the rest refused with a reason") {
+TEST_CASE("cmd/scan payloads: only a request_id - the rest refused with a reason") {
   std::string why;
   const auto ok = io::parse_scan_command(R"({"request_id":"abc-1"})", &why);
   REQUIRE(ok);
@@ -122,7 +122,7 @@ TEST_CASE("cmd/scan payloads: only {\"request_id\": \"...\"}; the rest refused w
   }
 }
 
-TEST_CASE("scan summary from the results store; alarms; every payload valid against the schema") {
+TEST_CASE("scan summary from the results store - alarms - every payload valid against the schema") {
   test::TempDir tmp;
   const std::string stem = stored_scan(tmp / "results", 3.2, 0.4);
   const io::ScanSummary s = io::summarize_stored_scan(tmp / "results", stem, "mill-7");
