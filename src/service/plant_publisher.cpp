@@ -90,6 +90,7 @@ PublisherCounters PlantPublisher::counters() const {
 
 void PlantPublisher::queue(const std::string& topic_suffix, const std::string& payload) {
   queue_.push(opts_.mqtt.topic_root() + "/" + topic_suffix, payload);
+  new_messages_.store(true);
 }
 
 void PlantPublisher::scan_committed(const std::filesystem::path& store_dir, const std::string& stem,
@@ -100,6 +101,7 @@ void PlantPublisher::scan_committed(const std::filesystem::path& store_dir, cons
   for (const auto& a : io::alarms_for(s, opts_.mqtt.straightness_tolerance_um))
     queue_.push(root + "/alarm", io::to_json(a));
   queue_.raise_scan_high_water(scan_id);
+  new_messages_.store(true);
 }
 
 int PlantPublisher::queue_unpublished(const io::ResultsStore& store) {
@@ -162,10 +164,12 @@ void PlantPublisher::run() {
 
   drivers::MqttClient client(co);
   std::map<int, std::uint64_t> inflight;  // message id -> queue seq
+  bool acked_since_list = false;          // room in flight: look at the queue again now
   std::set<std::uint64_t> sent, unreadable;
   client.on_ack = [&](int mid) {
     const auto it = inflight.find(mid);
     if (it == inflight.end()) return;  // a status or reply
+    acked_since_list = true;
     try {
       queue_.remove(it->second);
     } catch (const std::exception& e) {
@@ -276,8 +280,12 @@ void PlantPublisher::run() {
       publish_status(false);
       next_status = now + std::chrono::milliseconds(250);
     }
-    if (static_cast<int>(inflight.size()) < opts_.max_inflight && now >= next_list) {
+    // The queue is listed when something was queued here, when acknowledgements made room, or
+    // every 100 ms (another process may share the queue).
+    if (static_cast<int>(inflight.size()) < opts_.max_inflight &&
+        (new_messages_.exchange(false) || acked_since_list || now >= next_list)) {
       next_list = now + std::chrono::milliseconds(100);
+      acked_since_list = false;
       for (const std::uint64_t seq : queue_.list()) {
         if (static_cast<int>(inflight.size()) >= opts_.max_inflight) break;
         if (sent.count(seq) || unreadable.count(seq)) continue;

@@ -105,6 +105,7 @@ class PlantPublisher {
   io::MessageQueue queue_;
   std::thread thread_;
   std::atomic<bool> stop_{false}, wake_{false};
+  std::atomic<bool> new_messages_{false};  ///< queued by this process since the last look
   std::chrono::milliseconds grace_{1000};
   mutable std::mutex mu_;  // guards counters_
   PublisherCounters counters_;
