@@ -32,12 +32,19 @@ std::pair<std::string, std::string> split_topic(const std::string& t) {
   return {t.substr(a + 1, b - a - 1), t.substr(b + 1)};
 }
 
-std::set<std::string> result_stems(const std::filesystem::path& results) {
-  std::set<std::string> out;
+/// Scans of a results store by stem, with the kinds of their files.
+std::map<std::string, std::set<std::string>> stored_scans(const std::filesystem::path& results) {
+  std::map<std::string, std::set<std::string>> out;
   for (const auto& e : std::filesystem::directory_iterator(results))
-    if (const auto f = io::parse_store_name(e.path()); f && f->kind == "result")
-      out.insert(f->stem);
+    if (const auto f = io::parse_store_name(e.path())) out[f->stem].insert(f->kind);
   return out;
+}
+
+std::set<std::string> stems(const std::map<std::string, std::set<std::string>>& scans) {
+  std::set<std::string> s;
+  for (const auto& [stem, kinds] : scans)
+    s.insert(stem);
+  return s;
 }
 
 }  // namespace
@@ -141,23 +148,44 @@ TEST_CASE(
     REQUIRE(sums.count(names[i]));
     CHECK(static_cast<int>(sums.at(names[i]).size()) == kScans);
     // Exactly the scans of the local store, by scan id.
-    CHECK(sums.at(names[i]) == result_stems(rigs[i]->results));
+    CHECK(sums.at(names[i]) == stems(stored_scans(rigs[i]->results)));
   }
   // Every payload received is valid against the schema, and each summary is a complete scan
   // with its straightness and U.
   const std::string invalid = test::validate_payloads(msgs);
   INFO(invalid);
   CHECK(invalid.empty());
+  // Each summary says what the local store holds: a complete scan has its result and its
+  // straightness; a scan that a device fault ended (the loaded test machine can starve the
+  // simulator past the sensor bus's 20 ms timeout) says so and has its alarm.
+  std::set<std::string> alarms;
+  for (const auto& m : msgs)
+    if (split_topic(m.topic).second == "alarm")
+      alarms.insert(split_topic(m.topic).first + "/" + test::json_field(m.payload, "scan_id") +
+                    "/" + test::json_field(m.payload, "kind"));
+  int complete = 0, faulted = 0;
   for (const auto& m : msgs) {
     const auto [machine, rest] = split_topic(m.topic);
     if (rest.rfind("scan/", 0) != 0) continue;
     INFO(m.payload);
-    CHECK(test::json_field(m.payload, "scan_id") == rest.substr(5));
+    const std::string id = rest.substr(5);
+    CHECK(test::json_field(m.payload, "scan_id") == id);
     CHECK(test::json_field(m.payload, "machine") == machine);
-    CHECK(test::json_field(m.payload, "outcome") == "complete");
     CHECK(test::json_field(m.payload, "trigger") == "mqtt");
-    CHECK(test::json_field(m.payload, "straightness") != "null");
+    const auto store = stored_scans(rigs[std::stoul(machine.substr(1))]->results);
+    REQUIRE(store.count(id));
+    if (store.at(id).count("result")) {
+      ++complete;
+      CHECK(test::json_field(m.payload, "outcome") == "complete");
+      CHECK(test::json_field(m.payload, "straightness") != "null");
+    } else {
+      ++faulted;
+      CHECK(test::json_field(m.payload, "outcome") == "device_fault");
+      CHECK(alarms.count(machine + "/" + id + "/device_fault") == 1);
+    }
   }
+  std::cout << "fleet: " << complete << " complete scans, " << faulted
+            << " ended by a device fault (summary and alarm published)\n";
 
   // Retained status: a subscriber that comes now sees every machine's status at once.
   {

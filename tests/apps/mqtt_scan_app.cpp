@@ -24,9 +24,8 @@ TEST_CASE("errsep-scan publishes its summary - broker down: queued on disk, sent
   test::MqttSubscriber sub(broker, "viewer", "errsep/#", "scan-app-subscriber");
   test::TempDir tmp;
   {
-    std::ifstream in(test::source_dir() / "tests/apps/daemon_machine.toml");
     std::ofstream out(tmp / "machine.toml");
-    out << in.rdbuf() << test::mqtt_table(broker, "m0", false);
+    out << test::mqtt_machine_toml() << test::mqtt_table(broker, "m0", false);
   }
   auto scan = [&](const std::string& out_dir, const std::string& extra, std::string* output) {
     return test::run_command(test::app_path("scan").string() + " -c " +

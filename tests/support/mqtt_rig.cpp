@@ -271,9 +271,21 @@ std::string mqtt_table(const MqttBroker& broker, const std::string& machine, boo
   return t.str();
 }
 
+std::string mqtt_machine_toml() {
+  // The sensor bus's 20 ms response timeout of the daemon tests, raised: eight services and
+  // their simulators on two loaded cores (under ASan too) miss 20 ms now and then, and a
+  // device fault is not what these tests are about (tests/drivers/modbus_faults.cpp is).
+  std::string t = read_all(source_dir() / "tests/apps/daemon_machine.toml");
+  const std::string from = "response_timeout_ms = 20\n";
+  const auto p = t.find(from);
+  if (p == std::string::npos)
+    throw std::runtime_error("daemon_machine.toml: no 'response_timeout_ms = 20' to raise");
+  return t.replace(p, from.size(), "response_timeout_ms = 200\n");
+}
+
 void use_mqtt_config(DaemonRig& rig, const std::string& mqtt_toml) {
   const auto cfg = rig.tmp / "machine.toml";
-  write_text(cfg, read_all(source_dir() / "tests/apps/daemon_machine.toml") + mqtt_toml);
+  write_text(cfg, mqtt_machine_toml() + mqtt_toml);
   rig.config = cfg;
 }
 

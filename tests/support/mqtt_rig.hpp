@@ -106,7 +106,9 @@ std::string json_field(const std::string& payload, const std::string& key);
 std::string mqtt_table(const MqttBroker& broker, const std::string& machine, bool commands,
                        bool tls = false, const std::filesystem::path& queue_dir = {});
 
-/// A daemon rig whose machine config is tests/apps/daemon_machine.toml plus `mqtt_toml`.
+/// tests/apps/daemon_machine.toml with the sensor bus's response timeout raised to 200 ms.
+std::string mqtt_machine_toml();
+/// A daemon rig whose machine config is mqtt_machine_toml() plus `mqtt_toml`.
 void use_mqtt_config(DaemonRig& rig, const std::string& mqtt_toml);
 
 }  // namespace errsep::test
