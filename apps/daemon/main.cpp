@@ -168,6 +168,14 @@ int main(int argc, char** argv) {
     if (!notifier.error().empty()) std::cerr << "<4>" << notifier.error() << "\n";
     errsep::acq::Daemon daemon(opts, factory, notifier);
     daemon_ptr = &daemon;
+    // The publisher's thread asks the daemon for its status: it stops before the daemon goes,
+    // on every way out of this block.
+    struct StopFirst {
+      errsep::service::PlantPublisher* p;
+      ~StopFirst() {
+        if (p) p->stop();
+      }
+    } stop_publisher_first{publisher.get()};
     if (publisher) {
       // Scans written before a kill but not queued (their ids are above the queue's mark).
       publisher->queue_unpublished(errsep::io::ResultsStore(opts.results));

@@ -67,7 +67,10 @@ TEST_CASE(
   std::vector<std::unique_ptr<test::DaemonRig>> rigs;
   for (int i = 0; i < kServices; ++i) {
     auto rig = std::make_unique<test::DaemonRig>();
-    test::use_mqtt_config(*rig, test::mqtt_table(broker, names[static_cast<std::size_t>(i)], true));
+    // m1 has a straightness tolerance far below the simulated slideway's (~22 um): an alarm
+    // per complete scan.
+    test::use_mqtt_config(*rig, test::mqtt_table(broker, names[static_cast<std::size_t>(i)], true) +
+                                    (i == 1 ? "straightness_tolerance_um = 1.0\n" : ""));
     rig->devsim.start(rig->config, rig->tmp / "devsim.log");
     rig->start_daemon();
     rigs.push_back(std::move(rig));
@@ -184,6 +187,23 @@ TEST_CASE(
       CHECK(alarms.count(machine + "/" + id + "/device_fault") == 1);
     }
   }
+  // The tolerance alarms: m1's complete scans, each exceeded beyond its U; nobody else's.
+  int tolerance_alarms = 0;
+  for (const auto& m : msgs)
+    if (split_topic(m.topic).second == "alarm" &&
+        test::json_field(m.payload, "kind") == "straightness_tolerance") {
+      INFO(m.payload);
+      ++tolerance_alarms;
+      CHECK(split_topic(m.topic).first == "m1");
+      CHECK(test::json_field(m.payload, "proven") == "true");
+      const auto store = stored_scans(rigs[1]->results);
+      const std::string id = test::json_field(m.payload, "scan_id");
+      CHECK((store.count(id) && store.at(id).count("result")));
+    }
+  int m1_complete = 0;
+  for (const auto& [stem, kinds] : stored_scans(rigs[1]->results))
+    m1_complete += kinds.count("result") ? 1 : 0;
+  CHECK(tolerance_alarms == m1_complete);
   std::cout << "fleet: " << complete << " complete scans, " << faulted
             << " ended by a device fault (summary and alarm published)\n";
 
