@@ -170,6 +170,11 @@ void PlantPublisher::run() {
     const auto it = inflight.find(mid);
     if (it == inflight.end()) return;  // a status or reply
     acked_since_list = true;
+    {
+      // Counted before the file goes: whoever sees the queue empty sees every count.
+      std::lock_guard<std::mutex> lock(mu_);
+      ++counters_.acknowledged;
+    }
     try {
       queue_.remove(it->second);
     } catch (const std::exception& e) {
@@ -177,8 +182,6 @@ void PlantPublisher::run() {
     }
     sent.erase(it->second);
     inflight.erase(it);
-    std::lock_guard<std::mutex> lock(mu_);
-    ++counters_.acknowledged;
   };
   auto reply = [&](const io::CommandReply& r) {
     std::string why;

@@ -173,7 +173,8 @@ TEST_CASE(
   ok->queue("alarm", R"({"type":"alarm"})");
   ok->start();
   const auto until = std::chrono::steady_clock::now() + 20s;
-  while (ok->counters().acknowledged < 1 && std::chrono::steady_clock::now() < until)
+  while ((ok->counters().acknowledged < 1 || ok->queued() > 0) &&
+         std::chrono::steady_clock::now() < until)
     std::this_thread::sleep_for(20ms);
   CHECK(ok->counters().acknowledged == 1);
   CHECK(ok->queued() == 0);
