@@ -160,7 +160,8 @@ TEST_CASE(
     CHECK(ps.size() == 1);
   }
   std::cout << "faults: " << scan_msgs << " scan messages for " << payloads.size() << " scans ("
-            << scan_msgs - payloads.size() << " duplicates)\n";
+            << scan_msgs - payloads.size() << " duplicates); m1 SIGKILLed with " << queued_m1
+            << " messages queued\n";
   const std::string invalid = test::validate_payloads(msgs);
   INFO(invalid);
   CHECK(invalid.empty());
