@@ -98,7 +98,14 @@ CsvTable trend_table(const StraightnessTrend& t) {
   c.add_column("scan_number", col([](const TrendPoint& p) { return double(p.scan_number); }));
   c.add_column("straightness_um", col([](const TrendPoint& p) { return p.straightness_um; }));
   c.add_column("U_um", col([](const TrendPoint& p) { return p.U_um; }));
-  c.add_column("sigma_hat_um", col([](const TrendPoint& p) { return p.sigma_hat_um; }));
+  // Only when every result says it: a CSV cell is a number (csv.hpp), never a NaN.
+  bool all_sigma = true;
+  for (const auto& p : t.points)
+    all_sigma = all_sigma && std::isfinite(p.sigma_hat_um);
+  if (all_sigma)
+    c.add_column("sigma_hat_um", col([](const TrendPoint& p) { return p.sigma_hat_um; }));
+  else
+    c.set_meta("sigma_hat_um", "not in every result file: column left out");
   c.add_column("change_um", col([](const TrendPoint& p) { return p.change_um; }));
   c.add_column("change_U_um", col([](const TrendPoint& p) { return p.change_U_um; }));
   c.add_column("significant", col([](const TrendPoint& p) { return p.significant ? 1.0 : 0.0; }));

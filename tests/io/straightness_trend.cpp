@@ -22,7 +22,9 @@
 #include "errsep/io/csv.hpp"
 #include "errsep/io/mqtt_messages.hpp"
 #include "errsep/io/results_store.hpp"
+#include "errsep/io/scan_report.hpp"
 #include "support/refine_cases.hpp"
+#include "support/result_dir.hpp"
 #include "support/support.hpp"
 
 using namespace errsep;
@@ -186,4 +188,39 @@ TEST_CASE("trend rule on hand-made results: step, drift, skipped files, CSV and 
   CHECK(text.find("SIGNIFICANT") != std::string::npos);
   CHECK(text.find("skipped") != std::string::npos);
   CHECK_THROWS_WITH(io::straightness_trend(tmp / "nope"), Catch::Contains("not a directory"));
+}
+
+TEST_CASE("the report shows the trend of the results store and warns of a significant change") {
+  test::TempDir tmp;
+  test::write_four_sensor_result(tmp / "report");
+  auto store = make_store(tmp / "results");
+  const std::vector<std::pair<const char*, const char*>> figures = {
+      {"3.0", "0.4"}, {"3.2", "0.4"}, {"4.5", "0.4"}};
+  std::uint64_t id = 0;
+  for (const auto& [t_um, U_um] : figures) {
+    io::CsvTable t;
+    t.set_meta("straightness_minimum_zone_um", t_um);
+    t.set_meta("straightness_minimum_zone_U_um", U_um);
+    t.add_column("x_mm", {0, 1});
+    store.write(io::ResultsStore::stem(std::chrono::system_clock::now(), ++id), "result",
+                io::format_csv(t));
+  }
+  io::ScanReportOptions o;
+  o.plots = false;
+  o.tables = false;
+  o.trend_results_dir = tmp / "results";
+  const auto res = io::write_scan_report(tmp / "report", o);
+  CHECK(std::filesystem::exists(tmp / "report" / "trend.csv"));
+  CHECK(res.text.find("Straightness trend") != std::string::npos);
+  CHECK(res.text.find("SIGNIFICANT") != std::string::npos);
+  bool warned = false;
+  for (const auto& w : res.warnings)
+    warned = warned || w.find("changed beyond the combined U") != std::string::npos;
+  CHECK(warned);
+  const auto t = io::read_csv(tmp / "report" / "trend.csv");
+  CHECK(t.column("significant") == std::vector<double>{0, 0, 1});
+  // Without the option: no trend.
+  o.trend_results_dir.clear();
+  const auto plain = io::write_scan_report(tmp / "report", o);
+  CHECK(plain.text.find("Straightness trend") == std::string::npos);
 }

@@ -48,8 +48,9 @@ struct StraightnessTrend {
 /// directory cannot be read.  Results without straightness metadata are listed in `skipped`.
 StraightnessTrend straightness_trend(const std::filesystem::path& results_dir);
 
-/// One row per scan: scan_number, straightness_um, U_um, sigma_hat_um, change_um, change_U_um,
-/// significant (0/1), drift_um, drift_U_um, drift_significant (0/1); scan ids in metadata.
+/// One row per scan: scan_number, straightness_um, U_um, sigma_hat_um (when every result has
+/// it), change_um, change_U_um, significant (0/1), drift_um, drift_U_um, drift_significant (0/1);
+/// scan ids in metadata.
 CsvTable trend_table(const StraightnessTrend& t);
 /// The trend as text lines (for evaluation.txt): one line per scan, flagged changes marked.
 std::string format_trend(const StraightnessTrend& t);
