@@ -129,7 +129,7 @@ service::PlantPublisherOptions options(const std::string& host, int port, const 
 
 /// 1 kHz sampler with 4 fake sensors for `seconds`, a consumer draining the ring; `during` runs
 /// on another thread meanwhile.
-acq::SamplerStats sample_for(double seconds,
+acq::SamplerStats sample_for(double seconds, bool realtime,
                              const std::function<void(std::atomic<bool>&)>& during) {
   std::vector<std::unique_ptr<acq::FakeSensor>> sensors;
   std::vector<acq::DisplacementSensor*> ptrs;
@@ -143,6 +143,10 @@ acq::SamplerStats sample_for(double seconds,
   acq::SpscRing<acq::Sample> ring(65536);
   acq::SamplerOptions so;
   so.rate_hz = 1000;
+  if (realtime) {  // as [sampler] realtime = true: SCHED_FIFO 80 and mlockall, if permitted
+    so.realtime.fifo_priority = 80;
+    so.realtime.lock_memory = true;
+  }
   acq::Sampler sampler(ptrs, ring, so);
   std::uint64_t consumed = 0;
   acq::RingConsumer consumer({&ring}, [&](const acq::Sample&) { ++consumed; });
@@ -177,6 +181,7 @@ int main(int argc, char** argv) {
   std::string host = "127.0.0.1";
   int port = 0, messages = 1000, latency_samples = 50;
   double seconds = 5;
+  bool realtime = false;
   app.add_option("--host", host, "broker (with --port; default: start a Mosquitto here)");
   app.add_option("--port", port, "broker port (0 = start a Mosquitto on loopback)")
       ->check(CLI::Range(0, 65535));
@@ -189,6 +194,9 @@ int main(int argc, char** argv) {
   app.add_option("--seconds", seconds, "sampling time per jitter condition")
       ->capture_default_str()
       ->check(CLI::Range(0.5, 3600.0));
+  app.add_flag("--realtime", realtime,
+               "sampling thread with SCHED_FIFO 80 + mlockall, as [sampler] realtime = true "
+               "(needs the privilege; a warning otherwise)");
   CLI11_PARSE(app, argc, argv);
   std::signal(SIGPIPE, SIG_IGN);
 
@@ -254,11 +262,13 @@ int main(int argc, char** argv) {
           latency_samples, percentile(lat, 0.5), percentile(lat, 0.95), percentile(lat, 1.0));
     }
     // 4: sampler jitter.
-    std::printf("4. sampling thread, 1 kHz, 4 fake sensors, %.1f s each:\n", seconds);
-    print_jitter("no publishing", sample_for(seconds, [](std::atomic<bool>& stop) {
+    std::printf("4. sampling thread, 1 kHz, 4 fake sensors, %.1f s each, %s:\n", seconds,
+                realtime ? "SCHED_FIFO" : "normal priority");
+    print_jitter("no publishing", sample_for(seconds, realtime, [](std::atomic<bool>& stop) {
                    while (!stop.load())
                      std::this_thread::sleep_for(std::chrono::milliseconds(5));
                  }));
+    std::string note;  // what the publishing thread did, printed after its jitter line
     auto publishing = [&](const fs::path& q, bool block) {
       return [&, q, block](std::atomic<bool>& stop) {
         service::PlantPublisher pub(options(host, port, q), {});
@@ -272,14 +282,18 @@ int main(int argc, char** argv) {
         }
         pub.stop(std::chrono::milliseconds(100));
         if (block && broker) ::kill(broker->pid, SIGCONT);
-        std::printf("  (%d scans queued, %zu left on disk)\n", i, pub.queued());
+        note = "    (" + std::to_string(i) + " scans queued meanwhile, " +
+               std::to_string(pub.queued()) + " left on disk at the end)\n";
       };
     };
-    print_jitter("publishing 100 scans/s", sample_for(seconds, publishing(tmp / "q3", false)));
-    if (broker)
+    print_jitter("publishing 100 scans/s",
+                 sample_for(seconds, realtime, publishing(tmp / "q3", false)));
+    std::fputs(note.c_str(), stdout);
+    if (broker) {
       print_jitter("publishing to a SIGSTOPped broker",
-                   sample_for(seconds, publishing(tmp / "q4", true)));
-    else
+                   sample_for(seconds, realtime, publishing(tmp / "q4", true)));
+      std::fputs(note.c_str(), stdout);
+    } else
       std::printf("  (blocked-broker condition needs the bench's own broker: omit --port)\n");
     broker.reset();
     std::error_code ec;
