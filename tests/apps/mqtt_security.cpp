@@ -8,6 +8,9 @@
 //    reason ("a scan is running"), as the Modbus coil is;
 //  - with TLS configured, errsep connects only through TLS: to a plain-TCP listener it does not
 //    connect (no fall-back), and a plain-TCP client is refused by the TLS listener.
+#include <signal.h>
+#include <sys/wait.h>
+
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <iostream>
@@ -138,6 +141,23 @@ TEST_CASE(
         return false;
       },
       20s);
+  // A clean stop: exit 0 (no sanitizer report under ASan), the retained status says offline.
+  rig.daemon->signal(SIGTERM);
+  const auto st = rig.daemon->wait(15s);
+  REQUIRE(st);
+  CHECK(WIFEXITED(*st));
+  CHECK(WEXITSTATUS(*st) == 0);
+  CHECK(rig.logs().find("Sanitizer") == std::string::npos);
+  CHECK(rig.logs().find("runtime error") == std::string::npos);
+  msgs = sub.wait(
+      [](const auto& ms) {
+        return !ms.empty() && ms.back().topic == "errsep/m0/status" &&
+               test::json_field(ms.back().payload, "state") == "offline";
+      },
+      10s);
+  REQUIRE_FALSE(msgs.empty());
+  CHECK(msgs.back().topic == "errsep/m0/status");
+  CHECK(test::json_field(msgs.back().payload, "message") == "stopped");
   const std::string invalid = test::validate_payloads(msgs);
   INFO(invalid);
   CHECK(invalid.empty());
