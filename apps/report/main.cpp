@@ -68,6 +68,10 @@ int main(int argc, char** argv) {
                  "standard uncertainty of each w(x, y) node in um (from errsep-budget), when the "
                  "grid CSV has no u_w_um column")
       ->check(CLI::NonNegativeNumber);
+  app.add_option("--trend", o.trend_results_dir,
+                 "the daemon's results store: add this machine's straightness over its past "
+                 "scans (trend.csv) and flag a change beyond the combined U")
+      ->check(CLI::ExistingDirectory);
   app.add_flag("--no-plots", no_plots, "do not run gnuplot (the report then has no figures)");
   app.add_flag("--no-tables", no_tables, "do not write compensation tables");
   app.add_option("--gnuplot", o.plot.gnuplot, "gnuplot program");

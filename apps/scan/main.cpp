@@ -22,6 +22,7 @@
 #include <iostream>
 #include <memory>
 #include <optional>
+#include <thread>
 
 #include "errsep/acq/scan_runner.hpp"
 #include "errsep/core/displacement_method.hpp"
@@ -31,9 +32,12 @@
 #include "errsep/drivers/simulator_process.hpp"
 #include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/machine_config.hpp"
+#include "errsep/io/mqtt_messages.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/refine_run.hpp"
 #include "errsep/io/staged_directory.hpp"
+#include "errsep/io/results_store.hpp"
+#include "errsep/service/plant_publisher.hpp"
 #include "errsep/version.hpp"
 
 namespace {
@@ -76,9 +80,9 @@ core::FourSensorOptions separation_options(const std::string& gauge) {
 
 /// Separation of a complete four-sensor raw scan, with the defaults of errsep-separate, written
 /// into `out`; `raw_file` and `run_id` go into the results' metadata.
-void separate_four_sensor(const io::RawFourSensorScan& raw, const fs::path& raw_file,
-                          const fs::path& out, const std::string& gauge,
-                          const std::string& run_id) {
+core::FourSensorResult separate_four_sensor(const io::RawFourSensorScan& raw,
+                                            const fs::path& raw_file, const fs::path& out,
+                                            const std::string& gauge, const std::string& run_id) {
   const auto& g = *raw.geometry;
   const auto P = static_cast<Eigen::Index>(raw.positions());
   Eigen::MatrixXd m(P, 4);
@@ -93,6 +97,33 @@ void separate_four_sensor(const io::RawFourSensorScan& raw, const fs::path& raw_
                  "by the discrepancy principle instead\n";
   else if (res.lambda_fallback == core::LambdaFallback::collapse_least_squares)
     std::cerr << "warning: " << res.determination_note << "\n";
+  return res;
+}
+
+/// [mqtt]: the scan's summary (and alarms) into the disk queue beside OUT, then up to `wait_s`
+/// to deliver it; what is left stays queued for the next run (or the daemon sharing the queue).
+void publish_summary(const io::MqttConfig& mqtt, io::ScanSummary s, const fs::path& out,
+                     double wait_s) {
+  service::PlantPublisherOptions po;
+  po.mqtt = mqtt;
+  po.queue_dir = service::default_queue_dir(mqtt, out);
+  service::PlantPublisher pub(po, {});  // no status: the machine's status topic is the daemon's
+  s.machine = mqtt.machine;
+  pub.queue("scan/" + s.scan_id, io::to_json(s));
+  for (const auto& a : io::alarms_for(s, mqtt.straightness_tolerance_um))
+    pub.queue("alarm", io::to_json(a));
+  pub.start();
+  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(wait_s);
+  while (pub.queued() > 0 && std::chrono::steady_clock::now() < until)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  pub.stop(std::chrono::milliseconds(200));
+  const auto left = pub.queued();
+  std::cout << "mqtt: " << mqtt.topic_root() << "/scan/" << s.scan_id << ": "
+            << (left == 0
+                    ? std::string("delivered")
+                    : std::to_string(left) + " messages left queued in " + po.queue_dir.string() +
+                          " (" + pub.counters().last_error + "); sent by the next run")
+            << "\n";
 }
 
 void separate_displacement(const io::RawDisplacementScan& raw) {
@@ -121,6 +152,8 @@ int main(int argc, char** argv) {
   int averages = 0, settle_ms = -1;
   bool no_separate = false, refine = false;
   std::string refine_reference;
+  double mqtt_wait_s = 10;
+  bool no_mqtt = false;
   app.add_option("-c,--config", config_path, "machine config (TOML)")->capture_default_str();
   app.add_option("-o,--out", out_dir, "output directory (default: [scan] output_dir)");
   app.add_option("--method", method, "four_sensor, displacement or both (default: [scan] method)")
@@ -148,6 +181,12 @@ int main(int argc, char** argv) {
                  "zero-adjustment values have no quadratic part), paper_eq12")
       ->check(CLI::IsMember({"sensor_stage", "reference", "paper_eq12"}))
       ->capture_default_str();
+  app.add_option("--mqtt-wait-s", mqtt_wait_s,
+                 "[mqtt] in the config: wait this long for the broker to take the scan's summary "
+                 "(what is not delivered stays queued on disk for the next run)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 3600.0));
+  app.add_flag("--no-mqtt", no_mqtt, "do not publish, even with [mqtt] in the config");
   CLI11_PARSE(app, argc, argv);
 
   struct sigaction sa {};
@@ -175,6 +214,7 @@ int main(int argc, char** argv) {
       std::cout << swept << "\n";
     const fs::path work = stage.dir();
     std::vector<std::string> written;
+    std::optional<io::ScanSummary> summary;  // published once the set is in place
 
     // The embedded default: no machine, start the device simulator and talk to it.
     std::unique_ptr<drivers::SimulatorProcess> sim;
@@ -207,6 +247,7 @@ int main(int argc, char** argv) {
       acq::ScanHooks hooks;
       hooks.progress = [&printer](const acq::ScanProgress& p) { printer(p); };
       hooks.abort = &g_abort;
+      const auto started = std::chrono::system_clock::now();
       auto res = acq::run_scan(devices, opts, hooks);
       if (printer.tty && res.counts.points_done != res.counts.points_total)
         std::fputc('\n', stderr);
@@ -242,7 +283,22 @@ int main(int argc, char** argv) {
       if (no_separate) continue;
       try {
         if (res.four_sensor) {
-          separate_four_sensor(*res.four_sensor, raw_file, work, gauge, stage.run_id());
+          const auto sep =
+              separate_four_sensor(*res.four_sensor, raw_file, work, gauge, stage.run_id());
+          io::ScanSummary s;
+          // A scan id unique per machine: the start time and this process.
+          s.scan_id = io::ResultsStore::stem(started, 0).substr(0, 16) + "_scan-app-" +
+                      std::to_string(::getpid());
+          s.started_utc = io::utc_iso(started);
+          s.ended_utc = io::utc_now_iso();
+          s.trigger = "manual";
+          s.outcome = "complete";
+          s.points_measured =
+              std::to_string(res.counts.points_done) + "/" + std::to_string(res.counts.points_total);
+          s.files = {"raw.csv",    "motion.csv",    "reference.csv",
+                     "lcurve.csv", "residuals.csv", "summary.txt"};
+          io::add_separation(s, sep);
+          summary = s;
           written.push_back(
               "results: " + out.string() +
               "/ (motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt)");
@@ -262,6 +318,14 @@ int main(int argc, char** argv) {
               std::cerr << "warning: the refined model is incomplete (residual not white or "
                            "implausible effects rejected): see "
                         << (out / "refine" / "refine_report.txt").string() << "\n";
+            io::ScanSummary::Refine rf;
+            rf.model_complete = run.result.model_complete();
+            rf.verdict = run.result.brief_report();
+            rf.model = run.result.model_name;
+            for (std::size_t k = 1; k < run.result.steps.size(); ++k)
+              rf.steps.push_back(run.result.steps[k].effect);
+            summary->refine = rf;
+            summary->files.push_back("refine/refine_report.txt");
           }
         } else {
           separate_displacement(*res.displacement);
@@ -276,6 +340,7 @@ int main(int argc, char** argv) {
                            [](const std::string& l) { return l.rfind("raw data: ", 0) != 0; }),
             written.end());
         std::cerr << "errsep-scan: separation failed: " << e.what() << "; the raw data is kept\n";
+        summary.reset();
         exit_code = 1;
         break;
       }
@@ -285,6 +350,8 @@ int main(int argc, char** argv) {
     stage.commit();  // the whole set, in one rename
     for (const auto& line : written)
       std::cout << line << "\n";
+    // Store and forward: the result is on disk first, then its summary goes to the queue.
+    if (summary && cfg.mqtt && !no_mqtt) publish_summary(*cfg.mqtt, *summary, out, mqtt_wait_s);
   } catch (const std::exception& e) {
     std::cerr << "errsep-scan: " << e.what() << "\n";
     return 1;

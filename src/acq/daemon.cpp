@@ -22,6 +22,7 @@
 #include "errsep/core/iso230.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/staged_directory.hpp"
+#include "errsep/io/utc_time.hpp"
 
 namespace errsep::acq {
 namespace {
@@ -30,15 +31,6 @@ namespace {
 constexpr int kErr = 3, kWarning = 4, kInfo = 6;
 
 constexpr std::int64_t kMsNs = 1'000'000;
-
-std::string utc_iso(std::chrono::system_clock::time_point t) {
-  const std::time_t tt = std::chrono::system_clock::to_time_t(t);
-  std::tm tm{};
-  ::gmtime_r(&tt, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
 
 std::string fmt(double v, int prec = 4) {
   std::ostringstream os;
@@ -74,6 +66,8 @@ const char* to_string(TriggerSource s) noexcept {
       return "schedule";
     case TriggerSource::command:
       return "command";
+    case TriggerSource::mqtt:
+      return "mqtt";
   }
   return "unknown";
 }
@@ -472,11 +466,11 @@ std::vector<std::pair<std::string, std::string>> Daemon::scan_metadata(
   std::vector<std::pair<std::string, std::string>> meta = {
       {"scan_id", std::to_string(ctx_->scan_id())},
       {"trigger", to_string(scan_source_)},
-      {"started_utc", utc_iso(scan_start_)}};
+      {"started_utc", io::utc_iso(scan_start_)}};
   if (outcome == "in_progress")
-    meta.emplace_back("checkpoint_utc", utc_iso(std::chrono::system_clock::now()));
+    meta.emplace_back("checkpoint_utc", io::utc_iso(std::chrono::system_clock::now()));
   else
-    meta.emplace_back("ended_utc", utc_iso(std::chrono::system_clock::now()));
+    meta.emplace_back("ended_utc", io::utc_iso(std::chrono::system_clock::now()));
   meta.emplace_back("outcome", outcome);
   if (!reason.empty()) meta.emplace_back("outcome_reason", reason);
   return meta;
@@ -542,6 +536,8 @@ Daemon::ResultFigures Daemon::write_result(
     t.set_meta("raw_crc32", hex);
   }
   t.set_meta("solver", r.brief_report());
+  t.set_meta("lambda", fmt(r.lambda, 6));
+  t.set_meta("sigma_hat_um", fmt(r.sigma_um, 6));
   const auto n = static_cast<std::size_t>(r.x_mm.size());
   std::vector<double> x(n), s(n), g(n), us(n);
   for (std::size_t k = 0; k < n; ++k) {
@@ -617,13 +613,14 @@ int Daemon::recover_results() {
       for (const char* key : {"scan_id", "trigger", "started_utc", "ended_utc", "outcome",
                               "outcome_reason", "points_measured"})
         if (const auto v = raw.meta(key)) meta.emplace_back(key, *v);
-      meta.emplace_back("result_recovered_utc", utc_iso(std::chrono::system_clock::now()));
+      meta.emplace_back("result_recovered_utc", io::utc_iso(std::chrono::system_clock::now()));
       const ResultFigures f = write_result(stem, raw, meta, raw_path.string());
       log(kWarning, "result of " + raw_path.filename().string() +
                         " was missing (the daemon stopped before writing it): computed "
                         "from the raw file, wrote " +
                         f.file);
       ++made;
+      if (const auto id = raw.meta("scan_id")) scan_committed(std::stoull(*id), stem);
     } catch (const std::exception& e) {
       log(kErr, "result of " + raw_path.filename().string() +
                     " is missing and could not be made: " + e.what());
@@ -692,14 +689,27 @@ void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd
     log(kWarning, "scan " + std::to_string(id) + ": its last checkpoint (" +
                       std::to_string(checkpoint_points_) + " points) stays on disk as " +
                       store_.path(scan_stem_, "raw-incomplete").string());
-  std::lock_guard<std::mutex> lock(mu_);
-  status_.last_scan_id = id;
-  status_.last_outcome = outcome;
-  status_.last_straightness_um = straightness;
-  status_.last_straightness_U_um = straightness_U;
-  status_.last_straightness_lsq_um = straightness_lsq;
-  if (!last_file.empty()) status_.last_file = last_file;
-  if (outcome == ScanOutcome::complete) ++status_.scans_completed;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    status_.last_scan_id = id;
+    status_.last_outcome = outcome;
+    status_.last_straightness_um = straightness;
+    status_.last_straightness_U_um = straightness_U;
+    status_.last_straightness_lsq_um = straightness_lsq;
+    if (!last_file.empty()) status_.last_file = last_file;
+    if (outcome == ScanOutcome::complete) ++status_.scans_completed;
+  }
+  // A scan whose files could not be written has nothing on disk to forward.
+  if (outcome != ScanOutcome::write_failed) scan_committed(id, scan_stem_);
+}
+
+void Daemon::scan_committed(std::uint64_t scan_id, const std::string& stem) {
+  if (!opts_.on_scan_committed) return;
+  try {
+    opts_.on_scan_committed(scan_id, stem);
+  } catch (const std::exception& e) {
+    log(kErr, "scan " + std::to_string(scan_id) + ": after writing: " + e.what());
+  }
 }
 
 void Daemon::finish_scan(bool stopping) {

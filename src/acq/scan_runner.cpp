@@ -10,21 +10,12 @@
 #include <thread>
 
 #include "errsep/io/plausibility.hpp"
+#include "errsep/io/utc_time.hpp"
 
 namespace errsep::acq {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
-std::string utc_now() {
-  const auto now = std::chrono::system_clock::now();
-  const std::time_t t = std::chrono::system_clock::to_time_t(now);
-  std::tm tm{};
-  ::gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
 
 std::string fmt(double v, int prec = 6) {
   std::ostringstream os;
@@ -227,7 +218,7 @@ void Runner::displacement() {
 
 ScanResult Runner::run() {
   res_.kind = opts_.kind;
-  res_.started_utc = utc_now();
+  res_.started_utc = io::utc_now_iso();
   t0_ns_ = monotonic_ns();
   const std::size_t ns = dev_.sensors.size();
 
@@ -320,7 +311,7 @@ ScanResult Runner::run() {
       res_.counts.reads_by_status[i] += st.reads_by_status[i];
   }
   res_.counts.samples_consumed = consumer.consumed();
-  res_.finished_utc = utc_now();
+  res_.finished_utc = io::utc_now_iso();
   res_.duration_s = static_cast<double>(monotonic_ns() - t0_ns_) * 1e-9;
 
   // Metadata of the raw file: what was done, how, and every counter.

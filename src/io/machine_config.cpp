@@ -650,11 +650,67 @@ void read_refine(const Reader& root, MachineConfig& c) {
   r.check("alpha", c.refine.alpha > 0.0 && c.refine.alpha < 1.0, "must be in (0, 1)");
 }
 
+void read_mqtt(const Reader& root, MachineConfig& c) {
+  const toml::table* t = root.sub("mqtt");
+  if (!t) return;
+  Reader r(root.file(), *t, "mqtt");
+  r.only({"host", "port", "machine", "client_id", "topic_prefix", "qos", "keepalive_s", "username",
+          "password_file", "tls_ca_file", "tls_cert_file", "tls_key_file", "queue_dir", "commands",
+          "straightness_tolerance_um"});
+  MqttConfig m;
+  r.get("host", m.host);
+  r.check("host", !m.host.empty(), "must name the broker");
+  r.get_int("port", m.port, 1, 65535);
+  r.get("machine", m.machine, true);
+  // A topic level: no wildcards, no separator, nothing a subscription could misread.
+  auto level_ok = [](const std::string& v) {
+    return !v.empty() && v.find_first_of("/+#") == std::string::npos &&
+           std::all_of(v.begin(), v.end(), [](char ch) { return ch > ' ' && ch != 0x7f; });
+  };
+  r.check("machine", level_ok(m.machine),
+          "must be one topic level: no '/', '+', '#', spaces or control characters");
+  r.get("client_id", m.client_id);
+  r.get("topic_prefix", m.topic_prefix);
+  r.check("topic_prefix",
+          !m.topic_prefix.empty() && m.topic_prefix.find_first_of("+#") == std::string::npos &&
+              m.topic_prefix.front() != '/' && m.topic_prefix.back() != '/',
+          "must be a topic without wildcards and without a leading or trailing '/'");
+  r.get_int("qos", m.qos, 1, 2);
+  r.get_int("keepalive_s", m.keepalive_s, 5, 3600);
+  r.get("username", m.username);
+  std::string s;
+  r.get("password_file", s);
+  m.password_file = s;
+  r.check("password_file", m.password_file.empty() || !m.username.empty(),
+          "a password needs a username");
+  s.clear();
+  r.get("tls_ca_file", s);
+  m.tls_ca_file = s;
+  s.clear();
+  r.get("tls_cert_file", s);
+  m.tls_cert_file = s;
+  s.clear();
+  r.get("tls_key_file", s);
+  m.tls_key_file = s;
+  r.check("tls_cert_file", m.tls_cert_file.empty() == m.tls_key_file.empty(),
+          "tls_cert_file and tls_key_file go together");
+  r.check("tls_cert_file", m.tls_cert_file.empty() || !m.tls_ca_file.empty(),
+          "a client certificate needs tls_ca_file");
+  s.clear();
+  r.get("queue_dir", s);
+  m.queue_dir = s;
+  r.get("commands", m.commands);
+  r.get("straightness_tolerance_um", m.straightness_tolerance_um);
+  r.check("straightness_tolerance_um", m.straightness_tolerance_um >= 0.0,
+          "must be >= 0 (0 = no alarm)");
+  c.mqtt = m;
+}
+
 MachineConfig build(const toml::table& root, const std::string& name) {
   MachineConfig c;
   c.source = name;
   Reader r(name, root, "");
-  r.only({"bus", "sensor", "stage", "gpio", "sampler", "scan", "refine", "simulator"});
+  r.only({"bus", "sensor", "stage", "gpio", "sampler", "scan", "refine", "simulator", "mqtt"});
   read_buses(name, root, c);
   if (c.buses.empty()) throw ConfigError(name, 0, "bus", "at least one [[bus]] is required");
   read_sensors(name, root, c);
@@ -664,6 +720,7 @@ MachineConfig build(const toml::table& root, const std::string& name) {
   read_scan(r, c);
   read_refine(r, c);
   read_simulator(r, c);
+  read_mqtt(r, c);
   // Port 0 means "the embedded simulator's ephemeral port"; without it nothing fills it in.
   for (std::size_t i = 0; i < c.buses.size(); ++i) {
     const auto& b = c.buses[i];

@@ -1,4 +1,5 @@
 #include "errsep/io/scan_report.hpp"
+#include "errsep/io/straightness_trend.hpp"
 
 #include <algorithm>
 #include <cctype>
@@ -728,6 +729,14 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
   html.files.insert(html.files.begin() + 1, {"evaluation.txt", "the evaluation as text"});
 
   res.text = text_table(rows, k);
+  if (!opts.trend_results_dir.empty()) {
+    const StraightnessTrend trend = straightness_trend(opts.trend_results_dir);
+    res.text += "\n" + format_trend(trend);
+    outputs.emplace_back(out / "trend.csv", format_csv(trend_table(trend), 10));
+    html.files.push_back({"trend.csv", "straightness over the machine's past scans"});
+    if (trend.any_significant())
+      res.warnings.push_back("straightness changed beyond the combined U (see trend.csv)");
+  }
   outputs.emplace_back(out / "evaluation.csv", format_csv(eval_csv, 12));
   outputs.emplace_back(out / "evaluation.txt", res.text);
   outputs.emplace_back(out / "report.html", render_html_report(html));

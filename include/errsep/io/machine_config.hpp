@@ -135,6 +135,34 @@ struct RefineConfig {
   double alpha = 0.01;   ///< family-wise significance of one step (RefineOptions::alpha)
 };
 
+/// Publishing to the plant's MQTT broker ([mqtt], optional; service/plant_publisher.hpp).  The
+/// topic tree of one machine is <topic_prefix>/<machine>/{status, scan/<scan id>, alarm,
+/// cmd/scan, cmd/scan/reply}; every payload is JSON valid against schema/mqtt-messages.schema.json.
+struct MqttConfig {
+  std::string host = "127.0.0.1";
+  int port = 1883;
+  std::string machine;    ///< this machine's name in the topic tree (required)
+  std::string client_id;  ///< empty = "errsep-<machine>"
+  std::string topic_prefix = "errsep";
+  int qos = 1;  ///< 1 or 2: a queued message is removed only once acknowledged
+  int keepalive_s = 30;
+  std::string username;                               ///< empty = anonymous
+  std::filesystem::path password_file;                ///< the password, first line of this file
+  std::filesystem::path tls_ca_file;                  ///< set: TLS only (no plain-TCP fallback)
+  std::filesystem::path tls_cert_file, tls_key_file;  ///< client certificate (optional, a pair)
+  /// Store-and-forward queue; empty = "mqtt-queue" beside the results directory.
+  std::filesystem::path queue_dir;
+  bool commands = false;  ///< accept <prefix>/<machine>/cmd/scan (same refusals as the coil)
+  /// An alarm is published when a scan's minimum-zone straightness exceeds this (0 = none).
+  double straightness_tolerance_um = 0.0;
+
+  std::string effective_client_id() const {
+    return client_id.empty() ? "errsep-" + machine : client_id;
+  }
+  /// <topic_prefix>/<machine>
+  std::string topic_root() const { return topic_prefix + "/" + machine; }
+};
+
 /// One harmonic a·sin(2π·x/period + phase) of a simulated profile.
 struct Harmonic {
   double amplitude = 0.0;  ///< µm (for gamma: µrad)
@@ -196,6 +224,7 @@ struct MachineConfig {
   ScanConfig scan;
   RefineConfig refine;
   SimulatorConfig simulator;
+  std::optional<MqttConfig> mqtt;  ///< [mqtt]: publish to a broker (absent: do not)
 
   const BusConfig* find_bus(const std::string& name) const;
   const SensorConfig* find_sensor(const std::string& name) const;

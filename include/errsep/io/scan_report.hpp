@@ -54,6 +54,9 @@ struct ScanReportOptions {
   /// Standard uncertainty of every w(x, y) node (from the displacement method's budget) when the
   /// grid CSV has no u_w_um column; 0 = not known.
   double u_w_um = 0;
+  /// The daemon's results store: adds the straightness trend over its scans (trend.csv and a
+  /// section of evaluation.txt; io/straightness_trend.hpp).  Empty = none.
+  std::filesystem::path trend_results_dir;
   bool is_valid(std::string* why) const;
 };
 
