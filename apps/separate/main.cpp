@@ -111,8 +111,8 @@ int main(int argc, char** argv) {
     errsep::core::FourSensorResult res;
     try {
       res = errsep::core::separate_four_sensor(cfg, m, opts);
-    } catch (const std::exception& e) {  // name the file the data came from
-      throw std::runtime_error(input + ": " + e.what());
+    } catch (const std::exception& err) {  // name the file the data came from
+      throw std::runtime_error(input + ": " + err.what());
     }
     // All result files appear together or not at all, as one result set replacing an earlier
     // one whole (io/staged_directory.hpp).

@@ -197,17 +197,21 @@ inline core::ProfileErrors errors_against(const core::FourSensorResult& r,
 // counted over all seeds against the 99 % allowance, unless `count_z` is false because the same
 // seeds were already counted at another σ: the errors are linear in the noise, so the z repeat),
 // and over the seeds the RMS of the error the effect causes in S, γ and f must at least halve.
+// `opts` are the refinement's options (its separations before and after and the clean one use
+// opts.solve).
 template <class MakeCase, class Truth>
 void check_realistic(const char* title, const std::string& effect, double sigma, int seeds,
-                     int example2_k, MakeCase make_case, Truth p_true, bool count_z = true) {
+                     int example2_k, MakeCase make_case, Truth p_true, bool count_z = true,
+                     const core::RefineOptions& opts = {}) {
   std::printf("%s, sigma %.2f um\n", title, sigma);
   std::vector<double> zs;
   double b2[3] = {0, 0, 0}, a2[3] = {0, 0, 0};
   for (int seed = 1; seed <= seeds; ++seed) {
     const auto c = make_case(sigma, static_cast<std::uint64_t>(seed));
     const auto c0 = make_refine_case(sigma, static_cast<std::uint64_t>(seed), {}, {}, example2_k);
-    const auto r = core::refine_four_sensor(c.cfg, c.sim.m_um, Eigen::MatrixXd(), {}, &c.truth);
-    const core::FourSensorResult clean = core::separate_four_sensor(c0.cfg, c0.sim.m_um);
+    const auto r = core::refine_four_sensor(c.cfg, c.sim.m_um, Eigen::MatrixXd(), opts, &c.truth);
+    const core::FourSensorResult clean =
+        core::separate_four_sensor(c0.cfg, c0.sim.m_um, opts.solve);
     INFO("seed " << seed << ": " << r.brief_report());
     REQUIRE(r.steps.size() >= 2);
     CHECK(r.steps[1].effect == effect);
