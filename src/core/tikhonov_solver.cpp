@@ -686,9 +686,12 @@ double SelectedInverse::operator()(Eigen::Index i, Eigen::Index j) const {
 }
 
 // Takahashi's recurrence on the band's LDLᵀ (L unit lower): Z = D⁻¹L⁻¹ + (I − Lᵀ)Z gives, column
-// by column from the last, Z(i, j) = −Σ_k L(k, j)·Z(k, i) for i in the pattern of column j (k over
-// it too) and Z(j, j) = 1/D_j − Σ_k L(k, j)·Z(k, j): every Z(k, i) needed lies inside the pattern
-// of L, so the band of the inverse costs O(m·b²) and nothing outside it is formed.  The border
+// by column from the last, Z(i, j) = −Σ_k L(k, j)·Z(k, i) for j < i <= j + b (k over the pattern
+// of column j) and Z(j, j) = 1/D_j − Σ_k L(k, j)·Z(k, j): every Z(k, i) needed lies inside the
+// band, so the band of the inverse costs O(m·b²) and nothing outside it is formed.  The whole
+// band, not only the pattern of L: a pair of unknowns that a quantity couples can lie outside the
+// pattern where AᵀA has an exact zero near the start of the band (the four-sensor spacings
+// (2, 3, 10): QQᵀ has a zero entry, and u_S at the first positions needs it).  The border
 // adds the low-rank term of the block inverse: with Y = B⁻¹C and the Schur block S,
 // M⁻¹ = [B⁻¹ + Y S⁻¹Yᵀ, −Y S⁻¹; −S⁻¹Yᵀ, S⁻¹].
 SelectedInverse TikhonovSolver::selected_inverse() {
@@ -723,11 +726,12 @@ SelectedInverse TikhonovSolver::selected_inverse() {
       rows.push_back(Li[q]);
       vals.push_back(Lx[q]);
     }
-    for (std::size_t a = 0; a < rows.size(); ++a) {
+    const Eigen::Index last = std::min<Eigen::Index>(m - 1, j + bw);
+    for (Eigen::Index i = j + 1; i <= last; ++i) {
       double s = 0.0;
       for (std::size_t b = 0; b < rows.size(); ++b)
-        s += vals[b] * at(rows[b], rows[a]);
-      at(rows[a], j) = -s;
+        s += vals[b] * at(rows[b], i);
+      at(j, i) = -s;
     }
     double s = 0.0;
     for (std::size_t b = 0; b < rows.size(); ++b)
