@@ -288,6 +288,44 @@ Eigen::MatrixXd FourSensorCovariance::covariance_S(const std::vector<int>& posit
   return p_->sigma2 * V;
 }
 
+Eigen::MatrixXd FourSensorCovariance::covariance_S_with(const Eigen::MatrixXd& a_S) {
+  const Parts& p = *p_;
+  const int P = p.cfg.positions(), N = p.cfg.N;
+  if (a_S.rows() != P)
+    throw std::invalid_argument("FourSensorCovariance::covariance_S_with: coefficients have " +
+                                std::to_string(a_S.rows()) + " rows, need " + std::to_string(P));
+  const auto k = p.cfg.offsets_samples();
+  Eigen::VectorXd g = Eigen::VectorXd::Zero(p.n_all);  // the bow that to_gauge removes
+  for (int i = 0; i < N; ++i) {
+    const int col = p.f_index[static_cast<std::size_t>(i)];
+    if (col >= 0) g(col) = p.bow(i);
+  }
+  const Eigen::Vector2d ew = p.E.transpose() * p.w_S;
+  const double ww = p.w_S.squaredNorm();
+  Eigen::MatrixXd out(P, a_S.cols());
+  for (Eigen::Index j = 0; j < a_S.cols(); ++j) {
+    Eigen::VectorXd h;
+    double nh = 0.0, noise = 0.0;
+    p.functional(a_S.col(j), {}, {}, h, nh, noise);
+    p.to_gauge(h, nh);
+    const Eigen::VectorXd y = p.solver->solve_normal(h);
+    const double gy = g.dot(y);
+    // t_nᵀy for t_n = h_n − (n·h_n/g·n)·g, h_n the coefficients of S(x_n) as functional() forms
+    // them (at most 4 samples of f and η̃), and the readings' own noise, independent per n.
+    for (int n = 0; n < P; ++n) {
+      double hy = -ew.dot(y.segment<2>(p.m)), nhn = -ew.dot(p.n_eta);
+      for (int q = 0; q < 4; ++q) {
+        const int i = n + k[static_cast<std::size_t>(q)];
+        const int col = p.f_index[static_cast<std::size_t>(i)];
+        if (col >= 0) hy -= p.w_S(q) * y(col);
+        nhn -= p.w_S(q) * p.bow(i);
+      }
+      out(n, j) = p.sigma2 * (a_S(n, j) * ww + hy - nhn / p.gn * gy);
+    }
+  }
+  return out;
+}
+
 // ---------------------------------------------------------------------------------------------
 // λ search.
 
@@ -424,7 +462,7 @@ void line_weights(const FourSensorConfig& cfg, Eigen::Vector4d& w_S, Eigen::Vect
 // ---------------------------------------------------------------------------------------------
 
 FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
-                                    const FourSensorOptions& opts) {
+                                    const FourSensorOptions& opts, double known_sigma_um) {
   const auto t0 = std::chrono::steady_clock::now();
   const int N = cfg.N, P = cfg.positions();
   FourSensorResult res;
@@ -447,7 +485,9 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
   if (res.redundancy_dof < 1)
     throw std::invalid_argument("N = " + std::to_string(N) +
                                 " leaves no redundant readings to estimate the noise from");
-  res.sigma_um = std::sqrt((ls->A() * x_ls - b).squaredNorm() / res.redundancy_dof);
+  res.sigma_um = known_sigma_um > 0.0
+                     ? known_sigma_um
+                     : std::sqrt((ls->A() * x_ls - b).squaredNorm() / res.redundancy_dof);
   const double sigma2 = std::max(res.sigma_um * res.sigma_um, 1e-30);
 
   const bool prior = opts.penalty != Penalty::none && opts.rule != LambdaRule::least_squares;
@@ -690,6 +730,29 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
   }
   res.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return res;
+}
+
+FourSensorPrediction predict_four_sensor_uncertainty(const FourSensorConfig& cfg, double sigma_um) {
+  if (!(std::isfinite(sigma_um) && sigma_um > 0.0))
+    throw std::invalid_argument("predict_four_sensor_uncertainty: sigma_um = " +
+                                std::to_string(sigma_um) + ": must be a positive finite noise");
+  std::string why;
+  if (!cfg.is_valid(&why)) throw std::invalid_argument("invalid configuration: " + why);
+  FourSensorOptions o;
+  o.penalty = Penalty::none;
+  o.rule = LambdaRule::least_squares;
+  // Zero readings: the estimate is zero, and the covariance is what any readings would give.
+  FourSensorResult r =
+      separate_posterior(cfg, Eigen::MatrixXd::Zero(cfg.positions(), 4), o, sigma_um);
+  FourSensorPrediction out;
+  out.config = cfg;
+  out.sigma_um = sigma_um;
+  out.x_mm = std::move(r.x_mm);
+  out.u_S_um = std::move(r.u_S_um);
+  out.u_gamma_rad = std::move(r.u_gamma_rad);
+  out.u_f_um = std::move(r.u_f_um);
+  out.covariance = std::move(r.covariance);
+  return out;
 }
 
 }  // namespace errsep::core
