@@ -343,12 +343,12 @@ struct Criterion {
 Criterion reml_at(TikhonovSolver& s, const Eigen::VectorXd& Atb, double bb, double sigma2, int rank,
                   double lambda) {
   Criterion c;
-  Eigen::VectorXd x;
-  if (s.factorize_and_solve(lambda, Atb, x) != SolverStatus::success) return c;
-  const Eigen::VectorXd Px = s.apply_penalty(x);
-  const double pen = x.dot(Px), l2 = lambda * lambda;
-  const double rss = std::max(0.0, bb - x.dot(Atb) - l2 * pen);
-  c.value = (rss + l2 * pen) / sigma2 + s.log_det() - rank * std::log(l2);
+  // ‖b − Ax‖² + λ²xᵀPx = bᵀb − (Aᵀb)ᵀM⁻¹(Aᵀb) at x = M⁻¹Aᵀb: the forward substitution alone,
+  // no back substitution and no x.
+  double q = 0.0;
+  if (s.factorize_and_quadratic_form(lambda, Atb, q) != SolverStatus::success) return c;
+  const double l2 = lambda * lambda;
+  c.value = std::max(0.0, bb - q) / sigma2 + s.log_det() - rank * std::log(l2);
   c.ok = std::isfinite(c.value);
   return c;
 }
