@@ -98,6 +98,9 @@ struct TikhonovSolver::Normal {
   /// shift λ²I), its coupling with the border C_P (m × k) and border block D_P (k × k), and
   /// U_P = C_P·V (V spans the rows of both C and C_P).
   std::vector<double> pen_x;
+  /// Where pen_x is not zero (a second-difference penalty fills 3 of a column's 8 entries of the
+  /// four-sensor band): a λ's values are AᵀA copied, plus λ² times these.
+  std::vector<std::size_t> pen_nz;
   Eigen::MatrixXd C_P, D_P, U_P;
   Normal() { start_common(cm); }
   ~Normal() {
@@ -345,6 +348,8 @@ bool TikhonovSolver::build_banded(const Eigen::SparseMatrix<double>& At,
     }
   }
   up[m] = k;
+  for (std::size_t q = 0; q < normal_->pen_x.size(); ++q)
+    if (normal_->pen_x[q] != 0.0) normal_->pen_nz.push_back(q);
   normal_->band = *normal_->upper;
   normal_->C = std::move(C);
   normal_->D = std::move(D);
@@ -498,8 +503,9 @@ SolverStatus TikhonovSolver::factorize_impl(double lambda, const Eigen::VectorXd
     const auto* a = static_cast<const double*>(normal_->band.x);
     const double* pen = normal_->pen_x.data();
     double* wx = impl_->work_x.data();
-    for (std::size_t q = 0; q < impl_->work_x.size(); ++q)
-      wx[q] = a[q] + l2 * pen[q];
+    std::copy_n(a, impl_->work_x.size(), wx);
+    for (const std::size_t q : normal_->pen_nz)
+      wx[q] += l2 * pen[q];
   }
   const int ok = cholmod_factorize_p(general_form ? &impl_->work : &normal_->band, beta, nullptr, 0,
                                      impl_->L, &impl_->cm);
@@ -775,21 +781,44 @@ SelectedInverse TikhonovSolver::selected_inverse() {
   }
   if (border_ > 0) {
     // Y = B⁻¹C = (B⁻¹U)·Vᵀ, B⁻¹U = L⁻ᵀD⁻¹·(L⁻¹U) from the W kept by the factorisation.
+    // All r columns in one pass over the factor (into their own CHOLMOD buffers: Xk holds W).
     const Eigen::Index r = normal_->U.cols();
     Eigen::MatrixXd BinvU(m, r);
-    for (Eigen::Index c = 0; c < r; ++c) {
-      Eigen::VectorXd col = impl_->W.col(c);
-      impl_->band_solve(CHOLMOD_DLt, col.data(), m, BinvU.col(c).data());
+    if (r > 0) {
+      cholmod_dense wv = view(impl_->W.data(), m, r);
+      cholmod_dense *X = nullptr, *Y = nullptr, *E = nullptr;
+      const int ok =
+          cholmod_solve2(CHOLMOD_DLt, impl_->L, &wv, nullptr, &X, nullptr, &Y, &E, &impl_->cm);
+      if (ok) BinvU = Eigen::Map<const Eigen::MatrixXd>(static_cast<const double*>(X->x), m, r);
+      cholmod_free_dense(&X, &impl_->cm);
+      cholmod_free_dense(&Y, &impl_->cm);
+      cholmod_free_dense(&E, &impl_->cm);
+      if (!ok)
+        throw std::runtime_error("CHOLMOD solve failed (status " +
+                                 std::to_string(impl_->cm.status) + ")");
     }
-    const Eigen::MatrixXd Y = BinvU * normal_->V.transpose();
     z.border = impl_->S.solve(Eigen::MatrixXd::Identity(border_, border_));
-    const Eigen::MatrixXd G = Y * z.border;  // Y·S⁻¹
-    z.cross = -G;
-    for (Eigen::Index i = 0; i < m; ++i)
-      for (Eigen::Index j = i; j <= std::min<Eigen::Index>(m - 1, i + bw); ++j) {
-        double& v = at(i, j);
-        if (!std::isnan(v)) v += G.row(i).dot(Y.row(j));
+    z.cross = -(BinvU * (normal_->V.transpose() * z.border));  // −Y·S⁻¹, Y = B⁻¹U·Vᵀ
+    // The band of Y·S⁻¹·Yᵀ = B⁻¹U·H·(B⁻¹U)ᵀ, H = VᵀS⁻¹V (r × r): rows of B⁻¹U and of B⁻¹U·H
+    // row-major, r multiply-adds per entry (a dynamic-size row product per entry cost more than
+    // the whole recurrence at N = 10⁶).
+    using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+    const RowMajor Bu = BinvU;
+    const RowMajor Ch = Bu * (normal_->V.transpose() * z.border * normal_->V);
+    const double* bu = Bu.data();
+    const double* ch = Ch.data();
+    for (Eigen::Index i = 0; i < m; ++i) {
+      const double* ci = ch + i * r;
+      double* zi = z.band.data() + static_cast<std::size_t>(i) * w;
+      const Eigen::Index last = std::min<Eigen::Index>(m - 1, i + bw);
+      for (Eigen::Index j = i; j <= last; ++j) {
+        const double* bj = bu + j * r;
+        double acc = 0.0;
+        for (Eigen::Index a = 0; a < r; ++a)
+          acc += ci[a] * bj[a];
+        zi[j - i] += acc;
       }
+    }
   } else {
     z.cross.resize(m, 0);
     z.border.resize(0, 0);
