@@ -106,16 +106,16 @@ void write_four_sensor_result(const std::filesystem::path& dir, const core::Four
     sn.push_back(p.solution_norm);
     k.push_back(p.curvature);
   }
-  const bool with_criterion = r.lambda_criterion.size() == l.size() && !l.empty();
-  lc.columns = {"lambda", "residual_norm", "solution_norm", "curvature"};
-  if (with_criterion) {
-    lc.columns.push_back(std::string(core::to_string(r.rule)) + "_criterion");
-    lc.set_meta("curve", "the lambda search grid of rule " + std::string(core::to_string(r.rule)) +
-                             " (solution_norm = |L x|, curvature not computed: 0)");
-  }
-  for (std::size_t i = 0; i < l.size(); ++i) {
-    lc.rows.push_back({l[i], rn[i], sn[i], k[i]});
-    if (with_criterion) lc.rows.back().push_back(r.lambda_criterion[i]);
+  if (!r.lambda_grid.empty() && r.lambda_grid.size() == r.lambda_criterion.size()) {
+    // Rules reml and gcv: the search's grid and the criterion it minimised (no L-curve drawn).
+    lc.set_meta("curve", std::string("the lambda search of rule ") + core::to_string(r.rule));
+    lc.columns = {"lambda", std::string(core::to_string(r.rule)) + "_criterion"};
+    for (std::size_t i = 0; i < r.lambda_grid.size(); ++i)
+      lc.rows.push_back({r.lambda_grid[i], r.lambda_criterion[i]});
+  } else {
+    lc.columns = {"lambda", "residual_norm", "solution_norm", "curvature"};
+    for (std::size_t i = 0; i < l.size(); ++i)
+      lc.rows.push_back({l[i], rn[i], sn[i], k[i]});
   }
 
   CsvTable res;

@@ -440,15 +440,20 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     if (fs::exists(dir / "lcurve.csv")) {
       const auto t = read_csv(dir / "lcurve.csv", {.allow_non_finite = false, .min_rows = 2});
       const auto lam = t.column("lambda", dir / "lcurve.csv");
-      const auto rn = t.column("residual_norm", dir / "lcurve.csv");
-      const auto sn = t.column("solution_norm", dir / "lcurve.csv");
+      // The L-curve (rule lcurve), or the criterion a likelihood rule minimised over λ.
+      const std::string rule = t.meta("lambda_rule").value_or("?");
+      const bool curve = t.find_column("residual_norm").has_value();
+      const auto rn = curve ? t.column("residual_norm", dir / "lcurve.csv") : lam;
+      const auto sn = curve ? t.column("solution_norm", dir / "lcurve.csv")
+                            : t.column(rule + "_criterion", dir / "lcurve.csv");
       LinePlot p;
       p.name = "lcurve";
-      p.title = "L-curve";
-      p.xlabel = "residual norm ||A x - b||";
-      p.ylabel = "solution norm ||x||";
-      p.log_x = p.log_y = true;
-      p.series.push_back({"L-curve", rn, sn, {}});
+      p.title = curve ? "L-curve" : "lambda search: " + rule + " criterion";
+      p.xlabel = curve ? "residual norm ||A x - b||" : "lambda";
+      p.ylabel = curve ? "solution norm ||x||" : rule + " criterion (smaller is better)";
+      p.log_x = true;
+      p.log_y = curve;
+      p.series.push_back({curve ? "L-curve" : rule, rn, sn, {}});
       if (auto lc = t.meta("lambda_chosen")) {
         double chosen = 0;
         try {
