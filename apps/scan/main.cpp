@@ -5,7 +5,9 @@
 // then the result files of the separation (four-sensor: motion.csv, reference.csv, lcurve.csv,
 // residuals.csv, summary.txt).  --refine (or [refine] enabled = true in the config) also runs the
 // refine step of errsep-refine on the four-sensor scan and writes its files to OUT/refine/
-// (io/refine_run.hpp). Ctrl-C / SIGTERM: the stages are stopped, the raw data measured so far is
+// (io/refine_run.hpp). --verify-with TABLE: the scan after a compensation table was loaded
+// (the embedded simulator applies it itself), compared with the first scan and the residual the
+// table predicts (OUT/verification.txt, .csv; io/verification_report.hpp). Ctrl-C / SIGTERM: the stages are stopped, the raw data measured so far is
 // written marked "complete: false", nothing is separated, exit status 130. Exit status: 0 complete,
 // 1 usage/config/device set-up error, 3 scan failed (device fault), 130 aborted.
 #include <unistd.h>
@@ -24,10 +26,13 @@
 #include "errsep/drivers/device_factory.hpp"
 #include "errsep/drivers/scan_devices.hpp"
 #include "errsep/drivers/simulator_process.hpp"
+#include "errsep/core/compensation_verification.hpp"
+#include "errsep/io/cnc/compensation_format.hpp"
 #include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/refine_run.hpp"
+#include "errsep/io/verification_report.hpp"
 #include "errsep/version.hpp"
 
 namespace {
@@ -68,8 +73,9 @@ core::CurvatureGauge gauge_of(const std::string& gauge) {
 }
 
 /// Separation of a complete four-sensor raw scan, with the defaults of errsep-separate.
-void separate_four_sensor(const io::RawFourSensorScan& raw, const fs::path& raw_file,
-                          const fs::path& out, const std::string& gauge) {
+core::FourSensorResult separate_four_sensor(const io::RawFourSensorScan& raw,
+                                            const fs::path& raw_file, const fs::path& out,
+                                            const std::string& gauge) {
   const auto& g = *raw.geometry;
   const auto P = static_cast<Eigen::Index>(raw.positions());
   Eigen::MatrixXd m(P, 4);
@@ -79,11 +85,36 @@ void separate_four_sensor(const io::RawFourSensorScan& raw, const fs::path& raw_
   core::FourSensorOptions opts;  // lambda from the L-curve corner, as errsep-separate
   opts.gauge = gauge_of(gauge);
   const auto res = core::separate_four_sensor(g, m, opts);
-  io::write_four_sensor_result(out, res, {raw_file.string(), "X", "Y", {}});
+  io::ResultWriteInfo info{raw_file.string(), "X", "Y", {}};
+  io::carry_machine_axes(raw.metadata, info);  // machine coordinates, from the config
+  io::write_four_sensor_result(out, res, info);
   std::cout << "separation: " << res.brief_report() << "\n";
   if (res.lambda_fallback == core::LambdaFallback::discrepancy)
     std::cerr << "warning: the L-curve has no corner inside the lambda range; lambda was chosen "
                  "by the discrepancy principle instead\n";
+  return res;
+}
+
+std::vector<double> vec(const Eigen::VectorXd& v) {
+  return {v.data(), v.data() + v.size()};
+}
+
+/// --verify-with: the second scan (this one) against the first and the table applied between.
+void verify(const core::FourSensorResult& res, const io::MachineConfig& cfg, const fs::path& table,
+            const fs::path& before_dir, const fs::path& out) {
+  const io::ControllerTable applied = io::read_compensation_file(table);
+  std::string warning;
+  const core::MachineError before = io::read_machine_error(before_dir, cfg.axes, &warning);
+  if (!warning.empty()) std::cerr << "warning: " << warning << "\n";
+  const core::MachineError after =
+      core::machine_error(vec(res.x_mm), vec(res.S_um), vec(res.u_S_um), cfg.axes);
+  const auto r = core::verify_compensation(before, after,
+                                           [&](double p) { return applied.apply_um(p); });
+  const io::VerificationInfo info{cfg.axes.symbol(), fs::absolute(table).string(),
+                                  fs::absolute(before_dir).string(), 2.0};
+  io::write_verification(out, r, info);
+  std::cout << io::verification_text(r, info) << "verification: " << (out / "verification.txt").string()
+            << ", " << (out / "verification.csv").string() << "\n";
 }
 
 void separate_displacement(const io::RawDisplacementScan& raw) {
@@ -111,7 +142,7 @@ int main(int argc, char** argv) {
   std::string gauge = "reference";
   int averages = 0, settle_ms = -1;
   bool no_separate = false, refine = false;
-  std::string refine_reference;
+  std::string refine_reference, verify_table, before_dir;
   app.add_option("-c,--config", config_path, "machine config (TOML)")->capture_default_str();
   app.add_option("-o,--out", out_dir, "output directory (default: [scan] output_dir)");
   app.add_option("--method", method, "four_sensor, displacement or both (default: [scan] method)")
@@ -139,6 +170,17 @@ int main(int argc, char** argv) {
                  "zero-adjustment values have no quadratic part), paper_eq12")
       ->check(CLI::IsMember({"sensor_stage", "reference", "paper_eq12"}))
       ->capture_default_str();
+  app.add_option("--verify-with", verify_table,
+                 "measure - compensate - verify: the compensation table now loaded in the "
+                 "controller (any errsep format; the embedded simulator applies it itself); the "
+                 "four-sensor scan is compared with the first scan and the predicted residual, "
+                 "written to OUT/verification.txt and .csv")
+      ->excludes(no_sep)
+      ->check(CLI::ExistingFile);
+  app.add_option("--before", before_dir,
+                 "result directory of the first scan (default: the directory whose "
+                 "compensation/ holds the --verify-with table)")
+      ->check(CLI::ExistingDirectory);
   CLI11_PARSE(app, argc, argv);
 
   struct sigaction sa {};
@@ -157,6 +199,16 @@ int main(int argc, char** argv) {
     if (method == "displacement") m = io::ScanMethod::displacement;
     if (method == "both") m = io::ScanMethod::both;
     const fs::path out = out_dir.empty() ? cfg.scan.output_dir : fs::path(out_dir);
+    if (!verify_table.empty()) {
+      if (m == io::ScanMethod::displacement)
+        throw std::invalid_argument("--verify-with needs a four-sensor scan (--method four_sensor)");
+      (void)io::read_compensation_file(verify_table);  // a table that cannot be read: stop now
+      if (before_dir.empty()) before_dir = io::result_dir_of_table(verify_table).string();
+      if (before_dir.empty())
+        throw std::invalid_argument("--verify-with " + verify_table +
+                                    ": not in a result directory's compensation/; give the first "
+                                    "scan's result directory with --before");
+    }
 
     // The embedded default: no machine, start the device simulator and talk to it.
     std::unique_ptr<drivers::SimulatorProcess> sim;
@@ -167,7 +219,9 @@ int main(int argc, char** argv) {
             "config " + config_path +
             " uses the embedded device simulator, but errsep-devsim was not found next to this "
             "program; give its path with --devsim");
-      sim = std::make_unique<drivers::SimulatorProcess>(exe, config_path);
+      std::vector<std::string> sim_args;
+      if (!verify_table.empty()) sim_args = {"--compensation", verify_table};
+      sim = std::make_unique<drivers::SimulatorProcess>(exe, config_path, sim_args);
       io::apply_simulator_port(cfg, sim->port());
       std::cout << "device simulator: pid " << sim->pid() << ", listening " << sim->host() << ":"
                 << sim->port() << "\n";
@@ -221,9 +275,10 @@ int main(int argc, char** argv) {
       }
       if (no_separate) continue;
       if (res.four_sensor) {
-        separate_four_sensor(*res.four_sensor, raw_file, out, gauge);
+        const auto sep = separate_four_sensor(*res.four_sensor, raw_file, out, gauge);
         std::cout << "results: " << out.string()
                   << "/ (motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt)\n";
+        if (!verify_table.empty()) verify(sep, cfg, verify_table, before_dir, out);
         if (refine || !refine_reference.empty() || cfg.refine.enabled) {
           io::RefineRunOptions ro;  // the defaults of errsep-refine, the scan's gauge
           ro.refine.solve.gauge = gauge_of(gauge);

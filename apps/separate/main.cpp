@@ -115,7 +115,13 @@ int main(int argc, char** argv) {
     }
     // All result files appear together or not at all.
     errsep::io::StagedDirectory stage(out_dir, "separate");
-    errsep::io::write_four_sensor_result(stage.dir(), res, {input, "X", "Y", {}});
+    errsep::io::ResultWriteInfo info{input, "X", "Y", {}};
+    try {
+      errsep::io::carry_machine_axes(scan.metadata, info);  // where the scan ran, if recorded
+    } catch (const std::invalid_argument& e) {
+      throw errsep::io::CsvError(input, 0, e.what());
+    }
+    errsep::io::write_four_sensor_result(stage.dir(), res, info);
     stage.commit();
     std::cout << res.brief_report() << "\n"
               << "results written to " << out_dir << "/ (motion.csv, reference.csv, lcurve.csv, "
