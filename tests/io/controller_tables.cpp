@@ -5,7 +5,6 @@
 // offsets (the real LinuxCNC runs in tests/apps/linuxcnc_hal.cpp).
 #include <catch2/catch.hpp>
 #include <cmath>
-#include <random>
 #include <vector>
 
 #include "errsep/core/compensation.hpp"
@@ -18,34 +17,9 @@ using namespace errsep;
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-
-// A measured straightness: random harmonics (several, random phases and amplitudes per seed), a
-// tilt from the artefact's alignment, noise on every point; x every 5 mm over 305 mm.
 void measured(std::uint32_t seed, std::vector<double>* x, std::vector<double>* s,
               std::vector<double>* u) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> uni(0, 1);
-  std::normal_distribution<double> noise(0, 0.1);
-  const int h = 2 + static_cast<int>(uni(rng) * 4);
-  std::vector<double> a(h), per(h), ph(h);
-  for (int k = 0; k < h; ++k) {
-    a[k] = 0.5 + 8 * uni(rng);
-    per[k] = 15 + 500 * uni(rng);
-    ph[k] = 2 * kPi * uni(rng);
-  }
-  x->clear();
-  s->clear();
-  u->clear();
-  for (int i = 0; i * 5.0 <= 305 + 1e-9; ++i) {
-    const double xi = i * 5.0;
-    double v = 3.0 + 0.01 * xi + noise(rng);
-    for (int k = 0; k < h; ++k)
-      v += a[k] * std::sin(2 * kPi * xi / per[k] + ph[k]);
-    x->push_back(xi);
-    s->push_back(v);
-    u->push_back(0.1);
-  }
+  test::random_straightness(seed, x, s, u);
 }
 
 const io::ExportedTable& table_of(const io::CompensationExport& e, io::CompensationFormat f) {
@@ -199,12 +173,19 @@ TEST_CASE("slide_start_mm = 250: every format gives the right correction at 250.
       const std::string& text = t.files.front().content;
       test::HalNetwork hal(text);
       const auto curves = hal.lincurves();
-      REQUIRE(curves.size() == 1);
-      const auto xs = hal.lincurve_points(curves.begin()->first, 'x');
-      CHECK(xs.front() == 250);
-      CHECK(xs.back() == 555);
-      CHECK(xs.size() <= 16);
-      CHECK(hal.source_of(curves.begin()->first + ".in") == "axis.x.pos-cmd");
+      // 62 samples in the default 64 points: every sample, in 5 chained lincurves of <= 16.
+      REQUIRE(curves.size() == 5);
+      double lo = 1e9, hi = -1e9;
+      for (const auto& [name, points] : curves) {
+        CHECK(points <= 16);
+        const auto xs = hal.lincurve_points(name, 'x');
+        lo = std::min(lo, xs.front());
+        hi = std::max(hi, xs.back());
+        CHECK(hal.source_of(name + ".in") == "axis.x.pos-cmd");
+      }
+      CHECK(lo == 250);
+      CHECK(hi == 555);
+      CHECK(t.accuracy.max_um <= 0.0021);  // the samples themselves, 1 nm values + 2 counts
       CHECK(hal.connected("axis.y.eoffset-counts"));
       CHECK(hal.connected("axis.y.eoffset-request"));
       for (const double on : {100.0, 400.0, 700.0}) {
@@ -305,7 +286,7 @@ TEST_CASE("writers refuse bad parameters and tables they cannot hold, naming the
   expect(F::sinumerik_cec, {{"direction", "2"}}, "sinumerik_cec.direction: 2 is out of range");
   expect(F::sinumerik_cec, {{"max_points", "10"}, {"step_mm", "5"}}, "limit of 10");
   expect(F::sinumerik_cec, {{"colour", "red"}}, "sinumerik_cec.colour: unknown parameter");
-  expect(F::linuxcnc_hal, {{"points", "17"}}, "linuxcnc_hal.points: 17 is out of range 2..16");
+  expect(F::linuxcnc_hal, {{"points", "300"}}, "linuxcnc_hal.points: 300 is out of range 2..241");
   expect(F::linuxcnc_hal, {{"input_pin", "axis x"}}, "is not a HAL name");
   expect(F::beckhoff_crosscomp, {{"master_axis", "2"}}, "equals axis");
   expect(F::heidenhain_com, {{"step_mm", "10"}}, "does not divide");

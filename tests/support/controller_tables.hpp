@@ -22,6 +22,7 @@
 #include <cstdio>
 #include <functional>
 #include <map>
+#include <random>
 #include <regex>
 #include <sstream>
 #include <stdexcept>
@@ -29,6 +30,36 @@
 #include <vector>
 
 namespace errsep::test {
+
+/// A measured straightness for table tests: 2..5 harmonics with random amplitudes, periods and
+/// phases per seed, a tilt and an offset (the artefact's alignment), noise of 0.1 um on every
+/// point; x every 5 mm over 305 mm; u = 0.1 um per point.
+inline void random_straightness(std::uint32_t seed, std::vector<double>* x, std::vector<double>* s,
+                                std::vector<double>* u) {
+  constexpr double kPi = 3.14159265358979323846;
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> uni(0, 1);
+  std::normal_distribution<double> noise(0, 0.1);
+  const int h = 2 + static_cast<int>(uni(rng) * 4);
+  std::vector<double> a(h), per(h), ph(h);
+  for (int k = 0; k < h; ++k) {
+    a[k] = 0.5 + 8 * uni(rng);
+    per[k] = 15 + 500 * uni(rng);
+    ph[k] = 2 * kPi * uni(rng);
+  }
+  x->clear();
+  s->clear();
+  u->clear();
+  for (int i = 0; i * 5.0 <= 305 + 1e-9; ++i) {
+    const double xi = i * 5.0;
+    double v = 3.0 + 0.01 * xi + noise(rng);
+    for (int k = 0; k < h; ++k)
+      v += a[k] * std::sin(2 * kPi * xi / per[k] + ph[k]);
+    x->push_back(xi);
+    s->push_back(v);
+    u->push_back(0.1);
+  }
+}
 
 /// Linear between (xs, ys), end values held outside; xs increasing.
 inline double hold_interp(const std::vector<double>& xs, const std::vector<double>& ys, double x) {

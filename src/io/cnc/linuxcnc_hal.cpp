@@ -27,6 +27,15 @@ std::string g(double v) {
   return buf;
 }
 
+constexpr std::size_t kCurvePoints = 16;  // lincurve.comp: personality at most 16
+constexpr std::size_t kDefaultPoints = 64;
+constexpr std::size_t kMaxPoints = 16 * 15 + 1;  // 16 chained lincurves
+
+// Curve i of a chain holds nodes [15 i, 15 i + 15] (neighbours share their joint node).
+std::size_t curves_for(std::size_t nodes) {
+  return nodes <= kCurvePoints ? 1 : (nodes - 2) / (kCurvePoints - 1) + 1;
+}
+
 class LinuxCncHal final : public CompensationWriter {
  public:
   CompensationFormat format() const override { return CompensationFormat::linuxcnc_hal; }
@@ -39,13 +48,15 @@ class LinuxCncHal final : public CompensationWriter {
             {"instance", "name prefix of the HAL components (default errsep-<symbol>)"},
             {"thread", "HAL thread (default servo-thread)"},
             {"scale_mm", "axis.<L>.eoffset-scale, mm per count (default 1e-6)"},
-            {"points", "lincurve points, 2..16 (default 16)"}};
+            {"points", "table points, 2.." + std::to_string(kMaxPoints) + " (default " +
+                           std::to_string(kDefaultPoints) +
+                           "); more than 16 chain several lincurves"}};
   }
 
   struct Settings {
     std::string input_pin, instance, thread;
     double scale_mm = 1e-6;
-    std::size_t points = 16;
+    std::size_t points = kDefaultPoints;
   };
   Settings settings(const CncParameters& params, const core::MachineAxes* axes) const {
     const cnc::ParameterReader r(params, parameters(), to_string(format()));
@@ -57,7 +68,8 @@ class LinuxCncHal final : public CompensationWriter {
         r.text("instance", "errsep-" + (axes ? lower_text(axes->symbol()) : std::string("comp")));
     s.thread = r.text("thread", "servo-thread");
     s.scale_mm = r.number("scale_mm", 1e-6, 1e-9, 1.0);
-    s.points = static_cast<std::size_t>(r.integer("points", 16, 2, 16));
+    s.points = static_cast<std::size_t>(
+        r.integer("points", static_cast<long>(kDefaultPoints), 2, static_cast<long>(kMaxPoints)));
     for (const auto& [key, v] : {std::pair{"input_pin", s.input_pin},
                                  std::pair{"instance", s.instance}, std::pair{"thread", s.thread}})
       if (!cnc::plain_name(v)) r.fail(key, "'" + v + "' is not a HAL name");
@@ -69,6 +81,7 @@ class LinuxCncHal final : public CompensationWriter {
                                      const CncParameters& params) const override {
     core::BreakpointOptions b;
     b.max_points = settings(params, &profile.axes).points;
+    b.max_candidates = std::max(b.max_candidates, b.max_points);
     return core::make_breakpoint_table(profile, b);
   }
 
@@ -77,21 +90,26 @@ class LinuxCncHal final : public CompensationWriter {
                              const CncWriteInfo& info) const override {
     const Settings s = settings(params, &axes);
     const std::size_t n = table.points();
-    if (n < 2 || n > 16)
-      throw std::invalid_argument("LinuxCNC lincurve: " + std::to_string(n) +
-                                  " points; the component holds 2..16");
+    if (n < 2 || n > kMaxPoints)
+      throw std::invalid_argument("LinuxCNC: " + std::to_string(n) + " points; 2.." +
+                                  std::to_string(kMaxPoints) + " are written");
     const char l = cnc::lower(axes.output_axis);
     const char L = static_cast<char>(std::toupper(static_cast<unsigned char>(l)));
     const std::string& c = s.instance;
+    const std::size_t k = curves_for(n);
     double max_slope = 0;
     for (std::size_t i = 1; i < n; ++i)
       max_slope = std::max(max_slope, std::abs((table.comp_um[i] - table.comp_um[i - 1]) * 1e-3 /
                                                (table.position_mm[i] - table.position_mm[i - 1])));
     const double counts_per_um = 1e-3 / s.scale_mm;
+    auto counts = [&](double um) { return cnc::fixed(um * counts_per_um, 3); };
+    auto curve = [&](std::size_t i) { return c + "-table" + std::to_string(i); };
+    auto first = [&](std::size_t i) { return i * (kCurvePoints - 1); };
+    auto last = [&](std::size_t i) { return std::min(n - 1, first(i) + kCurvePoints - 1); };
     std::ostringstream o;
     o << "# errsep " << kVersion << ": " << axes.symbol() << " straightness compensation of axis "
-      << L << " as an absolute function of " << s.input_pin << " (lincurve, " << n
-      << " points)\n";
+      << L << " as an absolute function of " << s.input_pin << " (" << n << " points in " << k
+      << " lincurve" << (k > 1 ? "s" : "") << ")\n";
     if (!info.title.empty()) o << "# " << cnc::one_line(info.title) << "\n";
     o << "# compensation = -(measured error) at machine positions, applied as an external offset "
          "of axis "
@@ -102,35 +120,68 @@ class LinuxCncHal final : public CompensationWriter {
          "# (counts += table(x) - request / scale each period, only while motion is enabled and "
          "homed), so it\n# equals the table at every position whatever the machine-on position "
          "(within 2 counts).\n";
-    o << "# y-val are counts of axis." << l << ".eoffset-scale = " << g(s.scale_mm) << " mm.\n";
+    if (k > 1)
+      o << "# lincurve holds 16 points: " << k << " curves share their end points and are "
+        << "added, less the joint values\n# (each holds its end values outside its own range).\n";
+    o << "# y-val and the sums are counts of axis." << l << ".eoffset-scale = " << g(s.scale_mm)
+      << " mm.\n";
     o << "# The INI needs [AXIS_" << L
       << "]OFFSET_AV_RATIO > 0 (share of velocity/acceleration reserved for external offsets).\n";
     o << "# Largest slope of the table: " << g(max_slope) << " mm/mm; axis " << L
       << " must follow (slope) x (velocity of the moving axis).\n";
     o << "# If your HAL already loads lincurve, sum2, mux2, and2 or conv_float_s32, merge the "
-         "names= lists.\n";
-    o << "loadrt lincurve names=" << c << " personality=" << n << "\n";
-    o << "loadrt sum2 names=" << c << "-err," << c << "-acc\n";
+         "names= lists; if\n# "
+      << s.input_pin << ", axis." << l
+      << ".eoffset-request, motion.motion-enabled or motion.is-all-homed is already on a signal,"
+         "\n# net that signal instead (a pin is on one signal only).\n";
+    std::string names, pers, sums;
+    for (std::size_t i = 0; i < k; ++i) {
+      names += (i ? "," : "") + curve(i);
+      pers += (i ? "," : "") + std::to_string(last(i) - first(i) + 1);
+      if (i > 0) sums += "," + c + "-sum" + std::to_string(i);
+    }
+    o << "loadrt lincurve names=" << names << " personality=" << pers << "\n";
+    o << "loadrt sum2 names=" << c << "-err," << c << "-acc" << sums << "\n";
     o << "loadrt mux2 names=" << c << "-gate-err," << c << "-gate-acc\n";
     o << "loadrt and2 names=" << c << "-on\n";
     o << "loadrt conv_float_s32 names=" << c << "-s32\n";
-    for (const std::string& f : {c, c + "-on", c + "-err", c + "-gate-err", c + "-gate-acc",
-                                c + "-acc", c + "-s32"})
+    std::vector<std::string> functions;
+    for (std::size_t i = 0; i < k; ++i)
+      functions.push_back(curve(i));
+    for (std::size_t i = 1; i < k; ++i)
+      functions.push_back(c + "-sum" + std::to_string(i));
+    for (const char* f : {"-on", "-err", "-gate-err", "-gate-acc", "-acc", "-s32"})
+      functions.push_back(c + f);
+    for (const auto& f : functions)
       o << "addf " << f << " " << s.thread << "\n";
-    for (std::size_t i = 0; i < n; ++i) {
-      char nn[8];
-      std::snprintf(nn, sizeof nn, "%02zu", i);
-      o << "setp " << c << ".x-val-" << nn << " " << cnc::fixed(table.position_mm[i], 6) << "\n";
-      o << "setp " << c << ".y-val-" << nn << " "
-        << cnc::fixed(table.comp_um[i] * counts_per_um, 3) << "\n";
-    }
+    for (std::size_t i = 0; i < k; ++i)
+      for (std::size_t j = first(i); j <= last(i); ++j) {
+        char nn[8];
+        std::snprintf(nn, sizeof nn, "%02zu", j - first(i));
+        o << "setp " << curve(i) << ".x-val-" << nn << " " << cnc::fixed(table.position_mm[j], 6)
+          << "\n";
+        o << "setp " << curve(i) << ".y-val-" << nn << " " << counts(table.comp_um[j]) << "\n";
+      }
+    // sum_i = sum_{i-1} + table_i - table_i(its first node): each curve adds its own course.
+    for (std::size_t i = 1; i < k; ++i)
+      o << "setp " << c << "-sum" << i << ".offset " << counts(-table.comp_um[first(i)]) << "\n";
     o << "setp " << c << "-err.gain0 1\n";
     o << "setp " << c << "-err.gain1 " << g(-1.0 / s.scale_mm) << "\n";
     o << "setp " << c << "-gate-err.in0 0\n";
     o << "setp " << c << "-gate-acc.in0 0\n";
     o << "setp " << c << "-s32.clamp 1\n";
-    o << "net " << c << "-pos " << s.input_pin << " => " << c << ".in\n";
-    o << "net " << c << "-table " << c << ".out => " << c << "-err.in0\n";
+    o << "net " << c << "-pos " << s.input_pin << " =>";
+    for (std::size_t i = 0; i < k; ++i)
+      o << " " << curve(i) << ".in";
+    o << "\n";
+    std::string total = curve(0) + ".out";
+    for (std::size_t i = 1; i < k; ++i) {
+      const std::string sum = c + "-sum" + std::to_string(i);
+      o << "net " << c << "-part" << i - 1 << " " << total << " => " << sum << ".in0\n";
+      o << "net " << c << "-curve" << i << " " << curve(i) << ".out => " << sum << ".in1\n";
+      total = sum + ".out";
+    }
+    o << "net " << c << "-table " << total << " => " << c << "-err.in0\n";
     o << "net " << c << "-request axis." << l << ".eoffset-request => " << c << "-err.in1\n";
     o << "net " << c << "-enabled motion.motion-enabled => " << c << "-on.in0\n";
     o << "net " << c << "-homed motion.is-all-homed => " << c << "-on.in1\n";
@@ -152,24 +203,34 @@ class LinuxCncHal final : public CompensationWriter {
     std::string line;
     std::size_t no = 0;
     std::smatch m;
-    const std::regex load_re(R"(^loadrt lincurve names=(\S+) personality=(\d+)$)");
+    const std::regex load_re(R"(^loadrt lincurve names=(\S+) personality=(\S+)$)");
     const std::regex val_re(R"(^setp (\S+)\.([xy])-val-(\d\d) (\S+)$)");
     const std::regex scale_re(R"(^setp axis\.([xyzabcuvw])\.eoffset-scale (\S+)$)");
-    const std::regex in_re(R"(^net \S+ axis\.([xyz])\.pos-cmd => (\S+)\.in$)");
+    const std::regex in_re(R"(^net \S+ axis\.([xyz])\.pos-cmd => .*$)");
     const std::regex out_re(R"(^net \S+ \S+ => axis\.([xyz])\.eoffset-counts$)");
-    std::string instance;
-    std::size_t personality = 0;
-    std::map<std::size_t, double> xs, ys;
+    std::vector<std::string> curves;
+    std::vector<std::size_t> personality;
+    std::map<std::string, std::map<std::size_t, double>> xs, ys;
     double scale = 0;
     ControllerTable ct;
+    auto split = [](const std::string& t) {
+      std::vector<std::string> v;
+      std::stringstream ss(t);
+      for (std::string item; std::getline(ss, item, ',');)
+        v.push_back(item);
+      return v;
+    };
     while (std::getline(in, line)) {
       ++no;
       if (!line.empty() && line.back() == '\r') line.pop_back();
       if (std::regex_match(line, m, load_re)) {
-        instance = m[1];
-        personality = std::stoul(m[2]);
-      } else if (std::regex_match(line, m, val_re) && m[1] == instance) {
-        (m[2] == "x" ? xs : ys)[std::stoul(m[3])] = cnc::read_number(m[4], name, no);
+        curves = split(m[1]);
+        for (const auto& p : split(m[2]))
+          personality.push_back(static_cast<std::size_t>(cnc::read_number(p, name, no)));
+        if (personality.size() != curves.size())
+          cnc::read_fail(name, no, "one personality per lincurve needed");
+      } else if (std::regex_match(line, m, val_re)) {
+        (m[2] == "x" ? xs : ys)[m[1]][std::stoul(m[3])] = cnc::read_number(m[4], name, no);
       } else if (std::regex_match(line, m, scale_re)) {
         scale = cnc::read_number(m[2], name, no);
       } else if (std::regex_match(line, m, in_re)) {
@@ -178,18 +239,27 @@ class LinuxCncHal final : public CompensationWriter {
         ct.output_axis = static_cast<char>(std::toupper(static_cast<unsigned char>(m[1].str()[0])));
       }
     }
-    if (instance.empty()) cnc::read_fail(name, 0, "no 'loadrt lincurve names=... personality=N'");
-    if (personality < 2 || personality > 16)
-      cnc::read_fail(name, 0, "lincurve personality must be 2..16");
+    if (curves.empty()) cnc::read_fail(name, 0, "no 'loadrt lincurve names=... personality=...'");
     if (!(scale > 0)) cnc::read_fail(name, 0, "no positive axis.L.eoffset-scale");
-    for (std::size_t i = 0; i < personality; ++i) {
-      // lincurve parameters that are not set stay 0: a table must set all of them.
-      if (!xs.count(i) || !ys.count(i))
-        cnc::read_fail(name, 0, "lincurve point " + std::to_string(i) + " is not set");
-      if (i > 0 && !(xs[i] > xs[i - 1]))
-        cnc::read_fail(name, 0, "lincurve x-val must increase (point " + std::to_string(i) + ")");
-      ct.table.position_mm.push_back(xs[i]);
-      ct.table.comp_um.push_back(ys[i] * scale * 1e3);
+    for (std::size_t c = 0; c < curves.size(); ++c) {
+      const std::size_t p = personality[c];
+      if (p < 2 || p > kCurvePoints) cnc::read_fail(name, 0, "lincurve personality must be 2..16");
+      for (std::size_t i = 0; i < p; ++i) {
+        // lincurve parameters that are not set stay 0: a table must set all of them.
+        if (!xs[curves[c]].count(i) || !ys[curves[c]].count(i))
+          cnc::read_fail(name, 0, curves[c] + " point " + std::to_string(i) + " is not set");
+        const double x = xs[curves[c]][i], y = ys[curves[c]][i] * scale * 1e3;
+        auto& t = ct.table;
+        if (c > 0 && i == 0) {  // the joint node the neighbours share
+          if (t.position_mm.empty() || x != t.position_mm.back() || y != t.comp_um.back())
+            cnc::read_fail(name, 0, curves[c] + " does not start where " + curves[c - 1] + " ends");
+          continue;
+        }
+        if (!t.position_mm.empty() && !(x > t.position_mm.back()))
+          cnc::read_fail(name, 0, curves[c] + " x-val must increase (point " + std::to_string(i) + ")");
+        t.position_mm.push_back(x);
+        t.comp_um.push_back(y);
+      }
     }
     ct.extra_um = 2 * scale * 1e3;  // the loop runs in whole counts
     return ct;

@@ -23,10 +23,13 @@
 //   conv_float_s32 -> axis.L.eoffset-counts
 // The request then equals the table at the commanded position of one servo period before,
 // whatever the machine-on position, to within 2 counts (whole counts; 2 nm at the default scale).
-// lincurve: at most 16 points (src/hal/components/lincurve.comp), end values held outside.
+// lincurve holds at most 16 points (src/hal/components/lincurve.comp) and its end values outside
+// its range: a longer table is split into curves that share their end points, whose outputs are
+// added by sum2 less the joint values (sum2.offset), so that the sum follows each curve in turn.
 //
 // Parameters: input_pin (default axis.<input>.pos-cmd), instance (default errsep-<symbol>),
-// thread (default servo-thread), scale_mm (eoffset-scale, default 1e-6), points (2..16).
+// thread (default servo-thread), scale_mm (eoffset-scale, default 1e-6), points (2..241,
+// default 64: the breakpoints are chosen to make the largest interpolation error smallest).
 #include "errsep/io/cnc/compensation_format.hpp"
 
 namespace errsep::io {
