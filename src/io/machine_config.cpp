@@ -734,7 +734,8 @@ void read_compensation(const Reader& root, MachineConfig& c) {
                 ? msg.substr(dot + 1, colon - dot - 1)
                 : std::string();
         const toml::node* n = pkey.empty() ? nullptr : ft->get(pkey);
-        throw ConfigError(root.file(), n ? line_of(*n) : line_of(*ft), "compensation." + key,
+        throw ConfigError(root.file(), n ? line_of(*n) : line_of(*ft),
+                          "compensation." + (colon == std::string::npos ? key : msg.substr(0, colon)),
                           msg.substr(colon == std::string::npos ? 0 : colon + 2));
       }
       cc.tables.parameters[*f] = std::move(params);
