@@ -14,6 +14,7 @@
 #include "errsep/io/csv.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
+#include "support/controller_tables.hpp"
 #include "support/support.hpp"
 
 using namespace errsep;
@@ -117,6 +118,29 @@ TEST_CASE("scan on the device simulator, separated: S and gamma match the simula
   // it is now 30 µrad (8 % of γ's range), from the measured gain, and the gap is on issue 2.
   CHECK(max_dS < 0.5);
   CHECK(max_dg < 30.0);
+
+  // The demo's HEIDENHAIN table (io/cnc/heidenhain_com.hpp cites the TNC manuals), read back by
+  // an independent reader: column Y of EYX.COM at the machine positions of X, entered in column
+  // X of EYX.CMA; the values are -(S less its end-point line) in mm with 4 decimals.
+  std::string rep;
+  const int rrc = run_command(app_path("report").string() + " " + out.string() + " --config " +
+                                  cfg_path.string() + " --no-plots",
+                              &rep);
+  INFO(rep);
+  REQUIRE(rrc == 0);
+  const auto com = test::parse_heidenhain_com(read_text(out / "compensation" / "EYX.COM"));
+  const auto cma = test::parse_heidenhain_cma(read_text(out / "compensation" / "EYX.CMA"));
+  CHECK(com.axis == 'Y');
+  CHECK(cma.column == "X");
+  CHECK(cma.com_path == "TNC:\\table\\EYX.COM");
+  CHECK(cma.active);
+  REQUIRE(com.axispos_mm.size() == x.size());
+  const double start = cfg.scan.slide_start_mm;
+  for (std::size_t n = 0; n < x.size(); ++n) {
+    const double line = S.front() + (S.back() - S.front()) * (x[n] - x.front()) / (x.back() - x.front());
+    CHECK(com.axispos_mm[n] == Approx(start + x[n]).margin(1e-4));
+    CHECK(com.value_mm[n] * 1e3 == Approx(-(S[n] - line)).margin(0.05 + 1e-9));
+  }
 }
 
 TEST_CASE("SIGINT during the scan: stages stopped, raw data kept and marked incomplete, exit 130") {

@@ -88,7 +88,7 @@ TEST_CASE("measure - compensate - verify: residual, prediction and U over seeds 
       INFO("sigma " << sigma << " seed " << s << ": before " << v.before.straightness_um
                     << " measured " << v.measured.straightness_um << " predicted "
                     << v.predicted.straightness_um << " allowed " << v.allowed_um);
-      CHECK(v.before.straightness_um > 20);  // the slideway is what we think it is
+      CHECK(v.before.straightness_um > 15);  // the slideway is bowed as we think it is
       helps += v.measured.straightness_um < v.before.straightness_um;
       within_15 += v.ratio <= 0.15;
       consistent += v.consistent;
