@@ -104,8 +104,8 @@ int main(int argc, char** argv) {
     }
     for (const auto& p : table_params) {
       const auto dot = p.find('.'), eq = p.find('=');
-      const auto cf = dot == std::string::npos ? std::nullopt
-                                               : io::parse_compensation_format(p.substr(0, dot));
+      const auto cf =
+          dot == std::string::npos ? std::nullopt : io::parse_compensation_format(p.substr(0, dot));
       if (!cf || eq == std::string::npos || eq < dot)
         throw std::invalid_argument("--table-param '" + p +
                                     "': expected FORMAT.KEY=VALUE with FORMAT one of " +
@@ -121,8 +121,7 @@ int main(int argc, char** argv) {
     for (const auto& w : r.warnings)
       std::cerr << "warning: " << w << "\n";
     if (!r.compensation_summary.empty())
-      std::cout << "compensation tables (" << dir << "/compensation/):\n"
-                << r.compensation_summary;
+      std::cout << "compensation tables (" << dir << "/compensation/):\n" << r.compensation_summary;
     std::cout << "wrote " << r.written.size() << " files, report: " << dir << "/report.html\n";
     return 0;
   } catch (const std::exception& e) {

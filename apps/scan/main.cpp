@@ -7,9 +7,10 @@
 // refine step of errsep-refine on the four-sensor scan and writes its files to OUT/refine/
 // (io/refine_run.hpp). --verify-with TABLE: the scan after a compensation table was loaded
 // (the embedded simulator applies it itself), compared with the first scan and the residual the
-// table predicts (OUT/verification.txt, .csv; io/verification_report.hpp). Ctrl-C / SIGTERM: the stages are stopped, the raw data measured so far is
-// written marked "complete: false", nothing is separated, exit status 130. Exit status: 0 complete,
-// 1 usage/config/device set-up error, 3 scan failed (device fault), 130 aborted.
+// table predicts (OUT/verification.txt, .csv; io/verification_report.hpp). Ctrl-C / SIGTERM: the
+// stages are stopped, the raw data measured so far is written marked "complete: false", nothing is
+// separated, exit status 130. Exit status: 0 complete, 1 usage/config/device set-up error, 3 scan
+// failed (device fault), 130 aborted.
 #include <unistd.h>
 #include <CLI/CLI.hpp>
 #include <atomic>
@@ -21,12 +22,12 @@
 #include <optional>
 
 #include "errsep/acq/scan_runner.hpp"
+#include "errsep/core/compensation_verification.hpp"
 #include "errsep/core/displacement_method.hpp"
 #include "errsep/core/four_sensor.hpp"
 #include "errsep/drivers/device_factory.hpp"
 #include "errsep/drivers/scan_devices.hpp"
 #include "errsep/drivers/simulator_process.hpp"
-#include "errsep/core/compensation_verification.hpp"
 #include "errsep/io/cnc/compensation_format.hpp"
 #include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/machine_config.hpp"
@@ -108,13 +109,14 @@ void verify(const core::FourSensorResult& res, const io::MachineConfig& cfg, con
   if (!warning.empty()) std::cerr << "warning: " << warning << "\n";
   const core::MachineError after =
       core::machine_error(vec(res.x_mm), vec(res.S_um), vec(res.u_S_um), cfg.axes);
-  const auto r = core::verify_compensation(before, after,
-                                           [&](double p) { return applied.apply_um(p); });
+  const auto r =
+      core::verify_compensation(before, after, [&](double p) { return applied.apply_um(p); });
   const io::VerificationInfo info{cfg.axes.symbol(), fs::absolute(table).string(),
                                   fs::absolute(before_dir).string(), 2.0};
   io::write_verification(out, r, info);
-  std::cout << io::verification_text(r, info) << "verification: " << (out / "verification.txt").string()
-            << ", " << (out / "verification.csv").string() << "\n";
+  std::cout << io::verification_text(r, info)
+            << "verification: " << (out / "verification.txt").string() << ", "
+            << (out / "verification.csv").string() << "\n";
 }
 
 void separate_displacement(const io::RawDisplacementScan& raw) {
@@ -201,7 +203,8 @@ int main(int argc, char** argv) {
     const fs::path out = out_dir.empty() ? cfg.scan.output_dir : fs::path(out_dir);
     if (!verify_table.empty()) {
       if (m == io::ScanMethod::displacement)
-        throw std::invalid_argument("--verify-with needs a four-sensor scan (--method four_sensor)");
+        throw std::invalid_argument(
+            "--verify-with needs a four-sensor scan (--method four_sensor)");
       (void)io::read_compensation_file(verify_table);  // a table that cannot be read: stop now
       if (before_dir.empty()) before_dir = io::result_dir_of_table(verify_table).string();
       if (before_dir.empty())

@@ -220,11 +220,10 @@ CompensationTable make_uniform_table(const CompensationProfile& profile,
           " mm, or 0 to choose from the data");
     const auto m_int = static_cast<std::size_t>(mr);
     if (limit != 0 && m_int + 1 > limit)
-      throw std::invalid_argument("compensation table: " + std::to_string(m_int + 1) +
-                                  " points at step " + fmt(opts.step_mm) + " mm exceed the " +
-                                  "controller's limit of " + std::to_string(limit) +
-                                  " (use a step of at least " +
-                                  fmt(span / static_cast<double>(limit - 1)) + " mm)");
+      throw std::invalid_argument(
+          "compensation table: " + std::to_string(m_int + 1) + " points at step " +
+          fmt(opts.step_mm) + " mm exceed the " + "controller's limit of " + std::to_string(limit) +
+          " (use a step of at least " + fmt(span / static_cast<double>(limit - 1)) + " mm)");
     return uniform_nodes(profile, m_int);
   }
   // Chosen from the data: the samples themselves when they are uniform and fit the limit.

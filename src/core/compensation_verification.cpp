@@ -62,8 +62,8 @@ VerificationResult verify_compensation(const MachineError& before, const Machine
   r.difference_um = r.measured.straightness_um - r.predicted.straightness_um;
   r.allowed_um = r.measured.uncertainty.expanded + r.predicted.uncertainty.expanded;
   r.consistent = std::abs(r.difference_um) <= r.allowed_um;
-  r.ratio = r.before.straightness_um > 0 ? r.measured.straightness_um / r.before.straightness_um
-                                         : 0.0;
+  r.ratio =
+      r.before.straightness_um > 0 ? r.measured.straightness_um / r.before.straightness_um : 0.0;
   // Point by point, less the least-squares line of the difference.
   std::vector<double> d(r.points);
   for (std::size_t i = 0; i < r.points; ++i)

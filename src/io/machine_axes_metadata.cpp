@@ -44,8 +44,7 @@ std::optional<core::MachineAxes> machine_axes_from_metadata(const Metadata& md) 
   if (const std::string* v = find(md, "straightness_direction")) {
     a.output_axis = core::parse_linear_axis(*v);
     if (!a.output_axis)
-      throw std::invalid_argument("metadata straightness_direction: '" + *v +
-                                  "' is not X, Y or Z");
+      throw std::invalid_argument("metadata straightness_direction: '" + *v + "' is not X, Y or Z");
   }
   std::size_t used = 0;
   try {

@@ -658,8 +658,8 @@ void read_axes(const Reader& root, MachineConfig& c) {
   if (!t) return;
   Reader r(root.file(), *t, "axes");
   r.only({"input", "output", "scan_direction", "reading_sign"});
-  for (const auto& [key, axis] :
-       {std::pair<const char*, char*>{"input", &c.axes.input_axis}, {"output", &c.axes.output_axis}}) {
+  for (const auto& [key, axis] : {std::pair<const char*, char*>{"input", &c.axes.input_axis},
+                                  {"output", &c.axes.output_axis}}) {
     std::string v(1, *axis);
     r.get(key, v);
     const char a = core::parse_linear_axis(v);
@@ -718,7 +718,8 @@ void read_compensation(const Reader& root, MachineConfig& c) {
           std::snprintf(buf, sizeof buf, "%.17g", pv.as_floating_point()->get());
           text = buf;
         } else {
-          throw ConfigError(root.file(), line_of(pv), "compensation." + key + "." + std::string(pk.str()),
+          throw ConfigError(root.file(), line_of(pv),
+                            "compensation." + key + "." + std::string(pk.str()),
                             "expected a string or a number");
         }
         params[std::string(pk.str())] = text;
@@ -734,9 +735,10 @@ void read_compensation(const Reader& root, MachineConfig& c) {
                 ? msg.substr(dot + 1, colon - dot - 1)
                 : std::string();
         const toml::node* n = pkey.empty() ? nullptr : ft->get(pkey);
-        throw ConfigError(root.file(), n ? line_of(*n) : line_of(*ft),
-                          "compensation." + (colon == std::string::npos ? key : msg.substr(0, colon)),
-                          msg.substr(colon == std::string::npos ? 0 : colon + 2));
+        throw ConfigError(
+            root.file(), n ? line_of(*n) : line_of(*ft),
+            "compensation." + (colon == std::string::npos ? key : msg.substr(0, colon)),
+            msg.substr(colon == std::string::npos ? 0 : colon + 2));
       }
       cc.tables.parameters[*f] = std::move(params);
     } else {

@@ -471,8 +471,8 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
       html.notes.push_back(
           "Compensation sign: comp(p) = -error(p) at machine positions p of " +
           std::string(1, axis) + " (from " + sig(profile.first_mm(), 6) + " to " +
-          sig(profile.last_mm(), 6) + " mm; reading_sign " +
-          (axes.reading_sign > 0 ? "+1" : "-1") + "), added to the " + std::string(1, dirn) +
+          sig(profile.last_mm(), 6) + " mm; reading_sign " + (axes.reading_sign > 0 ? "+1" : "-1") +
+          "), added to the " + std::string(1, dirn) +
           " command (actual = commanded + comp + error = commanded). The " +
           (opts.compensation.remove_line ? std::string(core::label(*opts.compensation.remove_line))
                                          : std::string("no line")) +
@@ -499,8 +499,9 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
                               t.read_back.table.comp_um,
                               {}});
         }
-        plot_line(p, "Compensation: the measured -error with its expanded uncertainty and each "
-                     "controller's table as read back");
+        plot_line(p,
+                  "Compensation: the measured -error with its expanded uncertainty and each "
+                  "controller's table as read back");
       }
     }
   }

@@ -67,12 +67,12 @@ CsvTable verification_csv(const core::VerificationResult& r, const VerificationI
 
 std::string verification_text(const core::VerificationResult& r, const VerificationInfo& info) {
   std::ostringstream o;
-  o << "measure - compensate - verify, " << info.symbol << " (straightness, minimum zone; U with k = "
-    << g(info.coverage_factor, 3) << ")\n";
+  o << "measure - compensate - verify, " << info.symbol
+    << " (straightness, minimum zone; U with k = " << g(info.coverage_factor, 3) << ")\n";
   o << "  table applied:        " << info.table_file << "\n";
   o << "  first scan:           " << info.before << "\n";
-  o << "  before compensation:  "
-    << with_u(r.before.straightness_um, r.before.uncertainty.expanded) << "\n";
+  o << "  before compensation:  " << with_u(r.before.straightness_um, r.before.uncertainty.expanded)
+    << "\n";
   o << "  predicted residual:   "
     << with_u(r.predicted.straightness_um, r.predicted.uncertainty.expanded)
     << "  (first scan + the table as the controller applies it)\n";
@@ -80,10 +80,9 @@ std::string verification_text(const core::VerificationResult& r, const Verificat
     << with_u(r.measured.straightness_um, r.measured.uncertainty.expanded) << "  ("
     << g(100 * r.ratio, 3) << " % of before)\n";
   o << "  measured - predicted: " << g(r.difference_um, 3) << " um, within U_measured + "
-    << "U_predicted = " << g(r.allowed_um, 3) << " um: "
-    << (r.consistent ? "consistent" : "NOT consistent") << "\n";
-  o << "  point by point:       " << g(100 * r.pointwise_coverage, 3)
-    << " % of " << r.points
+    << "U_predicted = " << g(r.allowed_um, 3)
+    << " um: " << (r.consistent ? "consistent" : "NOT consistent") << "\n";
+  o << "  point by point:       " << g(100 * r.pointwise_coverage, 3) << " % of " << r.points
     << " positions within k sqrt(u_before^2 + u_after^2) of the prediction (line removed)\n";
   return o.str();
 }
@@ -113,7 +112,8 @@ core::MachineError read_machine_error(const std::filesystem::path& result_dir,
       *warning = f.string() + " does not record where its scan ran; taken as the machine " +
                  "config's axes (slide_start_mm " + g(fallback.slide_start_mm) + ")";
   }
-  const std::vector<double> u = t.find_column("u_S_um") ? t.column("u_S_um", f) : std::vector<double>{};
+  const std::vector<double> u =
+      t.find_column("u_S_um") ? t.column("u_S_um", f) : std::vector<double>{};
   try {
     return core::machine_error(t.column("x_mm", f), t.column("S_um", f), u, *axes);
   } catch (const std::invalid_argument& e) {
@@ -135,17 +135,17 @@ std::vector<std::pair<std::string, std::string>> verification_rows(
   rows.emplace_back("table applied", csv.meta("table").value_or("?"));
   rows.emplace_back(sym + " before compensation",
                     with_u(number(csv, "before_um", file), number(csv, "before_U_um", file)));
-  rows.emplace_back(sym + " predicted residual", with_u(number(csv, "predicted_um", file),
-                                                        number(csv, "predicted_U_um", file)));
+  rows.emplace_back(sym + " predicted residual",
+                    with_u(number(csv, "predicted_um", file), number(csv, "predicted_U_um", file)));
   rows.emplace_back(sym + " measured residual",
                     with_u(number(csv, "measured_um", file), number(csv, "measured_U_um", file)));
   rows.emplace_back("measured / before",
                     g(100 * number(csv, "ratio_measured_to_before", file), 3) + " %");
-  rows.emplace_back("measured - predicted",
-                    g(number(csv, "difference_um", file), 3) + " um (allowed " +
-                        g(number(csv, "allowed_um", file), 3) + " um): " +
-                        (csv.meta("consistent").value_or("false") == "true" ? "consistent"
-                                                                            : "NOT consistent"));
+  rows.emplace_back(
+      "measured - predicted",
+      g(number(csv, "difference_um", file), 3) + " um (allowed " +
+          g(number(csv, "allowed_um", file), 3) + " um): " +
+          (csv.meta("consistent").value_or("false") == "true" ? "consistent" : "NOT consistent"));
   return rows;
 }
 

@@ -210,8 +210,8 @@ TEST_CASE("LinuxCNC: errsep's HAL file applies the table at every position, any 
     const fs::path fifo = tmp / "rtapi";
     fs::create_directories(fifo);
     fs::permissions(fifo, fs::perms::all);
-    fs::permissions(tmp.path(), fs::perms::owner_all | fs::perms::others_exec |
-                                    fs::perms::group_exec);
+    fs::permissions(tmp.path(),
+                    fs::perms::owner_all | fs::perms::others_exec | fs::perms::group_exec);
     env += "RTAPI_UID=65534 RTAPI_FIFO_PATH=" + (fifo / "rtapi_fifo").string() + " ";
   }
   std::string output;
@@ -242,11 +242,10 @@ TEST_CASE("LinuxCNC: errsep's HAL file applies the table at every position, any 
     const auto& last = v.back();
     const double standstill = std::abs(last.eoffset_um - profile.at(last.pos_mm));
     WARN("LinuxCNC, machine on at X = "
-         << ons[k] << " mm: " << compared << " periods over " << pmin << " .. " << pmax
-         << " mm (" << up << " up, " << down << " down); largest |request - compensation| "
-         << worst << " um (against the file's own table " << own
-         << " um), applied at standstill " << standstill << " um; stated " << stated_um
-         << " um");
+         << ons[k] << " mm: " << compared << " periods over " << pmin << " .. " << pmax << " mm ("
+         << up << " up, " << down << " down); largest |request - compensation| " << worst
+         << " um (against the file's own table " << own << " um), applied at standstill "
+         << standstill << " um; stated " << stated_um << " um");
     CHECK(compared > 1000);
     CHECK(pmin <= profile.first_mm());
     CHECK(pmax >= profile.last_mm());

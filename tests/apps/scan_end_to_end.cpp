@@ -137,7 +137,8 @@ TEST_CASE("scan on the device simulator, separated: S and gamma match the simula
   REQUIRE(com.axispos_mm.size() == x.size());
   const double start = cfg.scan.slide_start_mm;
   for (std::size_t n = 0; n < x.size(); ++n) {
-    const double line = S.front() + (S.back() - S.front()) * (x[n] - x.front()) / (x.back() - x.front());
+    const double line =
+        S.front() + (S.back() - S.front()) * (x[n] - x.front()) / (x.back() - x.front());
     CHECK(com.axispos_mm[n] == Approx(start + x[n]).margin(1e-4));
     CHECK(com.value_mm[n] * 1e3 == Approx(-(S[n] - line)).margin(0.05 + 1e-9));
   }

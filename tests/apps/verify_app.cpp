@@ -84,7 +84,8 @@ TEST_CASE("measure - compensate - verify on the simulator: residual <= 15 %, as 
   INFO(out);
   REQUIRE(rc == 0);
   // The tables are in machine coordinates: X from 250 mm.
-  const auto cec = test::parse_sinumerik_cec(read_text(first / "compensation/EYX_sinumerik_cec.ini"));
+  const auto cec =
+      test::parse_sinumerik_cec(read_text(first / "compensation/EYX_sinumerik_cec.ini"));
   CHECK(cec.min_mm == 250);
   CHECK(cec.max_mm == 555);
 

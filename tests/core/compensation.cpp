@@ -138,8 +138,8 @@ TEST_CASE("tables lie inside the measured range; the end-point line makes c 0 at
   // The point limit is enforced with an actionable message.
   o.step_mm = 5;
   o.max_points = 10;
-  CHECK_THROWS_WITH(make_uniform_table(p, o), Catch::Contains("limit of 10") &&
-                                                  Catch::Contains("use a step of at least"));
+  CHECK_THROWS_WITH(make_uniform_table(p, o),
+                    Catch::Contains("limit of 10") && Catch::Contains("use a step of at least"));
 }
 
 TEST_CASE("point limit: the step is chosen from the data; the stated error is the real one") {
@@ -185,10 +185,10 @@ TEST_CASE("point limit: the step is chosen from the data; the stated error is th
       CompensationTable fine;
       const std::size_t m = o.max_points - 1;
       for (std::size_t i = 0; i <= m; ++i) {
-        const double q = i == m ? p.last_mm()
-                                : p.first_mm() + (p.last_mm() - p.first_mm()) *
-                                                     static_cast<double>(i) /
-                                                     static_cast<double>(m);
+        const double q = i == m
+                             ? p.last_mm()
+                             : p.first_mm() + (p.last_mm() - p.first_mm()) *
+                                                  static_cast<double>(i) / static_cast<double>(m);
         fine.position_mm.push_back(q);
         fine.comp_um.push_back(p.at(q));
       }
@@ -265,10 +265,9 @@ TEST_CASE("16 lincurve points on the Zhao 2019 Eq. (21) slideway") {
     max_abs = std::max(max_abs, std::abs(r));
   CHECK(max_abs == Approx(acc.max_um).epsilon(1e-12));
   const double original = range(p.comp_um);
-  WARN("lincurve 16 points on Eq. (21): straightness " << original
-                                                       << " um, max interpolation error "
-                                                       << acc.max_um << " um, rms " << acc.rms_um
-                                                       << " um");
+  WARN("lincurve 16 points on Eq. (21): straightness "
+       << original << " um, max interpolation error " << acc.max_um << " um, rms " << acc.rms_um
+       << " um");
   CHECK(range(res) < 0.10 * original);  // stated target: below 10 % of the original
   // Uniform spacing with the same 16 points is never better than the optimised choice.
   UniformTableOptions o;

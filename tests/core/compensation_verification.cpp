@@ -54,8 +54,7 @@ core::VerificationResult cycle(std::uint32_t seed, double sigma_um, double* bow_
   so.seed = seed;
   const auto d1 = core::simulate_four_sensor(cfg, truth, so);
   const auto r1 = core::separate_four_sensor(cfg, d1.m_um);
-  const auto profile =
-      core::compensation_profile(vec(r1.x_mm), vec(r1.S_um), vec(r1.u_S_um), axes);
+  const auto profile = core::compensation_profile(vec(r1.x_mm), vec(r1.S_um), vec(r1.u_S_um), axes);
   io::CompensationExportOptions eo;
   eo.formats = {io::CompensationFormat::sinumerik_cec};
   const auto e = io::export_compensation(profile, eo);

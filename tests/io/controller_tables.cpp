@@ -48,7 +48,8 @@ Applied check_applied(const core::CompensationProfile& p,
   Applied a;
   for (double q = p.first_mm(); q <= p.last_mm(); q += 0.37)
     a.max_inside_um = std::max(a.max_inside_um, std::abs(applied_um(q) - p.at(q)));
-  a.max_inside_um = std::max(a.max_inside_um, std::abs(applied_um(p.last_mm()) - p.at(p.last_mm())));
+  a.max_inside_um =
+      std::max(a.max_inside_um, std::abs(applied_um(p.last_mm()) - p.at(p.last_mm())));
   for (double q : {-500.0, 0.0, 100.0, p.first_mm() - 0.5, p.last_mm() + 0.5, 700.0, 2000.0})
     a.max_outside_um = std::max(a.max_outside_um, std::abs(applied_um(q)));
   return a;
@@ -86,7 +87,8 @@ double linuxcnc_run(const std::string& hal_text, const core::CompensationProfile
 
 }  // namespace
 
-TEST_CASE("slide_start_mm = 250: every format gives the right correction at 250..end, none outside") {
+TEST_CASE(
+    "slide_start_mm = 250: every format gives the right correction at 250..end, none outside") {
   int linuxcnc_runs = 0;
   double worst_ratio = 0;
   for (std::uint32_t seed = 1; seed <= 6; ++seed) {
@@ -231,8 +233,8 @@ TEST_CASE("LinuxCNC: lincurve fed straight into eoffset-counts shifts by its mac
   const double worst = linuxcnc_run(naive, p, on, 0.2, &periods);
   // Off by lincurve(400) everywhere; lincurve is within its interpolation error of the table.
   const double expected = std::abs(p.at(on)) - core::table_accuracy(p, t).max_um;
-  WARN("naive arrangement, machine on at 400 mm: worst error " << worst << " um, table(400) = "
-                                                              << p.at(on) << " um");
+  WARN("naive arrangement, machine on at 400 mm: worst error "
+       << worst << " um, table(400) = " << p.at(on) << " um");
   CHECK(expected > 0.5);
   CHECK(worst >= expected);
 }

@@ -309,12 +309,12 @@ table_dir = "PLC:\\comp\\"
   CHECK(error_of(base + "[compensation]\nformats = [\"fanuc\"]\n")
             .find("compensation.formats: 'fanuc' is not one of sinumerik_cec") !=
         std::string::npos);
-  const std::string m =
-      error_of(base + "[compensation]\n[compensation.linuxcnc_hal]\nscale_mm = 1e-6\npoints = 500\n");
+  const std::string m = error_of(
+      base + "[compensation]\n[compensation.linuxcnc_hal]\nscale_mm = 1e-6\npoints = 500\n");
   CHECK(m.find("t.toml:30: compensation.linuxcnc_hal.points: 500 is out of range") == 0);
   CHECK(error_of(base + "[compensation.beckhoff_crosscomp]\nmaster = 3\n")
             .find("compensation.beckhoff_crosscomp.master: unknown parameter (known: axis,") !=
         std::string::npos);
-  CHECK(error_of(base + "[compensation]\nstep = 5\n")
-            .find("compensation.step: unknown key") != std::string::npos);
+  CHECK(error_of(base + "[compensation]\nstep = 5\n").find("compensation.step: unknown key") !=
+        std::string::npos);
 }

@@ -179,7 +179,8 @@ class HalNetwork {
       if (line.empty() || line[0] == '#') continue;
       if (std::regex_match(line, m, load_re)) {
         std::vector<std::string> names = split(m[2], ',');
-        std::vector<std::string> pers = m[3].matched ? split(m[3], ',') : std::vector<std::string>{};
+        std::vector<std::string> pers =
+            m[3].matched ? split(m[3], ',') : std::vector<std::string>{};
         for (std::size_t i = 0; i < names.size(); ++i) {
           Comp c{m[1], names[i], 0};
           if (c.type == "lincurve")
@@ -311,9 +312,8 @@ class HalNetwork {
     for (const auto& [n, c] : comps_)
       if (pin == n + ".out") return true;
     return pin.rfind("motion.", 0) == 0 ||
-           (pin.rfind("axis.", 0) == 0 &&
-            (pin.find(".pos-cmd") != std::string::npos ||
-             pin.find(".eoffset-request") != std::string::npos));
+           (pin.rfind("axis.", 0) == 0 && (pin.find(".pos-cmd") != std::string::npos ||
+                                           pin.find(".eoffset-request") != std::string::npos));
   }
   double param(const std::string& pin, double dflt) const {
     const auto p = pins_.find(pin);
@@ -443,7 +443,8 @@ inline TncTable parse_tnc_table(const std::string& text) {
     std::size_t col = 0;
     for (auto it = std::sregex_iterator(lines[k].begin(), lines[k].end(), word);
          it != std::sregex_iterator(); ++it, ++col) {
-      if (col >= t.columns.size() || static_cast<std::size_t>(it->position()) != t.column_start[col])
+      if (col >= t.columns.size() ||
+          static_cast<std::size_t>(it->position()) != t.column_start[col])
         throw std::runtime_error("TNC table: row " + std::to_string(k + 1) +
                                  " does not line up with the columns");
       cells.push_back(it->str());

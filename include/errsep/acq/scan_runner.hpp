@@ -40,8 +40,8 @@ const char* to_string(ScanKind k) noexcept;
 
 struct ScanOptions {
   ScanKind kind = ScanKind::four_sensor;
-  core::FourSensorConfig geometry;      ///< Δx, s2, s3, s4, N (four-sensor)
-  double slide_start_mm = 0.0;          ///< slide position of x_0; raw x_mm is relative to it
+  core::FourSensorConfig geometry;  ///< Δx, s2, s3, s4, N (four-sensor)
+  double slide_start_mm = 0.0;      ///< slide position of x_0; raw x_mm is relative to it
   /// Machine axes (core/machine_axes.hpp): the slide goes to slide_start_mm +
   /// axes.scan_direction * x; all of it is recorded in the raw file's metadata.
   core::MachineAxes axes;

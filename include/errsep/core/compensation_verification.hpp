@@ -33,10 +33,10 @@ MachineError machine_error(const std::vector<double>& x_mm, const std::vector<do
 
 struct VerificationResult {
   StraightnessResult before, predicted, measured;  ///< minimum zone, with U
-  double difference_um = 0;  ///< T_measured - T_predicted
-  double allowed_um = 0;     ///< U_measured + U_predicted
-  bool consistent = false;   ///< |difference| <= allowed
-  double ratio = 0;          ///< T_measured / T_before
+  double difference_um = 0;                        ///< T_measured - T_predicted
+  double allowed_um = 0;                           ///< U_measured + U_predicted
+  bool consistent = false;                         ///< |difference| <= allowed
+  double ratio = 0;                                ///< T_measured / T_before
   double pointwise_coverage = 0;  ///< share of points with |d - line| <= k sqrt(u_a^2 + u_b^2)
   std::size_t points = 0;         ///< common positions compared
   // The profiles at the common positions (for the report and its CSV).

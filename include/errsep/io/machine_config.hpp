@@ -187,9 +187,9 @@ struct SimulatorConfig {
   ProfileSpec f_um;                        ///< reference surface f(x)
   std::array<double, 4> e_um{0, 0, 0, 0};  ///< zero-adjustment values e_1..e_4 (e_1 = 0)
   // displacement method (Haramiishi 2024, section 2.1)
-  ProfileSpec w_um;                ///< workpiece profile w(x)
-  ProfileSpec r_um;                ///< reference piece profile r(x)
-  ProfileSpec m_um;                ///< motion error m(x) of the table
+  ProfileSpec w_um;  ///< workpiece profile w(x)
+  ProfileSpec r_um;  ///< reference piece profile r(x)
+  ProfileSpec m_um;  ///< motion error m(x) of the table
   /// A compensation table (any errsep format, io/cnc/compensation_format.hpp) the simulated
   /// controller applies to the output axis as a function of the slide's machine position; empty =
   /// none.  Set by errsep-devsim --compensation (errsep-scan --verify-with).

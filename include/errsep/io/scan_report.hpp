@@ -40,7 +40,7 @@ struct ScanReportOptions {
   /// Moving axis and straightness direction (X, Y or Z); 0 = from motion.csv metadata, else X / Y.
   char axis = 0;
   char direction = 0;
-  core::CompensationOptions compensation;  ///< the line removed before tabulating
+  core::CompensationOptions compensation;   ///< the line removed before tabulating
   CompensationExportOptions tables_export;  ///< CNC formats and their parameters
   /// Machine axes for a result that does not record them (motion.csv metadata slide_start_mm,
   /// scan_direction, reading_sign), e.g. from the machine config; nullopt = scan coordinates

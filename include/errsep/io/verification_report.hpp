@@ -41,7 +41,7 @@ std::filesystem::path result_dir_of_table(const std::filesystem::path& table);
 
 /// The rows (quantity, value with U) of a verification.csv, for a report table.  Throws CsvError
 /// when a figure is missing.
-std::vector<std::pair<std::string, std::string>> verification_rows(const CsvTable& csv,
-                                                                   const std::filesystem::path& file);
+std::vector<std::pair<std::string, std::string>> verification_rows(
+    const CsvTable& csv, const std::filesystem::path& file);
 
 }  // namespace errsep::io

@@ -57,8 +57,7 @@ class BeckhoffCrosscomp final : public CompensationWriter {
   }
 
   std::vector<CncFile> write(const core::CompensationTable& table, const core::MachineAxes& axes,
-                             const CncParameters& params,
-                             const CncWriteInfo& info) const override {
+                             const CncParameters& params, const CncWriteInfo& info) const override {
     const Settings s = settings(params, &axes);
     const std::size_t n = table.points();
     if (n < 2) throw std::invalid_argument("Beckhoff cross compensation: fewer than 2 points");
@@ -98,7 +97,8 @@ class BeckhoffCrosscomp final : public CompensationWriter {
       ++no;
       if (!line.empty() && line.back() == '\r') line.pop_back();
       if (line.empty() || line[0] == '#') continue;
-      if (!std::regex_match(line, m, kv_re)) cnc::read_fail(name, no, "not 'key value': '" + line + "'");
+      if (!std::regex_match(line, m, kv_re))
+        cnc::read_fail(name, no, "not 'key value': '" + line + "'");
       const std::string key = m[1], value = m[2];
       std::smatch r;
       if (std::regex_match(key, r, row_re))

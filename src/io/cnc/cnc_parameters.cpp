@@ -51,8 +51,8 @@ long ParameterReader::integer(const std::string& key, long dflt, long lo, long h
   const auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
   if (ec != std::errc() || p != s.data() + s.size()) fail(key, "'" + s + "' is not an integer");
   if (v < lo || v > hi)
-    fail(key, std::to_string(v) + " is out of range " + std::to_string(lo) + ".." +
-                  std::to_string(hi));
+    fail(key,
+         std::to_string(v) + " is out of range " + std::to_string(lo) + ".." + std::to_string(hi));
   return v;
 }
 

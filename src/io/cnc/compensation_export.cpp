@@ -65,8 +65,8 @@ CompensationExport export_compensation(const core::CompensationProfile& profile,
       t.accuracy_line = "interpolation error of this table against the measurement: max " +
                         g(t.accuracy.max_um) + " um (at " + g(t.accuracy.position_of_max_mm, 6) +
                         " mm), rms " + g(t.accuracy.rms_um) + " um; U of the measurement " +
-                        (out.measurement_U_um > 0 ? g(out.measurement_U_um, 2) + " um (k = " +
-                                                        g(opts.coverage_factor) + ")"
+                        (out.measurement_U_um > 0 ? g(out.measurement_U_um, 2) +
+                                                        " um (k = " + g(opts.coverage_factor) + ")"
                                                   : std::string("not known")) +
                         ": " + verdict(t.accuracy.max_um, out.measurement_U_um);
       info.accuracy_line = t.accuracy_line;
@@ -79,8 +79,8 @@ CompensationExport export_compensation(const core::CompensationProfile& profile,
     } catch (const std::invalid_argument& e) {
       throw std::invalid_argument(std::string(to_string(f)) + ": " + e.what());
     } catch (const std::runtime_error& e) {
-      throw std::runtime_error(std::string(to_string(f)) + ": reading back what was written: " +
-                               e.what());
+      throw std::runtime_error(std::string(to_string(f)) +
+                               ": reading back what was written: " + e.what());
     }
   }
   return out;
@@ -90,12 +90,12 @@ std::string CompensationExport::summary() const {
   std::ostringstream o;
   for (const auto& t : tables) {
     const auto& tb = t.read_back.table;
-    o << symbol << " " << to_string(t.format) << ": " << t.files.front().name << ", "
-      << tb.points() << " points over " << g(tb.position_mm.front(), 6) << " .. "
-      << g(tb.position_mm.back(), 6) << " mm";
+    o << symbol << " " << to_string(t.format) << ": " << t.files.front().name << ", " << tb.points()
+      << " points over " << g(tb.position_mm.front(), 6) << " .. " << g(tb.position_mm.back(), 6)
+      << " mm";
     if (t.table.step_mm > 0) o << " (step " << g(t.table.step_mm, 6) << " mm)";
-    o << "; interpolation error max " << g(t.accuracy.max_um) << " um, rms "
-      << g(t.accuracy.rms_um) << " um";
+    o << "; interpolation error max " << g(t.accuracy.max_um) << " um, rms " << g(t.accuracy.rms_um)
+      << " um";
     if (measurement_U_um > 0) o << " vs U " << g(measurement_U_um, 2) << " um";
     o << ": " << verdict(t.accuracy.max_um, measurement_U_um) << "\n";
   }
@@ -107,15 +107,16 @@ CsvTable CompensationExport::accuracy_csv() const {
   c.set_meta("errsep compensation accuracy", std::string("v") + kVersion);
   c.set_meta("symbol", symbol);
   c.set_meta("coverage_factor", g(coverage_factor));
-  c.set_meta("columns", "format index (order of 'formats'), points, first and last node (machine "
-                        "mm), step (0: free breakpoints), interpolation error of the table as "
-                        "read back against the measurement (max, rms), U of the measurement");
+  c.set_meta("columns",
+             "format index (order of 'formats'), points, first and last node (machine "
+             "mm), step (0: free breakpoints), interpolation error of the table as "
+             "read back against the measurement (max, rms), U of the measurement");
   std::string names;
   std::vector<double> idx, points, first, last, step, mx, rms, U;
   for (std::size_t i = 0; i < tables.size(); ++i) {
     const auto& t = tables[i];
-    names += (names.empty() ? "" : " ") + std::string(to_string(t.format)) + "=" +
-             t.files.front().name;
+    names +=
+        (names.empty() ? "" : " ") + std::string(to_string(t.format)) + "=" + t.files.front().name;
     idx.push_back(static_cast<double>(i));
     points.push_back(static_cast<double>(t.read_back.table.points()));
     first.push_back(t.read_back.table.position_mm.front());

@@ -36,8 +36,9 @@ class HeidenhainCom final : public CompensationWriter {
   const char* suffix() const override { return ".COM"; }
   std::vector<std::pair<std::string, std::string>> parameters() const override {
     auto p = cnc::uniform_table_parameters(kDefaultMaxPoints, "256 entries per *.COM");
-    p.insert(p.begin(), {"table_dir", "directory of the *.COM on the control, as entered in the "
-                                      "*.CMA (default TNC:\\table\\)"});
+    p.insert(p.begin(), {"table_dir",
+                         "directory of the *.COM on the control, as entered in the "
+                         "*.CMA (default TNC:\\table\\)"});
     return p;
   }
 
@@ -119,8 +120,8 @@ class HeidenhainCom final : public CompensationWriter {
       } else if (c != "NR" && c != "BACKLASH") {
         if (val_col >= 0) cnc::read_fail(name, no, "more than one compensated axis column");
         val_col = static_cast<int>(k);
-        axis = c.size() == 1 ? static_cast<char>(std::toupper(static_cast<unsigned char>(c[0])))
-                             : 0;
+        axis =
+            c.size() == 1 ? static_cast<char>(std::toupper(static_cast<unsigned char>(c[0]))) : 0;
       }
     }
     if (pos_col < 0 || val_col < 0)

@@ -44,13 +44,13 @@ class LinuxCncHal final : public CompensationWriter {
   }
   const char* suffix() const override { return ".hal"; }
   std::vector<std::pair<std::string, std::string>> parameters() const override {
-    return {{"input_pin", "HAL pin of the moving axis position in mm (default axis.<x>.pos-cmd)"},
-            {"instance", "name prefix of the HAL components (default errsep-<symbol>)"},
-            {"thread", "HAL thread (default servo-thread)"},
-            {"scale_mm", "axis.<L>.eoffset-scale, mm per count (default 1e-6)"},
-            {"points", "table points, 2.." + std::to_string(kMaxPoints) + " (default " +
-                           std::to_string(kDefaultPoints) +
-                           "); more than 16 chain several lincurves"}};
+    return {
+        {"input_pin", "HAL pin of the moving axis position in mm (default axis.<x>.pos-cmd)"},
+        {"instance", "name prefix of the HAL components (default errsep-<symbol>)"},
+        {"thread", "HAL thread (default servo-thread)"},
+        {"scale_mm", "axis.<L>.eoffset-scale, mm per count (default 1e-6)"},
+        {"points", "table points, 2.." + std::to_string(kMaxPoints) + " (default " +
+                       std::to_string(kDefaultPoints) + "); more than 16 chain several lincurves"}};
   }
 
   struct Settings {
@@ -62,8 +62,7 @@ class LinuxCncHal final : public CompensationWriter {
     const cnc::ParameterReader r(params, parameters(), to_string(format()));
     Settings s;
     s.input_pin = r.text("input_pin", std::string("axis.") +
-                                          (axes ? cnc::lower(axes->input_axis) : 'x') +
-                                          ".pos-cmd");
+                                          (axes ? cnc::lower(axes->input_axis) : 'x') + ".pos-cmd");
     s.instance =
         r.text("instance", "errsep-" + (axes ? lower_text(axes->symbol()) : std::string("comp")));
     s.thread = r.text("thread", "servo-thread");
@@ -86,8 +85,7 @@ class LinuxCncHal final : public CompensationWriter {
   }
 
   std::vector<CncFile> write(const core::CompensationTable& table, const core::MachineAxes& axes,
-                             const CncParameters& params,
-                             const CncWriteInfo& info) const override {
+                             const CncParameters& params, const CncWriteInfo& info) const override {
     const Settings s = settings(params, &axes);
     const std::size_t n = table.points();
     if (n < 2 || n > kMaxPoints)
@@ -256,7 +254,8 @@ class LinuxCncHal final : public CompensationWriter {
           continue;
         }
         if (!t.position_mm.empty() && !(x > t.position_mm.back()))
-          cnc::read_fail(name, 0, curves[c] + " x-val must increase (point " + std::to_string(i) + ")");
+          cnc::read_fail(name, 0,
+                         curves[c] + " x-val must increase (point " + std::to_string(i) + ")");
         t.position_mm.push_back(x);
         t.comp_um.push_back(y);
       }

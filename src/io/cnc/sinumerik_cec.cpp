@@ -23,11 +23,12 @@ class SinumerikCec final : public CompensationWriter {
   const char* suffix() const override { return ".ini"; }
   std::vector<std::pair<std::string, std::string>> parameters() const override {
     auto p = cnc::uniform_table_parameters(kDefaultMaxPoints, "MD18342 $MN_MM_CEC_MAX_POINTS");
-    p.insert(p.begin(),
-             {{"input_axis", "machine axis name of the moving axis (default AX1/AX2/AX3 for X/Y/Z)"},
-              {"output_axis", "machine axis name of the compensated axis (default AX<n>)"},
-              {"table", "table index t of $AN_CEC[t,N] (default 0)"},
-              {"direction", "$AN_CEC_DIRECTION: 0 both (default), 1 positive, -1 negative"}});
+    p.insert(
+        p.begin(),
+        {{"input_axis", "machine axis name of the moving axis (default AX1/AX2/AX3 for X/Y/Z)"},
+         {"output_axis", "machine axis name of the compensated axis (default AX<n>)"},
+         {"table", "table index t of $AN_CEC[t,N] (default 0)"},
+         {"direction", "$AN_CEC_DIRECTION: 0 both (default), 1 positive, -1 negative"}});
     return p;
   }
 
@@ -39,14 +40,12 @@ class SinumerikCec final : public CompensationWriter {
   Settings settings(const CncParameters& params, const core::MachineAxes* axes) const {
     const cnc::ParameterReader r(params, parameters(), to_string(format()));
     Settings s;
-    s.input = r.text("input_axis", axes ? "AX" + std::to_string(cnc::axis_number(axes->input_axis))
-                                        : "AX1");
-    s.output = r.text("output_axis", axes ? "AX" + std::to_string(cnc::axis_number(
-                                                       axes->output_axis))
-                                          : "AX2");
+    s.input = r.text("input_axis",
+                     axes ? "AX" + std::to_string(cnc::axis_number(axes->input_axis)) : "AX1");
+    s.output = r.text("output_axis",
+                      axes ? "AX" + std::to_string(cnc::axis_number(axes->output_axis)) : "AX2");
     if (!cnc::plain_name(s.input)) r.fail("input_axis", "'" + s.input + "' is not an axis name");
-    if (!cnc::plain_name(s.output))
-      r.fail("output_axis", "'" + s.output + "' is not an axis name");
+    if (!cnc::plain_name(s.output)) r.fail("output_axis", "'" + s.output + "' is not an axis name");
     if (s.input == s.output) r.fail("output_axis", "equals input_axis (" + s.input + ")");
     s.table = static_cast<int>(r.integer("table", 0, 0, 1000));
     s.direction = static_cast<int>(r.integer("direction", 0, -1, 1));
@@ -61,8 +60,7 @@ class SinumerikCec final : public CompensationWriter {
   }
 
   std::vector<CncFile> write(const core::CompensationTable& table, const core::MachineAxes& axes,
-                             const CncParameters& params,
-                             const CncWriteInfo& info) const override {
+                             const CncParameters& params, const CncWriteInfo& info) const override {
     const Settings s = settings(params, &axes);
     const std::size_t n = table.points();
     if (n < 2 || !(table.step_mm > 0))
@@ -73,8 +71,7 @@ class SinumerikCec final : public CompensationWriter {
     o << "%_N_NC_CEC_INI\n";
     o << "CHANDATA(1)\n";
     o << "; errsep " << kVersion << ": sag/angularity (CEC) table " << s.table + 1 << ", "
-      << axes.symbol() << ": " << s.output << " compensated as a function of " << s.input
-      << "\n";
+      << axes.symbol() << ": " << s.output << " compensated as a function of " << s.input << "\n";
     if (!info.title.empty()) o << "; " << cnc::one_line(info.title) << "\n";
     o << "; values in mm = -(measured straightness error) at machine positions of " << s.input
       << "; added to the " << s.output << " setpoint\n";
@@ -129,7 +126,8 @@ class SinumerikCec final : public CompensationWriter {
     }
     const std::size_t n = values.size();
     if (n < 2) cnc::read_fail(name, 0, "fewer than 2 $AN_CEC points");
-    if (values.rbegin()->first != n - 1) cnc::read_fail(name, 0, "points are not 0.." + std::to_string(n - 1));
+    if (values.rbegin()->first != n - 1)
+      cnc::read_fail(name, 0, "points are not 0.." + std::to_string(n - 1));
     for (const char* k : {"STEP", "MIN", "MAX"})
       if (!param.count(k)) cnc::read_fail(name, 0, std::string("$AN_CEC_") + k + " missing");
     const double step = cnc::read_number(param["STEP"], name, 0);

@@ -13,9 +13,7 @@ namespace {
 class TableCsv final : public CompensationWriter {
  public:
   CompensationFormat format() const override { return CompensationFormat::csv; }
-  std::string description() const override {
-    return "errsep table CSV: x_mm (machine), comp_um";
-  }
+  std::string description() const override { return "errsep table CSV: x_mm (machine), comp_um"; }
   const char* suffix() const override { return ".csv"; }
   std::vector<std::pair<std::string, std::string>> parameters() const override {
     return cnc::uniform_table_parameters(0, "none");
@@ -31,8 +29,7 @@ class TableCsv final : public CompensationWriter {
   }
 
   std::vector<CncFile> write(const core::CompensationTable& table, const core::MachineAxes& axes,
-                             const CncParameters& params,
-                             const CncWriteInfo& info) const override {
+                             const CncParameters& params, const CncWriteInfo& info) const override {
     (void)settings(params);
     CsvTable t;
     t.set_meta("errsep compensation table", std::string("v") + kVersion);

@@ -26,16 +26,16 @@ struct CompensationExportOptions {
 
 struct ExportedTable {
   CompensationFormat format = CompensationFormat::csv;
-  std::vector<CncFile> files;      ///< files[0] holds the table
-  core::CompensationTable table;   ///< the nodes chosen
-  ControllerTable read_back;       ///< files[0] read back as the controller holds it
-  core::TableAccuracy accuracy;    ///< of read_back against the measurement
-  std::string accuracy_line;       ///< the sentence written beside the table
+  std::vector<CncFile> files;     ///< files[0] holds the table
+  core::CompensationTable table;  ///< the nodes chosen
+  ControllerTable read_back;      ///< files[0] read back as the controller holds it
+  core::TableAccuracy accuracy;   ///< of read_back against the measurement
+  std::string accuracy_line;      ///< the sentence written beside the table
 };
 
 struct CompensationExport {
-  std::string symbol;                 ///< ISO 230-1 symbol, e.g. "EYX"
-  double measurement_U_um = 0;        ///< largest k u(c) over the measured range; 0 = unknown
+  std::string symbol;           ///< ISO 230-1 symbol, e.g. "EYX"
+  double measurement_U_um = 0;  ///< largest k u(c) over the measured range; 0 = unknown
   double coverage_factor = 2.0;
   std::vector<ExportedTable> tables;  ///< in the order of the options' formats
   /// One line per table: points, range, step, max and RMS error, against U.

@@ -26,7 +26,13 @@
 
 namespace errsep::io {
 
-enum class CompensationFormat { sinumerik_cec, linuxcnc_hal, beckhoff_crosscomp, heidenhain_com, csv };
+enum class CompensationFormat {
+  sinumerik_cec,
+  linuxcnc_hal,
+  beckhoff_crosscomp,
+  heidenhain_com,
+  csv
+};
 
 /// The format's name as written in configs and on the command line ("sinumerik_cec", ...).
 const char* to_string(CompensationFormat f) noexcept;
