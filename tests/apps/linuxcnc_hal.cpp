@@ -29,13 +29,6 @@ bool on_path(const std::string& prog) {
   return test::run_command("command -v " + prog + " >/dev/null 2>&1") == 0;
 }
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 struct Sample {
   long tag = 0;
   double pos_mm = 0, request_um = 0, eoffset_um = 0;
@@ -218,7 +211,8 @@ TEST_CASE("LinuxCNC: errsep's HAL file applies the table at every position, any 
   const int rc = test::run_command(
       "cd " + dir.string() + " && " + env + "timeout 240 linuxcnc -r sim.ini", &output);
   INFO("linuxcnc exit " << rc << ":\n" << output);
-  if (fs::exists(dir / "error.txt")) FAIL("the UI script failed:\n" << slurp(dir / "error.txt"));
+  if (fs::exists(dir / "error.txt"))
+    FAIL("the UI script failed:\n" << test::read_file(dir / "error.txt"));
   REQUIRE(fs::exists(dir / "done.txt"));
 
   for (std::size_t k = 0; k < ons.size(); ++k) {

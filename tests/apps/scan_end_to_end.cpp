@@ -24,26 +24,13 @@ using errsep::test::TempDir;
 
 namespace {
 
-std::string read_text(const std::filesystem::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-void replace_once(std::string& s, const std::string& from, const std::string& to) {
-  const auto pos = s.find(from);
-  REQUIRE(pos != std::string::npos);
-  s.replace(pos, from.size(), to);
-}
-
 // The embedded default config, made quicker: a shorter reference (N = 40: P = 33 slide positions,
 // 132 points), faster stages.  The zero-adjustment values are set to the form e = b·O + d·O³ that
 // the default curvature gauge assumes (a quadratic part of e is not identifiable from the data,
 // see core/four_sensor_system.hpp), the same values as core::zhao2019_example1.
 std::filesystem::path write_test_config(const TempDir& dir) {
-  std::string t = read_text(test::source_dir() / "config" / "simulator.toml");
-  replace_once(t, "N = 69", "N = 40");
+  std::string t = test::read_file(test::source_dir() / "config" / "simulator.toml");
+  test::replace_once(t, "N = 69", "N = 40");
   // The shipped config already uses them; the test fails if that changes.
   REQUIRE(t.find("e_um = [0.0, 0.49, 0.92, 0.07]") != std::string::npos);
   for (const std::string from : {"speed_mm_s = 200.0", "speed_mm_s = 100.0"}) {
@@ -128,8 +115,8 @@ TEST_CASE("scan on the device simulator, separated: S and gamma match the simula
                               &rep);
   INFO(rep);
   REQUIRE(rrc == 0);
-  const auto com = test::parse_heidenhain_com(read_text(out / "compensation" / "EYX.COM"));
-  const auto cma = test::parse_heidenhain_cma(read_text(out / "compensation" / "EYX.CMA"));
+  const auto com = test::parse_heidenhain_com(test::read_file(out / "compensation" / "EYX.COM"));
+  const auto cma = test::parse_heidenhain_cma(test::read_file(out / "compensation" / "EYX.CMA"));
   CHECK(com.axis == 'Y');
   CHECK(cma.column == "X");
   CHECK(cma.com_path == "TNC:\\table\\EYX.COM");

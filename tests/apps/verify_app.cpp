@@ -21,36 +21,23 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string read_text(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-void replace_once(std::string& s, const std::string& from, const std::string& to) {
-  const auto pos = s.find(from);
-  REQUIRE(pos != std::string::npos);
-  s.replace(pos, from.size(), to);
-}
-
 // The embedded default, made into the test's slideway: four fixed probes (one pass), fast stages,
 // slide_start_mm = 250; S = q x^2 (a 20 um bow over the 305 mm scan: q L^2 / 4 = 20) plus a sine,
 // a small tilt, a short-wave artefact; 0.1 um noise on every reading, seeded per scan.
 fs::path write_config(const TempDir& dir, const std::string& name, int seed) {
-  std::string t = read_text(test::source_dir() / "config" / "simulator.toml");
-  replace_once(t, "single_sensor = true", "single_sensor = false");
-  replace_once(t, "sensors = [\"sensor1\"]",
-               "sensors = [\"probe1\", \"probe2\", \"probe3\", \"probe4\"]");
-  replace_once(t, "slide_start_mm = 0.0", "slide_start_mm = 250.0");
-  replace_once(t, "preset = \"zhao2019_example1\"",
-               "preset = \"\"\n"
-               "S_um = { quadratic_per_mm2 = 8.5998e-4, harmonics = [{ amplitude = 2.0, "
-               "period_mm = 120.0, phase_rad = 0.4 }] }\n"
-               "gamma_urad = { harmonics = [{ amplitude = 3.0, period_mm = 200.0 }] }\n"
-               "f_um = { harmonics = [{ amplitude = 0.5, period_mm = 17.0 }] }");
-  replace_once(t, "noise_sigma_um = 0.05", "noise_sigma_um = 0.1");
-  replace_once(t, "seed = 1", "seed = " + std::to_string(seed));
+  std::string t = test::read_file(test::source_dir() / "config" / "simulator.toml");
+  test::replace_once(t, "single_sensor = true", "single_sensor = false");
+  test::replace_once(t, "sensors = [\"sensor1\"]",
+                     "sensors = [\"probe1\", \"probe2\", \"probe3\", \"probe4\"]");
+  test::replace_once(t, "slide_start_mm = 0.0", "slide_start_mm = 250.0");
+  test::replace_once(t, "preset = \"zhao2019_example1\"",
+                     "preset = \"\"\n"
+                     "S_um = { quadratic_per_mm2 = 8.5998e-4, harmonics = [{ amplitude = 2.0, "
+                     "period_mm = 120.0, phase_rad = 0.4 }] }\n"
+                     "gamma_urad = { harmonics = [{ amplitude = 3.0, period_mm = 200.0 }] }\n"
+                     "f_um = { harmonics = [{ amplitude = 0.5, period_mm = 17.0 }] }");
+  test::replace_once(t, "noise_sigma_um = 0.05", "noise_sigma_um = 0.1");
+  test::replace_once(t, "seed = 1", "seed = " + std::to_string(seed));
   for (const std::string from : {"speed_mm_s = 200.0", "speed_mm_s = 100.0"})
     for (auto pos = t.find(from); pos != std::string::npos; pos = t.find(from, pos))
       t.replace(pos, from.size(), "speed_mm_s = 2000.0");
@@ -85,7 +72,7 @@ TEST_CASE("measure - compensate - verify on the simulator: residual <= 15 %, as 
   REQUIRE(rc == 0);
   // The tables are in machine coordinates: X from 250 mm.
   const auto cec =
-      test::parse_sinumerik_cec(read_text(first / "compensation/EYX_sinumerik_cec.ini"));
+      test::parse_sinumerik_cec(test::read_file(first / "compensation/EYX_sinumerik_cec.ini"));
   CHECK(cec.min_mm == 250);
   CHECK(cec.max_mm == 555);
 
@@ -121,7 +108,7 @@ TEST_CASE("measure - compensate - verify on the simulator: residual <= 15 %, as 
     REQUIRE(run_command(app_path("report").string() + " " + second.string() + " --no-plots " +
                             "--no-tables",
                         &vout) == 0);
-    const std::string html = read_text(second / "report.html");
+    const std::string html = test::read_file(second / "report.html");
     CHECK_THAT(html, Catch::Contains("<table id=\"verification\">") &&
                          Catch::Contains("predicted residual") &&
                          Catch::Contains("measured residual"));

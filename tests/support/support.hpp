@@ -38,4 +38,10 @@ class TempDir {
 /// combined stdout+stderr in `output`.
 int run_command(const std::string& cmd, std::string* output = nullptr);
 
+/// The whole content of a file ("" when it cannot be read).
+std::string read_file(const std::filesystem::path& p);
+/// Replaces the first `from` in `s` by `to`; throws std::runtime_error when there is none (a
+/// test that edits a shipped config must notice when the config changes).
+void replace_once(std::string& s, const std::string& from, const std::string& to);
+
 }  // namespace errsep::test

@@ -10,6 +10,17 @@
 namespace errsep::io::cnc {
 namespace {
 
+// The whole of `s` as a finite number.
+bool parse_double(const std::string& s, double* v) {
+  std::size_t used = 0;
+  try {
+    *v = std::stod(s, &used);
+  } catch (const std::exception&) {
+    return false;
+  }
+  return used != 0 && used == s.size() && std::isfinite(*v);
+}
+
 std::string g(double v) {
   char buf[48];
   std::snprintf(buf, sizeof buf, "%.10g", v);
@@ -60,14 +71,8 @@ double ParameterReader::number(const std::string& key, double dflt, double lo, d
   const auto it = params_.find(key);
   if (it == params_.end()) return dflt;
   const std::string& s = it->second;
-  std::size_t used = 0;
   double v = 0;
-  try {
-    v = std::stod(s, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used == 0 || used != s.size() || !std::isfinite(v)) fail(key, "'" + s + "' is not a number");
+  if (!parse_double(s, &v)) fail(key, "'" + s + "' is not a number");
   if (v < lo || v > hi) fail(key, g(v) + " is out of range " + g(lo) + ".." + g(hi));
   return v;
 }
@@ -127,15 +132,8 @@ void read_fail(const std::string& name, std::size_t line, const std::string& pro
 }
 
 double read_number(const std::string& s, const std::string& name, std::size_t line) {
-  std::size_t used = 0;
   double v = 0;
-  try {
-    v = std::stod(s, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used == 0 || used != s.size() || !std::isfinite(v))
-    read_fail(name, line, "'" + s + "' is not a number");
+  if (!parse_double(s, &v)) read_fail(name, line, "'" + s + "' is not a number");
   return v;
 }
 
