@@ -108,7 +108,7 @@ TEST_CASE("compensation = -error at machine positions, through the configured ax
   CHECK_THROWS_WITH(compensation_profile(x, s, {}, a), Catch::Contains("both X"));
 }
 
-TEST_CASE("tables lie inside the measured range; the end-point line makes c 0 at both ends") {
+TEST_CASE("tables lie inside the measured range, the end-point line makes c 0 at both ends") {
   std::vector<double> x, s;
   zhao_s(&x, &s);
   for (std::size_t i = 0; i < x.size(); ++i)
@@ -142,7 +142,7 @@ TEST_CASE("tables lie inside the measured range; the end-point line makes c 0 at
                     Catch::Contains("limit of 10") && Catch::Contains("use a step of at least"));
 }
 
-TEST_CASE("point limit: the step is chosen from the data; the stated error is the real one") {
+TEST_CASE("point limit: the step is chosen from the data, the stated error is the real one") {
   // Random profiles (several harmonics, random phases and amplitudes per seed) on random sample
   // counts; limits below and above the sample count.
   std::mt19937 rng(181);

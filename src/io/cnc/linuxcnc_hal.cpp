@@ -223,8 +223,12 @@ class LinuxCncHal final : public CompensationWriter {
       if (!line.empty() && line.back() == '\r') line.pop_back();
       if (std::regex_match(line, m, load_re)) {
         curves = split(m[1]);
-        for (const auto& p : split(m[2]))
-          personality.push_back(static_cast<std::size_t>(cnc::read_number(p, name, no)));
+        for (const auto& p : split(m[2])) {
+          const double v = cnc::read_number(p, name, no);
+          if (v != std::floor(v) || v < 2 || v > static_cast<double>(kCurvePoints))
+            cnc::read_fail(name, no, "lincurve personality '" + p + "' is not 2..16");
+          personality.push_back(static_cast<std::size_t>(v));
+        }
         if (personality.size() != curves.size())
           cnc::read_fail(name, no, "one personality per lincurve needed");
       } else if (std::regex_match(line, m, val_re)) {
@@ -241,7 +245,6 @@ class LinuxCncHal final : public CompensationWriter {
     if (!(scale > 0)) cnc::read_fail(name, 0, "no positive axis.L.eoffset-scale");
     for (std::size_t c = 0; c < curves.size(); ++c) {
       const std::size_t p = personality[c];
-      if (p < 2 || p > kCurvePoints) cnc::read_fail(name, 0, "lincurve personality must be 2..16");
       for (std::size_t i = 0; i < p; ++i) {
         // lincurve parameters that are not set stay 0: a table must set all of them.
         if (!xs[curves[c]].count(i) || !ys[curves[c]].count(i))
