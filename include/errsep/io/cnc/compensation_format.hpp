@@ -87,7 +87,8 @@ class CompensationWriter {
   /// The nodes this controller gets (uniform within its point limit, or free breakpoints).
   virtual core::CompensationTable make_table(const core::CompensationProfile& profile,
                                              const CncParameters& params) const = 0;
-  /// The file(s); files[0] holds the table.  `symbol` is the ISO 230-1 name (e.g. "EYX").
+  /// The file(s); files[0] holds the table.  The axes name the files (ISO 230-1 symbol, e.g.
+  /// EYX) and the controller's axes where the parameters do not.
   virtual std::vector<CncFile> write(const core::CompensationTable& table,
                                      const core::MachineAxes& axes, const CncParameters& params,
                                      const CncWriteInfo& info) const = 0;
