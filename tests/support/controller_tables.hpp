@@ -263,8 +263,12 @@ class HalNetwork {
       const Comp& c = comps_.at(name);
       const std::string& n = c.name;
       if (c.type == "lincurve") {
-        const auto xs = lincurve_points(n, 'x'), ys = lincurve_points(n, 'y');
-        set(n + ".out", hold_interp(xs, ys, get(n + ".in")));
+        // Its parameters are set once, when the file is loaded.
+        auto it = curves_.find(n);
+        if (it == curves_.end())
+          it = curves_.emplace(n, std::make_pair(lincurve_points(n, 'x'), lincurve_points(n, 'y')))
+                   .first;
+        set(n + ".out", hold_interp(it->second.first, it->second.second, get(n + ".in")));
       } else if (c.type == "sum2") {  // out = in0 * gain0 + in1 * gain1 + offset
         set(n + ".out", get(n + ".in0") * param(n + ".gain0", 1.0) +
                             get(n + ".in1") * param(n + ".gain1", 1.0) + param(n + ".offset", 0));
@@ -325,6 +329,7 @@ class HalNetwork {
   std::map<std::string, double> pins_;  // unconnected pins and parameters
   std::map<std::string, std::string> net_of_, writers_;
   std::map<std::string, double> signals_;
+  std::map<std::string, std::pair<std::vector<double>, std::vector<double>>> curves_;
 };
 
 /// motion's external offset of one axis as src/emc/motion does it (see the file comment).
