@@ -5,7 +5,10 @@
 // then the result files of the separation (four-sensor: motion.csv, reference.csv, lcurve.csv,
 // residuals.csv, summary.txt).  --refine (or [refine] enabled = true in the config) also runs the
 // refine step of errsep-refine on the four-sensor scan and writes its files to OUT/refine/
-// (io/refine_run.hpp).  OUT is one result set (io/staged_directory.hpp): written beside it and
+// (io/refine_run.hpp). --verify-with TABLE: the scan after a compensation table was loaded
+// (the embedded simulator applies it itself), compared with the first scan and the residual the
+// table predicts (OUT/verification.txt, .csv; io/verification_report.hpp).  OUT is one result
+// set (io/staged_directory.hpp): written beside it and
 // moved into place whole at the end, replacing an earlier scan's set whole; a kill at any moment
 // leaves the earlier set (or none), and the simulator started for the embedded default dies with
 // the scan.  Ctrl-C / SIGTERM: the stages are stopped, the raw data measured so far is written
@@ -25,11 +28,13 @@
 #include <thread>
 
 #include "errsep/acq/scan_runner.hpp"
+#include "errsep/core/compensation_verification.hpp"
 #include "errsep/core/displacement_method.hpp"
 #include "errsep/core/four_sensor.hpp"
 #include "errsep/drivers/device_factory.hpp"
 #include "errsep/drivers/scan_devices.hpp"
 #include "errsep/drivers/simulator_process.hpp"
+#include "errsep/io/cnc/compensation_format.hpp"
 #include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/mqtt_messages.hpp"
@@ -38,6 +43,7 @@
 #include "errsep/io/staged_directory.hpp"
 #include "errsep/io/results_store.hpp"
 #include "errsep/service/plant_publisher.hpp"
+#include "errsep/io/verification_report.hpp"
 #include "errsep/version.hpp"
 
 namespace {
@@ -90,7 +96,9 @@ core::FourSensorResult separate_four_sensor(const io::RawFourSensorScan& raw,
     for (Eigen::Index n = 0; n < P; ++n)
       m(n, j) = raw.m_um[static_cast<std::size_t>(j)][static_cast<std::size_t>(n)];
   const auto res = core::separate_four_sensor(g, m, separation_options(gauge));
-  io::write_four_sensor_result(out, res, {raw_file.string(), "X", "Y", {{"run_id", run_id}}});
+  io::ResultWriteInfo info{raw_file.string(), "X", "Y", {{"run_id", run_id}}};
+  io::carry_machine_axes(raw.metadata, info);  // machine coordinates, from the config
+  io::write_four_sensor_result(out, res, info);
   std::cout << "separation: " << res.brief_report() << "\n";
   if (res.lambda_fallback == core::LambdaFallback::discrepancy)
     std::cerr << "warning: the L-curve has no corner inside the lambda range; lambda was chosen "
@@ -126,6 +134,29 @@ void publish_summary(const io::MqttConfig& mqtt, io::ScanSummary s, const fs::pa
             << "\n";
 }
 
+std::vector<double> vec(const Eigen::VectorXd& v) {
+  return {v.data(), v.data() + v.size()};
+}
+
+/// --verify-with: the second scan (this one) against the first and the table applied between.
+void verify(const core::FourSensorResult& res, const io::MachineConfig& cfg, const fs::path& table,
+            const fs::path& before_dir, const fs::path& out, const fs::path& shown_out) {
+  const io::ControllerTable applied = io::read_compensation_file(table);
+  std::string warning;
+  const core::MachineError before = io::read_machine_error(before_dir, cfg.axes, &warning);
+  if (!warning.empty()) std::cerr << "warning: " << warning << "\n";
+  const core::MachineError after =
+      core::machine_error(vec(res.x_mm), vec(res.S_um), vec(res.u_S_um), cfg.axes);
+  const auto r =
+      core::verify_compensation(before, after, [&](double p) { return applied.apply_um(p); });
+  const io::VerificationInfo info{cfg.axes.symbol(), fs::absolute(table).string(),
+                                  fs::absolute(before_dir).string(), 2.0};
+  io::write_verification(out, r, info);
+  std::cout << io::verification_text(r, info)
+            << "verification: " << (shown_out / "verification.txt").string() << ", "
+            << (shown_out / "verification.csv").string() << "\n";
+}
+
 void separate_displacement(const io::RawDisplacementScan& raw) {
   core::DisplacementOptions o;
   o.sample_interval_mm = raw.x_mm.size() > 1 ? raw.x_mm[1] - raw.x_mm[0] : raw.d_mm;
@@ -151,7 +182,7 @@ int main(int argc, char** argv) {
   std::string gauge = "reference";
   int averages = 0, settle_ms = -1;
   bool no_separate = false, refine = false;
-  std::string refine_reference;
+  std::string refine_reference, verify_table, before_dir;
   double mqtt_wait_s = 10;
   bool no_mqtt = false;
   app.add_option("-c,--config", config_path, "machine config (TOML)")->capture_default_str();
@@ -187,6 +218,17 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(0.0, 3600.0));
   app.add_flag("--no-mqtt", no_mqtt, "do not publish, even with [mqtt] in the config");
+  app.add_option("--verify-with", verify_table,
+                 "measure - compensate - verify: the compensation table now loaded in the "
+                 "controller (any errsep format; the embedded simulator applies it itself); the "
+                 "four-sensor scan is compared with the first scan and the predicted residual, "
+                 "written to OUT/verification.txt and .csv")
+      ->excludes(no_sep)
+      ->check(CLI::ExistingFile);
+  app.add_option("--before", before_dir,
+                 "result directory of the first scan (default: the directory whose "
+                 "compensation/ holds the --verify-with table)")
+      ->check(CLI::ExistingDirectory);
   CLI11_PARSE(app, argc, argv);
 
   struct sigaction sa {};
@@ -205,6 +247,17 @@ int main(int argc, char** argv) {
     if (method == "displacement") m = io::ScanMethod::displacement;
     if (method == "both") m = io::ScanMethod::both;
     const fs::path out = out_dir.empty() ? cfg.scan.output_dir : fs::path(out_dir);
+    if (!verify_table.empty()) {
+      if (m == io::ScanMethod::displacement)
+        throw std::invalid_argument(
+            "--verify-with needs a four-sensor scan (--method four_sensor)");
+      (void)io::read_compensation_file(verify_table);  // a table that cannot be read: stop now
+      if (before_dir.empty()) before_dir = io::result_dir_of_table(verify_table).string();
+      if (before_dir.empty())
+        throw std::invalid_argument("--verify-with " + verify_table +
+                                    ": not in a result directory's compensation/; give the first "
+                                    "scan's result directory with --before");
+    }
     // The result folder is one set: everything is written into a staging folder beside it and
     // moved into place in one rename at the end (io/staged_directory.hpp), so that a kill at any
     // moment leaves the earlier result whole (or no folder), never files of two runs.  What is
@@ -225,7 +278,9 @@ int main(int argc, char** argv) {
             "config " + config_path +
             " uses the embedded device simulator, but errsep-devsim was not found next to this "
             "program; give its path with --devsim");
-      sim = std::make_unique<drivers::SimulatorProcess>(exe, config_path);
+      std::vector<std::string> sim_args;
+      if (!verify_table.empty()) sim_args = {"--compensation", verify_table};
+      sim = std::make_unique<drivers::SimulatorProcess>(exe, config_path, sim_args);
       io::apply_simulator_port(cfg, sim->port());
       std::cout << "device simulator: pid " << sim->pid() << ", listening " << sim->host() << ":"
                 << sim->port() << "\n";
@@ -299,6 +354,7 @@ int main(int argc, char** argv) {
                      "lcurve.csv", "residuals.csv", "summary.txt"};
           io::add_separation(s, sep);
           summary = s;
+          if (!verify_table.empty()) verify(sep, cfg, verify_table, before_dir, work, out);
           written.push_back(
               "results: " + out.string() +
               "/ (motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt)");

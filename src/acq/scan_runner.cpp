@@ -8,6 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <thread>
+#include "errsep/io/machine_axes_metadata.hpp"
 
 #include "errsep/io/plausibility.hpp"
 #include "errsep/io/utc_time.hpp"
@@ -165,7 +166,7 @@ void Runner::four_sensor_single() {
     for (int n = 0; n < P; ++n) {
       const double x = n * opts_.geometry.dx_mm;
       const std::string where = phase + ", x = " + fmt(x) + " mm";
-      move(*dev_.slide, opts_.slide_start_mm + x, where);
+      move(*dev_.slide, opts_.slide_start_mm + opts_.axes.scan_direction * x, where);
       const auto w = measure({0}, where);
       raw.m_um[static_cast<std::size_t>(i)][static_cast<std::size_t>(n)] = w.mean[0];
       (*raw.t_s)[static_cast<std::size_t>(i)][static_cast<std::size_t>(n)] =
@@ -182,7 +183,7 @@ void Runner::four_sensor_fixed() {
   for (int n = 0; n < P; ++n) {
     const double x = n * opts_.geometry.dx_mm;
     const std::string where = "x = " + fmt(x) + " mm";
-    move(*dev_.slide, opts_.slide_start_mm + x, where);
+    move(*dev_.slide, opts_.slide_start_mm + opts_.axes.scan_direction * x, where);
     const auto w = measure({0, 1, 2, 3}, where);
     for (std::size_t i = 0; i < 4; ++i) {
       raw.m_um[i][static_cast<std::size_t>(n)] = w.mean[i];
@@ -204,7 +205,7 @@ void Runner::displacement() {
     for (int k = 0; k < K; ++k) {
       const double x = k * opts_.d_mm;
       const std::string where = phase + ", x = " + fmt(x) + " mm";
-      move(*dev_.slide, opts_.slide_start_mm + x, where);
+      move(*dev_.slide, opts_.slide_start_mm + opts_.axes.scan_direction * x, where);
       const auto w = measure({0, 1}, where);
       const auto kk = static_cast<std::size_t>(k);
       (pass == 0 ? raw.s1_scan1_um : raw.s1_scan2_um)[kk] = w.mean[0];
@@ -327,7 +328,11 @@ ScanResult Runner::run() {
     names += (names.empty() ? "" : " ") + s->name();
   md.emplace_back("sensors", names);
   md.insert(md.end(), opts_.range_metadata.begin(), opts_.range_metadata.end());
-  md.emplace_back("slide_start_mm", fmt(opts_.slide_start_mm));
+  // Where the scan ran, in machine coordinates (io/machine_axes_metadata.hpp).
+  core::MachineAxes axes = opts_.axes;
+  axes.slide_start_mm = opts_.slide_start_mm;
+  for (auto& kv : io::machine_axes_metadata(axes))
+    md.push_back(std::move(kv));
   if (opts_.kind == ScanKind::four_sensor) {
     md.emplace_back("setup", ns == 1 ? "one sensor on a sensor stage" : "four sensors");
     md.emplace_back("sensor_stage_origin_mm", fmt(opts_.sensor_stage_origin_mm));
@@ -447,6 +452,7 @@ ScanOptions scan_options_from_config(const io::MachineConfig& cfg, ScanKind kind
   o.kind = kind;
   o.geometry = sc.geometry;
   o.slide_start_mm = sc.slide_start_mm;
+  o.axes = cfg.axes;
   o.sensor_stage_origin_mm = sc.sensor_stage_origin_mm;
   o.averages = sc.averages;
   o.settle_ms = sc.settle_ms;

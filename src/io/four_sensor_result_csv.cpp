@@ -6,6 +6,7 @@
 #include "errsep/core/four_sensor_model.hpp"
 #include "errsep/io/atomic_file.hpp"
 #include "errsep/io/csv.hpp"
+#include "errsep/io/machine_axes_metadata.hpp"
 #include "errsep/version.hpp"
 
 namespace errsep::io {
@@ -51,6 +52,16 @@ void common_meta(CsvTable& t, const core::FourSensorResult& r, const ResultWrite
 }
 
 }  // namespace
+
+void carry_machine_axes(const std::vector<std::pair<std::string, std::string>>& raw_metadata,
+                        ResultWriteInfo& info) {
+  const auto axes = machine_axes_from_metadata(raw_metadata);
+  if (!axes) return;
+  info.axis = std::string(1, axes->input_axis);
+  info.straightness_direction = std::string(1, axes->output_axis);
+  for (auto& kv : machine_axes_metadata(*axes))
+    info.extra_metadata.push_back(std::move(kv));
+}
 
 void write_four_sensor_result(const std::filesystem::path& dir, const core::FourSensorResult& r,
                               const ResultWriteInfo& info) {

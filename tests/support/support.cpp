@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <sstream>
 #include <stdexcept>
 
 namespace errsep::test {
@@ -45,6 +46,19 @@ int run_command(const std::string& cmd, std::string* output) {
   if (output) *output = std::move(out);
   if (status == -1 || !WIFEXITED(status)) return -1;
   return WEXITSTATUS(status);
+}
+
+std::string read_file(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+void replace_once(std::string& s, const std::string& from, const std::string& to) {
+  const auto pos = s.find(from);
+  if (pos == std::string::npos) throw std::runtime_error("replace_once: '" + from + "' not found");
+  s.replace(pos, from.size(), to);
 }
 
 }  // namespace errsep::test

@@ -42,4 +42,10 @@ std::size_t data_line(const std::filesystem::path& csv, std::size_t row);
 /// combined stdout+stderr in `output`.
 int run_command(const std::string& cmd, std::string* output = nullptr);
 
+/// The whole content of a file ("" when it cannot be read).
+std::string read_file(const std::filesystem::path& p);
+/// Replaces the first `from` in `s` by `to`; throws std::runtime_error when there is none (a
+/// test that edits a shipped config must notice when the config changes).
+void replace_once(std::string& s, const std::string& from, const std::string& to);
+
 }  // namespace errsep::test

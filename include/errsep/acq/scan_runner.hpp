@@ -30,6 +30,7 @@
 #include "errsep/acq/sampler.hpp"
 #include "errsep/acq/stage.hpp"
 #include "errsep/core/four_sensor_config.hpp"
+#include "errsep/core/machine_axes.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 
@@ -40,8 +41,11 @@ const char* to_string(ScanKind k) noexcept;
 
 struct ScanOptions {
   ScanKind kind = ScanKind::four_sensor;
-  core::FourSensorConfig geometry;      ///< Δx, s2, s3, s4, N (four-sensor)
-  double slide_start_mm = 0.0;          ///< slide position of x_0; raw x_mm is relative to it
+  core::FourSensorConfig geometry;  ///< Δx, s2, s3, s4, N (four-sensor)
+  double slide_start_mm = 0.0;      ///< slide position of x_0; raw x_mm is relative to it
+  /// Machine axes (core/machine_axes.hpp): the slide goes to slide_start_mm +
+  /// axes.scan_direction * x; all of it is recorded in the raw file's metadata.
+  core::MachineAxes axes;
   double sensor_stage_origin_mm = 0.0;  ///< sensor-stage position of configuration 1
   int averages = 100;                   ///< K ok readings averaged per point
   int settle_ms = 50;                   ///< wait after in-position before averaging

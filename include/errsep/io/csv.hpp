@@ -54,6 +54,9 @@ struct CsvReadOptions {
 
 /// Reads a CSV file; throws CsvError naming file and line on any malformed content.
 CsvTable read_csv(const std::filesystem::path& file, const CsvReadOptions& opts = {});
+/// The same from text already in memory; `name` stands for the file in messages.
+CsvTable parse_csv(const std::string& text, const std::filesystem::path& name,
+                   const CsvReadOptions& opts = {});
 
 /// Formats a table as CSV text (metadata as "# key: value" lines, then header, then rows).
 std::string format_csv(const CsvTable& table, int significant_digits = 10);

@@ -17,17 +17,20 @@
 // At least one of them must be present.
 //
 // Outputs in DIR: evaluation.csv (one row, ISO 230-1 symbols in the column names),
-// evaluation.txt, plots/*.png|svg|gp|dat, report.html, compensation/*.  DIR is a result set
+// evaluation.txt, plots/*.png|svg|gp|dat, report.html, compensation/* (every CNC format of
+// io/cnc/, in machine coordinates, and accuracy.csv).  DIR is a result set
 // (io/staged_directory.hpp): it is refused when its manifest says it is not whole, raw scans in it
 // are read with the plausibility checks, and the outputs join the set, which is committed anew
 // whole (outputs of an earlier report are replaced, never mixed with these).
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "errsep/core/compensation.hpp"
 #include "errsep/core/iso230.hpp"
-#include "errsep/io/controller_tables.hpp"
+#include "errsep/core/machine_axes.hpp"
+#include "errsep/io/cnc/compensation_export.hpp"
 #include "errsep/io/plots.hpp"
 
 namespace errsep::io {
@@ -40,14 +43,13 @@ struct ScanReportOptions {
   /// Moving axis and straightness direction (X, Y or Z); 0 = from motion.csv metadata, else X / Y.
   char axis = 0;
   char direction = 0;
-  core::CompensationOptions compensation;  ///< step_mm etc. of the uniform tables
-  std::size_t lincurve_points = 16;
+  core::CompensationOptions compensation;   ///< the line removed before tabulating
+  CompensationExportOptions tables_export;  ///< CNC formats and their parameters
+  /// Machine axes for a result that does not record them (motion.csv metadata slide_start_mm,
+  /// scan_direction, reading_sign), e.g. from the machine config; nullopt = scan coordinates
+  /// (with a warning).  The input/output letters follow `axis`/`direction` or the metadata.
+  std::optional<core::MachineAxes> axes;
   bool tables = true;  ///< write compensation tables (four-sensor results only)
-  /// Sinumerik machine axis names; empty = AX1/AX2/AX3 for X/Y/Z.
-  std::string cec_input_axis, cec_output_axis;
-  int cec_table_index = 0;
-  /// Beckhoff logical axis numbers; 0 = 1/2/3 for X/Y/Z.
-  int beckhoff_axis_number = 0, beckhoff_master_axis_number = 0;
   bool plots = true;
   PlotOptions plot;
   std::filesystem::path grid_csv;  ///< empty = look for one in the directory
@@ -67,7 +69,9 @@ struct ScanReportResult {
   std::string text;  ///< evaluation.txt
   std::vector<std::string> warnings;
   bool four_sensor = false, grid = false;
-  double lincurve_max_error_um = -1;  ///< -1 when no lincurve table was made
+  /// One line per compensation table (points, range, interpolation error against U); empty
+  /// when no table was made.
+  std::string compensation_summary;
 };
 
 /// Evaluates DIR and writes the outputs into it.  Throws CsvError / std::runtime_error /
