@@ -40,10 +40,10 @@
 #include "errsep/io/mqtt_messages.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/refine_run.hpp"
-#include "errsep/io/staged_directory.hpp"
 #include "errsep/io/results_store.hpp"
-#include "errsep/service/plant_publisher.hpp"
+#include "errsep/io/staged_directory.hpp"
 #include "errsep/io/verification_report.hpp"
+#include "errsep/service/plant_publisher.hpp"
 #include "errsep/version.hpp"
 
 namespace {
@@ -348,8 +348,8 @@ int main(int argc, char** argv) {
           s.ended_utc = io::utc_now_iso();
           s.trigger = "manual";
           s.outcome = "complete";
-          s.points_measured =
-              std::to_string(res.counts.points_done) + "/" + std::to_string(res.counts.points_total);
+          s.points_measured = std::to_string(res.counts.points_done) + "/" +
+                              std::to_string(res.counts.points_total);
           s.files = {"raw.csv",    "motion.csv",    "reference.csv",
                      "lcurve.csv", "residuals.csv", "summary.txt"};
           io::add_separation(s, sep);

@@ -14,9 +14,9 @@
 #include "errsep/io/atomic_file.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/html_report.hpp"
+#include "errsep/io/machine_axes_metadata.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/staged_directory.hpp"
-#include "errsep/io/machine_axes_metadata.hpp"
 #include "errsep/io/verification_report.hpp"
 #include "errsep/version.hpp"
 

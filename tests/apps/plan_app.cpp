@@ -204,7 +204,8 @@ TEST_CASE("the [scan] fragment sets the machine config's scan to the plan", "[pl
   }
 }
 
-TEST_CASE("a given configuration (--spacings) is predicted alone: the plan's (1, 1, 5) comparison", "[plan]") {
+TEST_CASE("a given configuration (--spacings) is predicted alone: the plan's (1, 1, 5) comparison",
+          "[plan]") {
   TempDir a, b;
   std::string out;
   REQUIRE(run("--travel-mm 500 --dx-mm 5 --stage-range-mm 60 --sigma-um 0.1 --target-U-um 0.4 "

@@ -42,7 +42,8 @@ bool wait_until(const std::function<bool()>& pred, std::chrono::milliseconds tim
 
 }  // namespace
 
-TEST_CASE("publisher: a blocked broker delays messages and loses none, a restart sends what is left") {
+TEST_CASE(
+    "publisher: a blocked broker delays messages and loses none, a restart sends what is left") {
   if (const auto why = test::mqtt_tools_missing(); !why.empty()) {
     std::cout << "SKIPPED: " << why << "\n";
     return;
