@@ -41,6 +41,8 @@ void common_meta(CsvTable& t, const core::FourSensorResult& r, const ResultWrite
   t.set_meta("lambda_fallback", core::to_string(r.lambda_fallback));
   t.set_meta("edf_f", fmt(r.edf_f));
   t.set_meta("sigma_hat_um", fmt(r.sigma_um));
+  // σ̂'s degrees of freedom: a user sizing a simultaneous band (or a t-based k) needs them.
+  t.set_meta("sigma_hat_dof", std::to_string(r.redundancy_dof));
   t.set_meta("uncertainty_model",
              r.covariance
                  ? "posterior covariance of the separation (prior included), sigma from "

@@ -4,6 +4,7 @@
 // the truth the simulator plays (Zhao 2019 Example 1, Eqs. 21-22, for the test geometry).
 #include <signal.h>
 
+#include <boost/math/distributions/students_t.hpp>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <fstream>
@@ -81,11 +82,23 @@ TEST_CASE("scan on the device simulator, separated: S and gamma match the simula
   const auto uS = motion.column("u_S_um");
   const auto ug = motion.column("u_gamma_urad");
   REQUIRE(x.size() == 33);
-  // Bounds from the run's own stated uncertainty (issue 15): every point within 4 u of the truth
-  // (a calibrated u exceeds that at one of 33 points in well under 1 % of runs; the coverage of u
-  // itself is tested over random profiles in tests/core/four_sensor_coverage).  γ is determined up
-  // to the constant e_4/(D2+D3+D4) (Eq. 19): e_4 = 0.07 µm here, which the simulator plays and
-  // the gauge e_4 = 0 moves into γ as a constant e_4/O_4, known exactly.
+  // Bounds from the run's own stated uncertainty (issue 15): every point within k·u of the truth,
+  // k the simultaneous factor for all points of S (and of γ) at a family-wise false-alarm rate of
+  // 10⁻³: Bonferroni over the P points with Student's t at σ̂'s degrees of freedom (u is σ̂ times
+  // a known matrix).  A fixed k = 4 was crossed by chance: over 200 simulated runs of this
+  // geometry and noise (σ̂ from 27 dof, 33 points) the largest |S − S_true|/u_S of a run has
+  // p99 3.9 and max 4.2 (γ 3.6 and 3.9), and the scan on the simulator reached 4.00 once in 60.
+  // The coverage of u itself (about 95 % within 2u) is tested over random profiles in
+  // tests/core/four_sensor_coverage.  γ is determined up to the constant e_4/(D2+D3+D4)
+  // (Eq. 19): e_4 = 0.07 µm here, which the simulator plays and the gauge e_4 = 0 moves into γ as
+  // a constant e_4/O_4, known exactly.
+  const auto dof_meta = motion.meta_number("sigma_hat_dof");
+  REQUIRE(dof_meta);
+  const double dof = *dof_meta;
+  REQUIRE(dof >= 5);
+  const double family_alpha = 1e-3;
+  const double k = boost::math::quantile(boost::math::complement(
+      boost::math::students_t(dof), family_alpha / (2.0 * static_cast<double>(x.size()))));
   const auto& off = cfg.scan.geometry.offsets_mm();
   const double dg_const = 1e6 * cfg.simulator.e_um[3] / (1000.0 * off[3]);
   double worst_S = 0, worst_g = 0, max_dS = 0, max_dg = 0;
@@ -101,10 +114,11 @@ TEST_CASE("scan on the device simulator, separated: S and gamma match the simula
   }
   std::printf(
       "scan end to end: max |S - S_true| = %.3f um, largest |S - S_true|/u_S = %.2f; "
-      "max |gamma - gamma_true| = %.3f urad, largest |gamma - gamma_true|/u_gamma = %.2f\n",
-      max_dS, worst_S, max_dg, worst_g);
-  CHECK(worst_S <= 4.0);
-  CHECK(worst_g <= 4.0);
+      "max |gamma - gamma_true| = %.3f urad, largest |gamma - gamma_true|/u_gamma = %.2f; "
+      "simultaneous k = %.2f (sigma_hat dof %.0f)\n",
+      max_dS, worst_S, max_dg, worst_g, k, dof);
+  CHECK(worst_S <= k);
+  CHECK(worst_g <= k);
 
   // The demo's HEIDENHAIN table (io/cnc/heidenhain_com.hpp cites the TNC manuals), read back by
   // an independent reader: column Y of EYX.COM at the machine positions of X, entered in column
