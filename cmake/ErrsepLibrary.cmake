@@ -1,9 +1,10 @@
 # errsep_library(<name> [PUBLIC_DEPS ...] [PRIVATE_DEPS ...])
-# One library per layer; its sources are every .cpp in the calling directory, its public headers
+# One library per layer; its sources are every .cpp under the calling directory (sub-folders group
+# a concept, e.g. src/io/cnc/), its public headers
 # live under include/errsep/<name>/.  New files need no CMake edit.
 function(errsep_library name)
   cmake_parse_arguments(ARG "" "" "PUBLIC_DEPS;PRIVATE_DEPS" ${ARGN})
-  file(GLOB _srcs CONFIGURE_DEPENDS "${CMAKE_CURRENT_SOURCE_DIR}/*.cpp")
+  file(GLOB_RECURSE _srcs CONFIGURE_DEPENDS "${CMAKE_CURRENT_SOURCE_DIR}/*.cpp")
   if(NOT _srcs)  # a layer with headers only (so far)
     add_library(errsep_${name} INTERFACE)
     target_include_directories(errsep_${name} INTERFACE

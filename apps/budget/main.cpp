@@ -9,6 +9,7 @@
 #include "errsep/io/atomic_file.hpp"
 #include "errsep/io/budget_config.hpp"
 #include "errsep/io/budget_report.hpp"
+#include "errsep/io/staged_directory.hpp"
 #include "errsep/version.hpp"
 
 int main(int argc, char** argv) {
@@ -29,6 +30,9 @@ int main(int argc, char** argv) {
       "term names, the combined value and the thermal loops are in '# key: value' metadata.");
   CLI11_PARSE(app, argc, argv);
   try {
+    // What a killed earlier run left beside the outputs (its temporaries) goes first.
+    if (const auto swept = errsep::io::sweep_beside({csv_out, text_out}); !swept.empty())
+      std::cerr << "errsep-budget: " << swept << "\n";
     errsep::core::BudgetSpec spec = errsep::io::read_budget_config(config);
     if (no_rounding) spec.round_sigma_um = 0.0;
     const auto ev = errsep::core::evaluate_budget(spec);

@@ -2,7 +2,9 @@
 // rising edge on the machine config's [gpio] start_line, a schedule), runs the configured
 // four-sensor scan and writes raw data and results durably to the results directory.  Runs in the
 // foreground under systemd (Type=notify; see config/errsep.service); SIGHUP reloads the machine
-// config between scans, SIGTERM stops the stage, writes what was measured and exits.
+// config between scans, SIGTERM stops the stage, writes what was measured and exits.  With an
+// [mqtt] table it also publishes every scan to the plant's broker, store and forward
+// (service/plant_publisher.hpp; [mqtt] is read at start only: a change needs a restart).
 #include <CLI/CLI.hpp>
 #include <csignal>
 #include <cstdio>
@@ -16,6 +18,7 @@
 #include "errsep/drivers/daemon_register_server.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/unit_dropin.hpp"
+#include "errsep/service/plant_publisher.hpp"
 #include "errsep/version.hpp"
 
 namespace {
@@ -124,9 +127,60 @@ int main(int argc, char** argv) {
     // SIGHUP, the old config is kept.
     factory();
 
+    // Plant broker: the publisher thread is fed from the results store through the disk queue,
+    // after each scan's files are committed, never from the sampling threads.
+    std::unique_ptr<errsep::service::PlantPublisher> publisher;
+    errsep::acq::Daemon* daemon_ptr = nullptr;  // set before the publisher starts
+    if (const auto mqtt = errsep::io::load_machine_config(config_path).mqtt) {
+      errsep::service::PlantPublisherOptions po;
+      po.mqtt = *mqtt;
+      po.queue_dir = errsep::service::default_queue_dir(*mqtt, results_dir);
+      auto status = [&daemon_ptr]() {
+        errsep::io::StatusMessage m;
+        const errsep::acq::DaemonStatus st = daemon_ptr->status();
+        m.state = errsep::acq::to_string(st.state);
+        m.message = st.message;
+        if (const auto f = errsep::io::parse_store_name(st.last_file)) m.last_scan_id = f->stem;
+        return m;
+      };
+      errsep::service::PlantPublisher::CommandFn command;
+      if (mqtt->commands)
+        command = [&daemon_ptr](const errsep::io::ScanCommand&) {
+          errsep::io::CommandReply r;
+          std::string why;
+          r.accepted = daemon_ptr->trigger(errsep::acq::TriggerSource::mqtt, &why) ==
+                       errsep::acq::TriggerReply::accepted;
+          r.reason = why;
+          return r;
+        };
+      publisher = std::make_unique<errsep::service::PlantPublisher>(po, status, command);
+      opts.on_scan_committed = [p = publisher.get(), dir = opts.results.dir](
+                                   std::uint64_t id, const std::string& stem) {
+        p->scan_committed(dir, stem, id);
+      };
+      std::cerr << "<6>mqtt: publishing to " << mqtt->host << ":" << mqtt->port << " under "
+                << mqtt->topic_root() << "/, queue " << po.queue_dir.string()
+                << (mqtt->commands ? ", commands on " + mqtt->topic_root() + "/cmd/scan" : "")
+                << "\n";
+    }
+
     const errsep::acq::SdNotifier notifier;
     if (!notifier.error().empty()) std::cerr << "<4>" << notifier.error() << "\n";
     errsep::acq::Daemon daemon(opts, factory, notifier);
+    daemon_ptr = &daemon;
+    // The publisher's thread asks the daemon for its status: it stops before the daemon goes,
+    // on every way out of this block.
+    struct StopFirst {
+      errsep::service::PlantPublisher* p;
+      ~StopFirst() {
+        if (p) p->stop();
+      }
+    } stop_publisher_first{publisher.get()};
+    if (publisher) {
+      // Scans written before a kill but not queued (their ids are above the queue's mark).
+      publisher->queue_unpublished(errsep::io::ResultsStore(opts.results));
+      publisher->start();
+    }
 
     std::unique_ptr<errsep::drivers::DaemonRegisterServer> server;
     if (!no_register_map) {
@@ -149,6 +203,7 @@ int main(int argc, char** argv) {
 
     const int rc = daemon.run();
     if (server) server->stop();
+    if (publisher) publisher->stop();
     g_daemon = nullptr;
     return rc;
   } catch (const std::exception& e) {

@@ -1,6 +1,7 @@
 // errsep-devsim: the device simulator (a Modbus TCP server on loopback playing the machine of a
 // machine config).  Prints "listening <host>:<port>" on stdout once it accepts connections, and
-// stops cleanly on SIGINT/SIGTERM.
+// stops cleanly on SIGINT/SIGTERM.  --compensation TABLE: the simulated controller applies a
+// compensation table (measure - compensate - verify).
 #include <CLI/CLI.hpp>
 #include <csignal>
 #include <cstdio>
@@ -51,6 +52,11 @@ int main(int argc, char** argv) {
   app.add_option("--exception-code", f.exception_code, "fault: the exception code (1..11)")
       ->check(CLI::Range(1, 11))
       ->each([&](const std::string&) { f_set[5] = true; });
+  std::string compensation;
+  app.add_option("--compensation", compensation,
+                 "a compensation table (any errsep format: .ini, .hal, .lis, .COM, .csv) the "
+                 "simulated controller applies to the output axis at the slide's machine position")
+      ->check(CLI::ExistingFile);
   app.add_option("--out-of-range", f.out_of_range_sensor,
                  "fault: this sensor reads range_max_um + 1000 µm")
       ->each([&](const std::string&) { f_set[6] = true; });
@@ -59,6 +65,7 @@ int main(int argc, char** argv) {
   try {
     errsep::io::MachineConfig cfg = errsep::io::load_machine_config(config_path);
     if (port >= 0) cfg.simulator.port = port;
+    if (!compensation.empty()) cfg.simulator.compensation_table = compensation;
     if (!host.empty()) cfg.simulator.host = host;
     auto& cf = cfg.simulator.faults;
     if (f_set[0]) cf.hang_after_requests = f.hang_after_requests;

@@ -10,6 +10,7 @@
 #include <iostream>
 
 #include "errsep/io/refine_run.hpp"
+#include "errsep/io/staged_directory.hpp"
 #include "errsep/version.hpp"
 
 int main(int argc, char** argv) {
@@ -64,6 +65,8 @@ int main(int argc, char** argv) {
     if (!truth.empty()) opts.truth_csv = truth;
     if (!reference.empty()) opts.reference_csv = reference;
     const auto run = errsep::io::run_refine(input, out_dir, opts, geo);
+    if (const std::string swept = errsep::io::describe_swept(run.swept); !swept.empty())
+      std::cout << swept << "\n";
     std::cout << run.text << "\nwritten:";
     for (const auto& f : run.files)
       std::cout << " " << f.filename().string();

@@ -5,11 +5,19 @@
 // then the result files of the separation (four-sensor: motion.csv, reference.csv, lcurve.csv,
 // residuals.csv, summary.txt).  --refine (or [refine] enabled = true in the config) also runs the
 // refine step of errsep-refine on the four-sensor scan and writes its files to OUT/refine/
-// (io/refine_run.hpp). Ctrl-C / SIGTERM: the stages are stopped, the raw data measured so far is
-// written marked "complete: false", nothing is separated, exit status 130. Exit status: 0 complete,
-// 1 usage/config/device set-up error, 3 scan failed (device fault), 130 aborted.
+// (io/refine_run.hpp). --verify-with TABLE: the scan after a compensation table was loaded
+// (the embedded simulator applies it itself), compared with the first scan and the residual the
+// table predicts (OUT/verification.txt, .csv; io/verification_report.hpp).  OUT is one result
+// set (io/staged_directory.hpp): written beside it and
+// moved into place whole at the end, replacing an earlier scan's set whole; a kill at any moment
+// leaves the earlier set (or none), and the simulator started for the embedded default dies with
+// the scan.  Ctrl-C / SIGTERM: the stages are stopped, the raw data measured so far is written
+// marked "complete: false" (the set then holds only it), nothing is separated, exit status 130.
+// Exit status: 0 complete, 1 usage/config/device set-up error or a separation that failed (the
+// set then holds the raw data alone), 3 scan failed (device fault), 130 aborted.
 #include <unistd.h>
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <atomic>
 #include <csignal>
 #include <cstdio>
@@ -17,17 +25,25 @@
 #include <iostream>
 #include <memory>
 #include <optional>
+#include <thread>
 
 #include "errsep/acq/scan_runner.hpp"
+#include "errsep/core/compensation_verification.hpp"
 #include "errsep/core/displacement_method.hpp"
 #include "errsep/core/four_sensor.hpp"
 #include "errsep/drivers/device_factory.hpp"
 #include "errsep/drivers/scan_devices.hpp"
 #include "errsep/drivers/simulator_process.hpp"
+#include "errsep/io/cnc/compensation_format.hpp"
 #include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/machine_config.hpp"
+#include "errsep/io/mqtt_messages.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/refine_run.hpp"
+#include "errsep/io/results_store.hpp"
+#include "errsep/io/staged_directory.hpp"
+#include "errsep/io/verification_report.hpp"
+#include "errsep/service/plant_publisher.hpp"
 #include "errsep/version.hpp"
 
 namespace {
@@ -68,9 +84,11 @@ core::FourSensorOptions separation_options(const std::string& gauge) {
   return core::options_for_gauge(*g);
 }
 
-/// Separation of a complete four-sensor raw scan, with the defaults of errsep-separate.
-void separate_four_sensor(const io::RawFourSensorScan& raw, const fs::path& raw_file,
-                          const fs::path& out, const std::string& gauge) {
+/// Separation of a complete four-sensor raw scan, with the defaults of errsep-separate, written
+/// into `out`; `raw_file` and `run_id` go into the results' metadata.
+core::FourSensorResult separate_four_sensor(const io::RawFourSensorScan& raw,
+                                            const fs::path& raw_file, const fs::path& out,
+                                            const std::string& gauge, const std::string& run_id) {
   const auto& g = *raw.geometry;
   const auto P = static_cast<Eigen::Index>(raw.positions());
   Eigen::MatrixXd m(P, 4);
@@ -78,13 +96,65 @@ void separate_four_sensor(const io::RawFourSensorScan& raw, const fs::path& raw_
     for (Eigen::Index n = 0; n < P; ++n)
       m(n, j) = raw.m_um[static_cast<std::size_t>(j)][static_cast<std::size_t>(n)];
   const auto res = core::separate_four_sensor(g, m, separation_options(gauge));
-  io::write_four_sensor_result(out, res, {raw_file.string(), "X", "Y", {}});
+  io::ResultWriteInfo info{raw_file.string(), "X", "Y", {{"run_id", run_id}}};
+  io::carry_machine_axes(raw.metadata, info);  // machine coordinates, from the config
+  io::write_four_sensor_result(out, res, info);
   std::cout << "separation: " << res.brief_report() << "\n";
   if (res.lambda_fallback == core::LambdaFallback::discrepancy)
     std::cerr << "warning: the L-curve has no corner inside the lambda range; lambda was chosen "
                  "by the discrepancy principle instead\n";
   else if (res.lambda_fallback == core::LambdaFallback::collapse_least_squares)
     std::cerr << "warning: " << res.determination_note << "\n";
+  return res;
+}
+
+/// [mqtt]: the scan's summary (and alarms) into the disk queue beside OUT, then up to `wait_s`
+/// to deliver it; what is left stays queued for the next run (or the daemon sharing the queue).
+void publish_summary(const io::MqttConfig& mqtt, io::ScanSummary s, const fs::path& out,
+                     double wait_s) {
+  service::PlantPublisherOptions po;
+  po.mqtt = mqtt;
+  po.queue_dir = service::default_queue_dir(mqtt, out);
+  service::PlantPublisher pub(po, {});  // no status: the machine's status topic is the daemon's
+  s.machine = mqtt.machine;
+  pub.queue("scan/" + s.scan_id, io::to_json(s));
+  for (const auto& a : io::alarms_for(s, mqtt.straightness_tolerance_um))
+    pub.queue("alarm", io::to_json(a));
+  pub.start();
+  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(wait_s);
+  while (pub.queued() > 0 && std::chrono::steady_clock::now() < until)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  pub.stop(std::chrono::milliseconds(200));
+  const auto left = pub.queued();
+  std::cout << "mqtt: " << mqtt.topic_root() << "/scan/" << s.scan_id << ": "
+            << (left == 0
+                    ? std::string("delivered")
+                    : std::to_string(left) + " messages left queued in " + po.queue_dir.string() +
+                          " (" + pub.counters().last_error + "); sent by the next run")
+            << "\n";
+}
+
+std::vector<double> vec(const Eigen::VectorXd& v) {
+  return {v.data(), v.data() + v.size()};
+}
+
+/// --verify-with: the second scan (this one) against the first and the table applied between.
+void verify(const core::FourSensorResult& res, const io::MachineConfig& cfg, const fs::path& table,
+            const fs::path& before_dir, const fs::path& out, const fs::path& shown_out) {
+  const io::ControllerTable applied = io::read_compensation_file(table);
+  std::string warning;
+  const core::MachineError before = io::read_machine_error(before_dir, cfg.axes, &warning);
+  if (!warning.empty()) std::cerr << "warning: " << warning << "\n";
+  const core::MachineError after =
+      core::machine_error(vec(res.x_mm), vec(res.S_um), vec(res.u_S_um), cfg.axes);
+  const auto r =
+      core::verify_compensation(before, after, [&](double p) { return applied.apply_um(p); });
+  const io::VerificationInfo info{cfg.axes.symbol(), fs::absolute(table).string(),
+                                  fs::absolute(before_dir).string(), 2.0};
+  io::write_verification(out, r, info);
+  std::cout << io::verification_text(r, info)
+            << "verification: " << (shown_out / "verification.txt").string() << ", "
+            << (shown_out / "verification.csv").string() << "\n";
 }
 
 void separate_displacement(const io::RawDisplacementScan& raw) {
@@ -112,7 +182,9 @@ int main(int argc, char** argv) {
   std::string gauge = "reference";
   int averages = 0, settle_ms = -1;
   bool no_separate = false, refine = false;
-  std::string refine_reference;
+  std::string refine_reference, verify_table, before_dir;
+  double mqtt_wait_s = 10;
+  bool no_mqtt = false;
   app.add_option("-c,--config", config_path, "machine config (TOML)")->capture_default_str();
   app.add_option("-o,--out", out_dir, "output directory (default: [scan] output_dir)");
   app.add_option("--method", method, "four_sensor, displacement or both (default: [scan] method)")
@@ -140,6 +212,23 @@ int main(int argc, char** argv) {
                  "zero-adjustment values have no quadratic part), paper_eq12")
       ->check(CLI::IsMember({"sensor_stage", "reference", "paper_eq12"}))
       ->capture_default_str();
+  app.add_option("--mqtt-wait-s", mqtt_wait_s,
+                 "[mqtt] in the config: wait this long for the broker to take the scan's summary "
+                 "(what is not delivered stays queued on disk for the next run)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 3600.0));
+  app.add_flag("--no-mqtt", no_mqtt, "do not publish, even with [mqtt] in the config");
+  app.add_option("--verify-with", verify_table,
+                 "measure - compensate - verify: the compensation table now loaded in the "
+                 "controller (any errsep format; the embedded simulator applies it itself); the "
+                 "four-sensor scan is compared with the first scan and the predicted residual, "
+                 "written to OUT/verification.txt and .csv")
+      ->excludes(no_sep)
+      ->check(CLI::ExistingFile);
+  app.add_option("--before", before_dir,
+                 "result directory of the first scan (default: the directory whose "
+                 "compensation/ holds the --verify-with table)")
+      ->check(CLI::ExistingDirectory);
   CLI11_PARSE(app, argc, argv);
 
   struct sigaction sa {};
@@ -158,6 +247,27 @@ int main(int argc, char** argv) {
     if (method == "displacement") m = io::ScanMethod::displacement;
     if (method == "both") m = io::ScanMethod::both;
     const fs::path out = out_dir.empty() ? cfg.scan.output_dir : fs::path(out_dir);
+    if (!verify_table.empty()) {
+      if (m == io::ScanMethod::displacement)
+        throw std::invalid_argument(
+            "--verify-with needs a four-sensor scan (--method four_sensor)");
+      (void)io::read_compensation_file(verify_table);  // a table that cannot be read: stop now
+      if (before_dir.empty()) before_dir = io::result_dir_of_table(verify_table).string();
+      if (before_dir.empty())
+        throw std::invalid_argument("--verify-with " + verify_table +
+                                    ": not in a result directory's compensation/; give the first "
+                                    "scan's result directory with --before");
+    }
+    // The result folder is one set: everything is written into a staging folder beside it and
+    // moved into place in one rename at the end (io/staged_directory.hpp), so that a kill at any
+    // moment leaves the earlier result whole (or no folder), never files of two runs.  What is
+    // reported as written is reported once it is in place.
+    io::StagedDirectory stage(out, {"scan", std::string("errsep-scan ") + kVersion, false, {}});
+    if (const std::string swept = io::describe_swept(stage.swept()); !swept.empty())
+      std::cout << swept << "\n";
+    const fs::path work = stage.dir();
+    std::vector<std::string> written;
+    std::optional<io::ScanSummary> summary;  // published once the set is in place
 
     // The embedded default: no machine, start the device simulator and talk to it.
     std::unique_ptr<drivers::SimulatorProcess> sim;
@@ -168,7 +278,9 @@ int main(int argc, char** argv) {
             "config " + config_path +
             " uses the embedded device simulator, but errsep-devsim was not found next to this "
             "program; give its path with --devsim");
-      sim = std::make_unique<drivers::SimulatorProcess>(exe, config_path);
+      std::vector<std::string> sim_args;
+      if (!verify_table.empty()) sim_args = {"--compensation", verify_table};
+      sim = std::make_unique<drivers::SimulatorProcess>(exe, config_path, sim_args);
       io::apply_simulator_port(cfg, sim->port());
       std::cout << "device simulator: pid " << sim->pid() << ", listening " << sim->host() << ":"
                 << sim->port() << "\n";
@@ -177,7 +289,6 @@ int main(int argc, char** argv) {
     std::optional<drivers::Devices> dev;  // destroyed (buses closed) before the simulator stops
     dev.emplace(drivers::make_devices(cfg));
     dev->configure();
-    fs::create_directories(out);
 
     std::vector<acq::ScanKind> kinds;
     if (m != io::ScanMethod::displacement) kinds.push_back(acq::ScanKind::four_sensor);
@@ -191,25 +302,29 @@ int main(int argc, char** argv) {
       acq::ScanHooks hooks;
       hooks.progress = [&printer](const acq::ScanProgress& p) { printer(p); };
       hooks.abort = &g_abort;
+      const auto started = std::chrono::system_clock::now();
       auto res = acq::run_scan(devices, opts, hooks);
       if (printer.tty && res.counts.points_done != res.counts.points_total)
         std::fputc('\n', stderr);
 
       // The raw record first, whatever happened: complete or not, it is kept.
-      const fs::path raw_file =
-          out / (kind == acq::ScanKind::four_sensor ? "raw.csv" : "raw_displacement.csv");
+      const fs::path raw_name =
+          kind == acq::ScanKind::four_sensor ? "raw.csv" : "raw_displacement.csv";
+      const fs::path raw_file = out / raw_name;  // where it will be, named in the results
+      const std::vector<std::pair<std::string, std::string>> meta = {
+          {"config", fs::absolute(config_path).string()}, {"run_id", stage.run_id()}};
       if (res.four_sensor) {
-        res.four_sensor->metadata.insert(res.four_sensor->metadata.begin(),
-                                         {"config", fs::absolute(config_path).string()});
-        io::write_raw_four_sensor_csv(raw_file, *res.four_sensor);
+        res.four_sensor->metadata.insert(res.four_sensor->metadata.begin(), meta.begin(),
+                                         meta.end());
+        io::write_raw_four_sensor_csv(work / raw_name, *res.four_sensor);
       } else {
-        res.displacement->metadata.insert(res.displacement->metadata.begin(),
-                                          {"config", fs::absolute(config_path).string()});
-        io::write_raw_displacement_csv(raw_file, *res.displacement);
+        res.displacement->metadata.insert(res.displacement->metadata.begin(), meta.begin(),
+                                          meta.end());
+        io::write_raw_displacement_csv(work / raw_name, *res.displacement);
       }
-      std::cout << res.brief_report() << "\n"
-                << "raw data: " << raw_file.string()
-                << (res.complete() ? "" : " (marked incomplete)") << "\n";
+      std::cout << res.brief_report() << "\n";
+      written.push_back("raw data: " + raw_file.string() +
+                        (res.complete() ? "" : " (marked incomplete)"));
       for (const auto& s : res.samplers)
         if (!s.realtime.all_ok())
           std::cerr << "warning: real-time set-up: " << s.realtime.brief() << "\n";
@@ -221,31 +336,78 @@ int main(int argc, char** argv) {
         break;
       }
       if (no_separate) continue;
-      if (res.four_sensor) {
-        separate_four_sensor(*res.four_sensor, raw_file, out, gauge);
-        std::cout << "results: " << out.string()
-                  << "/ (motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt)\n";
-        if (refine || !refine_reference.empty() || cfg.refine.enabled) {
-          io::RefineRunOptions ro;  // the defaults of errsep-refine, the scan's gauge
-          ro.refine.solve = separation_options(gauge);
-          ro.refine.alpha = cfg.refine.alpha;  // [refine] alpha (default 0.01, as errsep-refine)
-          if (!refine_reference.empty()) ro.reference_csv = refine_reference;
-          const auto run = io::run_refine(raw_file, out / "refine", ro);
-          std::cout << run.result.brief_report() << "\n"
-                    << "refine: " << (out / "refine").string()
-                    << "/ (refine_report.txt, refine_steps.csv, refined motion.csv, reference.csv, "
-                       "...)\n";
-          if (!run.result.model_complete())
-            std::cerr << "warning: the refined model is incomplete (residual not white or "
-                         "implausible effects rejected): see "
-                      << (out / "refine" / "refine_report.txt").string() << "\n";
+      try {
+        if (res.four_sensor) {
+          const auto sep =
+              separate_four_sensor(*res.four_sensor, raw_file, work, gauge, stage.run_id());
+          io::ScanSummary s;
+          // A scan id unique per machine: the start time and this process.
+          s.scan_id = io::ResultsStore::stem(started, 0).substr(0, 16) + "_scan-app-" +
+                      std::to_string(::getpid());
+          s.started_utc = io::utc_iso(started);
+          s.ended_utc = io::utc_now_iso();
+          s.trigger = "manual";
+          s.outcome = "complete";
+          s.points_measured = std::to_string(res.counts.points_done) + "/" +
+                              std::to_string(res.counts.points_total);
+          s.files = {"raw.csv",    "motion.csv",    "reference.csv",
+                     "lcurve.csv", "residuals.csv", "summary.txt"};
+          io::add_separation(s, sep);
+          summary = s;
+          if (!verify_table.empty()) verify(sep, cfg, verify_table, before_dir, work, out);
+          written.push_back(
+              "results: " + out.string() +
+              "/ (motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt)");
+          if (refine || !refine_reference.empty() || cfg.refine.enabled) {
+            io::RefineRunOptions ro;  // the defaults of errsep-refine, the scan's gauge
+            ro.refine.solve = separation_options(gauge);
+            ro.refine.alpha = cfg.refine.alpha;  // [refine] alpha (default 0.01, as errsep-refine)
+            if (!refine_reference.empty()) ro.reference_csv = refine_reference;
+            ro.source = raw_file.string();
+            // A set of its own inside the scan's (errsep-refine may replace it later).
+            const auto run = io::run_refine(work / raw_name, work / "refine", ro);
+            std::cout << run.result.brief_report() << "\n";
+            written.push_back("refine: " + (out / "refine").string() +
+                              "/ (refine_report.txt, refine_steps.csv, refined motion.csv, "
+                              "reference.csv, ...)");
+            if (!run.result.model_complete())
+              std::cerr << "warning: the refined model is incomplete (residual not white or "
+                           "implausible effects rejected): see "
+                        << (out / "refine" / "refine_report.txt").string() << "\n";
+            io::ScanSummary::Refine rf;
+            rf.model_complete = run.result.model_complete();
+            rf.verdict = run.result.brief_report();
+            rf.model = run.result.model_name;
+            for (std::size_t k = 1; k < run.result.steps.size(); ++k)
+              rf.steps.push_back(run.result.steps[k].effect);
+            summary->refine = rf;
+            summary->files.push_back("refine/refine_report.txt");
+          }
+        } else {
+          separate_displacement(*res.displacement);
         }
-      } else {
-        separate_displacement(*res.displacement);
+      } catch (const std::exception& e) {
+        // The measurements are kept: the set holds the raw files alone (no result is better than
+        // some of them), and the error is reported.
+        for (const auto& entry : fs::directory_iterator(work))
+          if (entry.path().filename().string().rfind("raw", 0) != 0) fs::remove_all(entry.path());
+        written.erase(
+            std::remove_if(written.begin(), written.end(),
+                           [](const std::string& l) { return l.rfind("raw data: ", 0) != 0; }),
+            written.end());
+        std::cerr << "errsep-scan: separation failed: " << e.what() << "; the raw data is kept\n";
+        summary.reset();
+        exit_code = 1;
+        break;
       }
     }
     dev.reset();  // close the buses before the simulator goes
     if (sim) sim->stop();
+    stage.commit();  // the whole set, in one rename
+    for (const auto& line : written)
+      std::cout << line << "\n";
+    // Store and forward: the result is on disk first, then its summary goes to the queue.
+    if (summary && cfg.mqtt && !no_mqtt) publish_summary(*cfg.mqtt, *summary, out, mqtt_wait_s);
   } catch (const std::exception& e) {
     std::cerr << "errsep-scan: " << e.what() << "\n";
     return 1;

@@ -19,6 +19,7 @@
 #include "errsep/core/two_axis_displacement.hpp"
 #include "errsep/core/two_axis_yaw.hpp"
 #include "errsep/io/displacement_csv.hpp"
+#include "errsep/io/staged_directory.hpp"
 #include "errsep/version.hpp"
 
 namespace {
@@ -229,6 +230,10 @@ int main(int argc, char** argv) {
       std::max(999, static_cast<int>(std::ceil(6.0 / ropt.whiteness.alpha)));
 
   try {
+    // What a killed earlier run left beside the outputs (its temporaries) goes first.
+    if (const auto swept = errsep::io::sweep_beside({output, residuals_out, motion_out});
+        !swept.empty())
+      std::cout << swept << "\n";
     if (one->parsed()) {
       const std::string& input = inputs.front();
       std::vector<errsep::io::OneAxisInput> all;

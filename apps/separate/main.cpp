@@ -114,9 +114,19 @@ int main(int argc, char** argv) {
     } catch (const std::exception& err) {  // name the file the data came from
       throw std::runtime_error(input + ": " + err.what());
     }
-    // All result files appear together or not at all.
-    errsep::io::StagedDirectory stage(out_dir, "separate");
-    errsep::io::write_four_sensor_result(stage.dir(), res, {input, "X", "Y", {}});
+    // All result files appear together or not at all, as one result set replacing an earlier
+    // one whole (io/staged_directory.hpp).
+    errsep::io::StagedDirectory stage(
+        out_dir, {"separate", std::string("errsep-separate ") + errsep::kVersion, false, {}});
+    if (const std::string swept = errsep::io::describe_swept(stage.swept()); !swept.empty())
+      std::cout << swept << "\n";
+    errsep::io::ResultWriteInfo info{input, "X", "Y", {{"run_id", stage.run_id()}}};
+    try {
+      errsep::io::carry_machine_axes(scan.metadata, info);  // where the scan ran, if recorded
+    } catch (const std::invalid_argument& bad_axes) {
+      throw errsep::io::CsvError(input, 0, bad_axes.what());
+    }
+    errsep::io::write_four_sensor_result(stage.dir(), res, info);
     stage.commit();
     std::cout << res.brief_report() << "\n"
               << "results written to " << out_dir << "/ (motion.csv, reference.csv, lcurve.csv, "

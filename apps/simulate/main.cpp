@@ -9,6 +9,7 @@
 #include "errsep/io/csv.hpp"
 #include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
+#include "errsep/io/staged_directory.hpp"
 #include "errsep/version.hpp"
 
 int main(int argc, char** argv) {
@@ -66,12 +67,18 @@ int main(int argc, char** argv) {
     for (int j = 0; j < 4; ++j)
       for (Eigen::Index n = 0; n < sim.m_um.rows(); ++n)
         raw.m_um[static_cast<size_t>(j)].push_back(sim.m_um(n, j));
+    // DIR is one result set, replacing an earlier simulation's whole (io/staged_directory.hpp).
+    errsep::io::StagedDirectory stage(
+        out_dir, {"simulate", std::string("errsep-simulate ") + errsep::kVersion, false, {}});
+    if (const std::string swept = errsep::io::describe_swept(stage.swept()); !swept.empty())
+      std::cout << swept << "\n";
+    const std::filesystem::path work = stage.dir();
     raw.metadata = {{"source", "errsep-simulate example " + std::to_string(example)},
+                    {"run_id", stage.run_id()},
                     {"sigma_um", std::to_string(sigma)},
                     {"seed", std::to_string(seed)},
                     {"noise_on", noise_on}};
-    std::filesystem::create_directories(out_dir);
-    errsep::io::write_raw_four_sensor_csv(std::filesystem::path(out_dir) / "raw.csv", raw);
+    errsep::io::write_raw_four_sensor_csv(work / "raw.csv", raw);
 
     if (combined) {
       errsep::io::CsvTable g;
@@ -85,11 +92,14 @@ int main(int argc, char** argv) {
           col[static_cast<size_t>(n)] = sim.g_um(n, r);
         g.add_column("g" + std::to_string(r + 1) + "_um", col);
       }
-      errsep::io::write_csv(std::filesystem::path(out_dir) / "combined.csv", g);
+      g.set_meta("run_id", stage.run_id());
+      errsep::io::write_csv(work / "combined.csv", g);
     }
     const auto res = combined ? errsep::core::separate_four_sensor_combined(cfg, sim.m_um, sim.g_um)
                               : errsep::core::separate_four_sensor(cfg, sim.m_um);
-    errsep::io::write_four_sensor_result(out_dir, res, {out_dir + "/raw.csv", "X", "Y", {}});
+    errsep::io::write_four_sensor_result(
+        work, res, {out_dir + "/raw.csv", "X", "Y", {{"run_id", stage.run_id()}}});
+    stage.commit();
     Eigen::VectorXd dS = res.S_um - sim.S_um;
     Eigen::VectorXd dg = res.gamma_rad - sim.gamma_rad;
     dg.array() -= dg.mean();

@@ -21,6 +21,8 @@
 #include "errsep/core/four_sensor_evaluation.hpp"
 #include "errsep/core/iso230.hpp"
 #include "errsep/io/csv.hpp"
+#include "errsep/io/staged_directory.hpp"
+#include "errsep/io/utc_time.hpp"
 
 namespace errsep::acq {
 namespace {
@@ -29,15 +31,6 @@ namespace {
 constexpr int kErr = 3, kWarning = 4, kInfo = 6;
 
 constexpr std::int64_t kMsNs = 1'000'000;
-
-std::string utc_iso(std::chrono::system_clock::time_point t) {
-  const std::time_t tt = std::chrono::system_clock::to_time_t(t);
-  std::tm tm{};
-  ::gmtime_r(&tt, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
 
 std::string fmt(double v, int prec = 4) {
   std::ostringstream os;
@@ -73,6 +66,8 @@ const char* to_string(TriggerSource s) noexcept {
       return "schedule";
     case TriggerSource::command:
       return "command";
+    case TriggerSource::mqtt:
+      return "mqtt";
   }
   return "unknown";
 }
@@ -471,11 +466,11 @@ std::vector<std::pair<std::string, std::string>> Daemon::scan_metadata(
   std::vector<std::pair<std::string, std::string>> meta = {
       {"scan_id", std::to_string(ctx_->scan_id())},
       {"trigger", to_string(scan_source_)},
-      {"started_utc", utc_iso(scan_start_)}};
+      {"started_utc", io::utc_iso(scan_start_)}};
   if (outcome == "in_progress")
-    meta.emplace_back("checkpoint_utc", utc_iso(std::chrono::system_clock::now()));
+    meta.emplace_back("checkpoint_utc", io::utc_iso(std::chrono::system_clock::now()));
   else
-    meta.emplace_back("ended_utc", utc_iso(std::chrono::system_clock::now()));
+    meta.emplace_back("ended_utc", io::utc_iso(std::chrono::system_clock::now()));
   meta.emplace_back("outcome", outcome);
   if (!reason.empty()) meta.emplace_back("outcome_reason", reason);
   return meta;
@@ -531,7 +526,18 @@ Daemon::ResultFigures Daemon::write_result(
   for (const auto& [k, v] : meta)
     t.set_meta(k, v);
   t.set_meta("raw_file", std::filesystem::path(raw_file).filename().string());
+  {
+    // The raw file this result is of, by content: the store's reader (recover_results) and any
+    // consumer can tell a result from its raw file's run from one that is not.
+    const auto [bytes, crc] = io::file_size_and_crc32(raw_file);
+    char hex[16];
+    std::snprintf(hex, sizeof hex, "%08x", crc);
+    t.set_meta("raw_bytes", std::to_string(bytes));
+    t.set_meta("raw_crc32", hex);
+  }
   t.set_meta("solver", r.brief_report());
+  t.set_meta("lambda", fmt(r.lambda, 6));
+  t.set_meta("sigma_hat_um", fmt(r.sigma_um, 6));
   const auto n = static_cast<std::size_t>(r.x_mm.size());
   std::vector<double> x(n), s(n), g(n), us(n);
   for (std::size_t k = 0; k < n; ++k) {
@@ -552,8 +558,10 @@ Daemon::ResultFigures Daemon::write_result(
       core::four_sensor_straightness(r, core::ReferenceLine::least_squares);
   t.set_meta("straightness_minimum_zone_um", fmt(mz.straightness_um, 6));
   t.set_meta("straightness_minimum_zone_U_um", fmt(mz.expanded_um, 6));
+  t.set_meta("straightness_minimum_zone_of_estimate_um", fmt(mz.zone.straightness_um, 6));
   t.set_meta("straightness_least_squares_um", fmt(ls.straightness_um, 6));
   t.set_meta("straightness_least_squares_U_um", fmt(ls.expanded_um, 6));
+  t.set_meta("straightness_least_squares_of_estimate_um", fmt(ls.zone.straightness_um, 6));
   t.set_meta("straightness_U_note",
              "k = 2, from the separation's posterior covariance (core/four_sensor_evaluation.hpp)");
   if (!r.determination_note.empty()) t.set_meta("not_determined", r.determination_note);
@@ -580,8 +588,24 @@ int Daemon::recover_results() {
     if (f.kind == "result") result_stems.insert(f.stem);
   }
   for (const auto& stem : raw_stems) {
-    if (result_stems.count(stem)) continue;
     const auto raw_path = store_.path(stem, "raw");
+    if (result_stems.count(stem)) {
+      // A result must be of its raw file (raw_bytes / raw_crc32, written since issue 21): one
+      // that is not is made again, as if missing.  Older results without them are kept.
+      try {
+        const io::CsvTable res = io::read_csv(store_.path(stem, "result"));
+        const auto want = res.meta("raw_crc32");
+        char hex[16];
+        std::snprintf(hex, sizeof hex, "%08x", io::file_size_and_crc32(raw_path).second);
+        if (!want || *want == hex) continue;
+        log(kWarning, "result of " + raw_path.filename().string() + " is of another raw file (" +
+                          "raw_crc32 " + *want + ", the raw file's is " + hex +
+                          "): made again from the raw file");
+      } catch (const std::exception& e) {
+        log(kWarning, "result of " + raw_path.filename().string() + " cannot be read (" + e.what() +
+                          "): made again from the raw file");
+      }
+    }
     try {
       const io::RawFourSensorScan raw = io::read_raw_four_sensor_csv(raw_path);
       if (!raw.geometry) throw std::runtime_error("no scan geometry in its metadata");
@@ -589,13 +613,14 @@ int Daemon::recover_results() {
       for (const char* key : {"scan_id", "trigger", "started_utc", "ended_utc", "outcome",
                               "outcome_reason", "points_measured"})
         if (const auto v = raw.meta(key)) meta.emplace_back(key, *v);
-      meta.emplace_back("result_recovered_utc", utc_iso(std::chrono::system_clock::now()));
+      meta.emplace_back("result_recovered_utc", io::utc_iso(std::chrono::system_clock::now()));
       const ResultFigures f = write_result(stem, raw, meta, raw_path.string());
       log(kWarning, "result of " + raw_path.filename().string() +
                         " was missing (the daemon stopped before writing it): computed "
                         "from the raw file, wrote " +
                         f.file);
       ++made;
+      if (const auto id = raw.meta("scan_id")) scan_committed(std::stoull(*id), stem);
     } catch (const std::exception& e) {
       log(kErr, "result of " + raw_path.filename().string() +
                     " is missing and could not be made: " + e.what());
@@ -664,14 +689,27 @@ void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd
     log(kWarning, "scan " + std::to_string(id) + ": its last checkpoint (" +
                       std::to_string(checkpoint_points_) + " points) stays on disk as " +
                       store_.path(scan_stem_, "raw-incomplete").string());
-  std::lock_guard<std::mutex> lock(mu_);
-  status_.last_scan_id = id;
-  status_.last_outcome = outcome;
-  status_.last_straightness_um = straightness;
-  status_.last_straightness_U_um = straightness_U;
-  status_.last_straightness_lsq_um = straightness_lsq;
-  if (!last_file.empty()) status_.last_file = last_file;
-  if (outcome == ScanOutcome::complete) ++status_.scans_completed;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    status_.last_scan_id = id;
+    status_.last_outcome = outcome;
+    status_.last_straightness_um = straightness;
+    status_.last_straightness_U_um = straightness_U;
+    status_.last_straightness_lsq_um = straightness_lsq;
+    if (!last_file.empty()) status_.last_file = last_file;
+    if (outcome == ScanOutcome::complete) ++status_.scans_completed;
+  }
+  // A scan whose files could not be written has nothing on disk to forward.
+  if (outcome != ScanOutcome::write_failed) scan_committed(id, scan_stem_);
+}
+
+void Daemon::scan_committed(std::uint64_t scan_id, const std::string& stem) {
+  if (!opts_.on_scan_committed) return;
+  try {
+    opts_.on_scan_committed(scan_id, stem);
+  } catch (const std::exception& e) {
+    log(kErr, "scan " + std::to_string(scan_id) + ": after writing: " + e.what());
+  }
 }
 
 void Daemon::finish_scan(bool stopping) {

@@ -8,21 +8,15 @@
 #include <sstream>
 #include <stdexcept>
 #include <thread>
+#include "errsep/io/machine_axes_metadata.hpp"
+
+#include "errsep/io/plausibility.hpp"
+#include "errsep/io/utc_time.hpp"
 
 namespace errsep::acq {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
-std::string utc_now() {
-  const auto now = std::chrono::system_clock::now();
-  const std::time_t t = std::chrono::system_clock::to_time_t(now);
-  std::tm tm{};
-  ::gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
 
 std::string fmt(double v, int prec = 6) {
   std::ostringstream os;
@@ -172,7 +166,7 @@ void Runner::four_sensor_single() {
     for (int n = 0; n < P; ++n) {
       const double x = n * opts_.geometry.dx_mm;
       const std::string where = phase + ", x = " + fmt(x) + " mm";
-      move(*dev_.slide, opts_.slide_start_mm + x, where);
+      move(*dev_.slide, opts_.slide_start_mm + opts_.axes.scan_direction * x, where);
       const auto w = measure({0}, where);
       raw.m_um[static_cast<std::size_t>(i)][static_cast<std::size_t>(n)] = w.mean[0];
       (*raw.t_s)[static_cast<std::size_t>(i)][static_cast<std::size_t>(n)] =
@@ -189,7 +183,7 @@ void Runner::four_sensor_fixed() {
   for (int n = 0; n < P; ++n) {
     const double x = n * opts_.geometry.dx_mm;
     const std::string where = "x = " + fmt(x) + " mm";
-    move(*dev_.slide, opts_.slide_start_mm + x, where);
+    move(*dev_.slide, opts_.slide_start_mm + opts_.axes.scan_direction * x, where);
     const auto w = measure({0, 1, 2, 3}, where);
     for (std::size_t i = 0; i < 4; ++i) {
       raw.m_um[i][static_cast<std::size_t>(n)] = w.mean[i];
@@ -211,7 +205,7 @@ void Runner::displacement() {
     for (int k = 0; k < K; ++k) {
       const double x = k * opts_.d_mm;
       const std::string where = phase + ", x = " + fmt(x) + " mm";
-      move(*dev_.slide, opts_.slide_start_mm + x, where);
+      move(*dev_.slide, opts_.slide_start_mm + opts_.axes.scan_direction * x, where);
       const auto w = measure({0, 1}, where);
       const auto kk = static_cast<std::size_t>(k);
       (pass == 0 ? raw.s1_scan1_um : raw.s1_scan2_um)[kk] = w.mean[0];
@@ -225,7 +219,7 @@ void Runner::displacement() {
 
 ScanResult Runner::run() {
   res_.kind = opts_.kind;
-  res_.started_utc = utc_now();
+  res_.started_utc = io::utc_now_iso();
   t0_ns_ = monotonic_ns();
   const std::size_t ns = dev_.sensors.size();
 
@@ -318,7 +312,7 @@ ScanResult Runner::run() {
       res_.counts.reads_by_status[i] += st.reads_by_status[i];
   }
   res_.counts.samples_consumed = consumer.consumed();
-  res_.finished_utc = utc_now();
+  res_.finished_utc = io::utc_now_iso();
   res_.duration_s = static_cast<double>(monotonic_ns() - t0_ns_) * 1e-9;
 
   // Metadata of the raw file: what was done, how, and every counter.
@@ -333,7 +327,12 @@ ScanResult Runner::run() {
   for (auto* s : dev_.sensors)
     names += (names.empty() ? "" : " ") + s->name();
   md.emplace_back("sensors", names);
-  md.emplace_back("slide_start_mm", fmt(opts_.slide_start_mm));
+  md.insert(md.end(), opts_.range_metadata.begin(), opts_.range_metadata.end());
+  // Where the scan ran, in machine coordinates (io/machine_axes_metadata.hpp).
+  core::MachineAxes axes = opts_.axes;
+  axes.slide_start_mm = opts_.slide_start_mm;
+  for (auto& kv : io::machine_axes_metadata(axes))
+    md.push_back(std::move(kv));
   if (opts_.kind == ScanKind::four_sensor) {
     md.emplace_back("setup", ns == 1 ? "one sensor on a sensor stage" : "four sensors");
     md.emplace_back("sensor_stage_origin_mm", fmt(opts_.sensor_stage_origin_mm));
@@ -424,12 +423,36 @@ bool ScanOptions::is_valid(std::string* why) const {
   return sampler.is_valid(why);
 }
 
+std::vector<std::pair<std::string, std::string>> sensor_range_metadata(const io::MachineConfig& cfg,
+                                                                       ScanKind kind) {
+  const auto& sc = cfg.scan;
+  std::vector<std::pair<std::string, std::string>> md;
+  auto add = [&](const std::string& column_sensor, const std::string& name) {
+    for (const auto& s : cfg.sensors)
+      if (s.name == name) {
+        const auto r = io::range_metadata(column_sensor, s.range_min_um, s.range_max_um);
+        md.insert(md.end(), r.begin(), r.end());
+      }
+  };
+  if (kind == ScanKind::four_sensor) {
+    // One sensor on the sensor stage reads all four configurations; else one per configuration.
+    for (std::size_t i = 0; i < 4; ++i)
+      if (sc.sensors.size() == 1 || i < sc.sensors.size())
+        add("m" + std::to_string(i + 1), sc.sensors[sc.sensors.size() == 1 ? 0 : i]);
+  } else {
+    add("s1", sc.workpiece_sensor);
+    add("s2", sc.reference_sensor);
+  }
+  return md;
+}
+
 ScanOptions scan_options_from_config(const io::MachineConfig& cfg, ScanKind kind) {
   const auto& sc = cfg.scan;
   ScanOptions o;
   o.kind = kind;
   o.geometry = sc.geometry;
   o.slide_start_mm = sc.slide_start_mm;
+  o.axes = cfg.axes;
   o.sensor_stage_origin_mm = sc.sensor_stage_origin_mm;
   o.averages = sc.averages;
   o.settle_ms = sc.settle_ms;
@@ -446,6 +469,7 @@ ScanOptions scan_options_from_config(const io::MachineConfig& cfg, ScanKind kind
   }
   o.sampler.realtime.cpu = cfg.sampler.cpu_affinity;
   o.ring_capacity = cfg.sampler.ring_capacity;
+  o.range_metadata = sensor_range_metadata(cfg, kind);
   std::string why;
   if (!o.is_valid(&why)) throw std::invalid_argument(cfg.source.string() + ": [scan]: " + why);
   return o;

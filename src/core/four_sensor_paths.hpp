@@ -7,8 +7,9 @@
 
 namespace errsep::core {
 
-/// Estimator::posterior (four_sensor_posterior.cpp).
+/// Estimator::posterior (four_sensor_posterior.cpp).  `known_sigma_um` > 0 is used instead of
+/// the σ̂ of the redundant readings (predict_four_sensor_uncertainty: no data, a stated σ).
 FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
-                                    const FourSensorOptions& opts);
+                                    const FourSensorOptions& opts, double known_sigma_um = 0.0);
 
 }  // namespace errsep::core

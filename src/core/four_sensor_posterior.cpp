@@ -337,6 +337,44 @@ Eigen::MatrixXd FourSensorCovariance::covariance_S(const std::vector<int>& posit
   return V;
 }
 
+Eigen::MatrixXd FourSensorCovariance::covariance_S_with(const Eigen::MatrixXd& a_S) {
+  const Parts& p = *p_;
+  const int P = p.cfg.positions(), N = p.cfg.N;
+  if (a_S.rows() != P)
+    throw std::invalid_argument("FourSensorCovariance::covariance_S_with: coefficients have " +
+                                std::to_string(a_S.rows()) + " rows, need " + std::to_string(P));
+  const auto k = p.cfg.offsets_samples();
+  Eigen::VectorXd g = Eigen::VectorXd::Zero(p.n_all);  // the bow that to_gauge removes
+  for (int i = 0; i < N; ++i) {
+    const int col = p.f_index[static_cast<std::size_t>(i)];
+    if (col >= 0) g(col) = p.bow(i);
+  }
+  const Eigen::Vector2d ew = p.E.transpose() * p.w_S;
+  const double ww = p.w_S.squaredNorm();
+  Eigen::MatrixXd out(P, a_S.cols());
+  for (Eigen::Index j = 0; j < a_S.cols(); ++j) {
+    Eigen::VectorXd h;
+    double nh = 0.0, noise = 0.0;
+    p.functional(a_S.col(j), {}, {}, h, nh, noise);
+    p.to_gauge(h, nh);
+    const Eigen::VectorXd y = p.solver->solve_normal(h);
+    const double gy = g.dot(y);
+    // t_nᵀy for t_n = h_n − (n·h_n/g·n)·g, h_n the coefficients of S(x_n) as functional() forms
+    // them (at most 4 samples of f and η̃), and the readings' own noise, independent per n.
+    for (int n = 0; n < P; ++n) {
+      double hy = -ew.dot(y.segment<2>(p.m)), nhn = -ew.dot(p.n_eta);
+      for (int q = 0; q < 4; ++q) {
+        const int i = n + k[static_cast<std::size_t>(q)];
+        const int col = p.f_index[static_cast<std::size_t>(i)];
+        if (col >= 0) hy -= p.w_S(q) * y(col);
+        nhn -= p.w_S(q) * p.bow(i);
+      }
+      out(n, j) = p.sigma2 * (a_S(n, j) * ww + hy - nhn / p.gn * gy);
+    }
+  }
+  return out;
+}
+
 // ---------------------------------------------------------------------------------------------
 // λ search.
 
@@ -354,12 +392,12 @@ struct Criterion {
 Criterion reml_at(TikhonovSolver& s, const Eigen::VectorXd& Atb, double bb, double sigma2, int rank,
                   double lambda) {
   Criterion c;
-  Eigen::VectorXd x;
-  if (s.factorize_and_solve(lambda, Atb, x) != SolverStatus::success) return c;
-  const Eigen::VectorXd Px = s.apply_penalty(x);
-  const double pen = x.dot(Px), l2 = lambda * lambda;
-  const double rss = std::max(0.0, bb - x.dot(Atb) - l2 * pen);
-  c.value = (rss + l2 * pen) / sigma2 + s.log_det() - rank * std::log(l2);
+  // ‖b − Ax‖² + λ²xᵀPx = bᵀb − (Aᵀb)ᵀM⁻¹(Aᵀb) at x = M⁻¹Aᵀb: the forward substitution alone,
+  // no back substitution and no x.
+  double q = 0.0;
+  if (s.factorize_and_quadratic_form(lambda, Atb, q) != SolverStatus::success) return c;
+  const double l2 = lambda * lambda;
+  c.value = std::max(0.0, bb - q) / sigma2 + s.log_det() - rank * std::log(l2);
   c.ok = std::isfinite(c.value);
   return c;
 }
@@ -384,10 +422,14 @@ struct SearchOutcome {
   double lambda = 0.0;
   bool at_edge = false;
   int worker_factorizations = 0;  ///< done by the worker threads (not in the solver's stats)
+  std::vector<double> grid_lambda, grid_criterion;  ///< the grid's finite points
 };
 
-// Grid in log λ (on `threads` threads, each with its own factor), then golden section between the
-// neighbours of the best grid point.
+// Grid in log λ (on `threads` threads, each with its own factor), then a refinement around the
+// best point: its two neighbours at half the spacing, evaluated at once (one on a worker when
+// there are two threads), the best of the three kept and the spacing halved, refine_iterations
+// times.  For a unimodal criterion each step halves the bracket for the wall time of one
+// evaluation on two threads (golden section: 0.618 per evaluation, which cannot run in parallel).
 template <class F>
 SearchOutcome minimise_over_lambda(TikhonovSolver& solver, const LambdaSearchOptions& o, F&& crit) {
   const double lmax = solver.sigma_max_bound() * std::pow(10.0, o.decades_above);
@@ -401,58 +443,64 @@ SearchOutcome minimise_over_lambda(TikhonovSolver& solver, const LambdaSearchOpt
   std::vector<std::unique_ptr<TikhonovSolver>> workers;
   for (int t = 1; t < threads; ++t)
     workers.push_back(solver.worker());
-  auto sweep = [&](int t, TikhonovSolver& s) {
-    for (int i = t; i < count; i += threads)
-      val[static_cast<std::size_t>(i)] =
-          crit(s, std::pow(10.0, grid[static_cast<std::size_t>(i)])).value;
-  };
-  {
+  // Runs job(t, solver_t) for t = 0 … n−1, t > 0 on worker threads.
+  auto in_parallel = [&](int n, auto&& job) {
     std::vector<std::thread> pool;
     std::exception_ptr err;
-    for (int t = 1; t < threads; ++t)
+    for (int t = 1; t < n; ++t)
       pool.emplace_back([&, t] {
         try {
-          sweep(t, *workers[static_cast<std::size_t>(t - 1)]);
+          job(t, *workers[static_cast<std::size_t>(t - 1)]);
         } catch (...) {
           err = std::current_exception();
         }
       });
-    sweep(0, solver);
+    job(0, solver);
     for (auto& th : pool)
       th.join();
     if (err) std::rethrow_exception(err);
-  }
+  };
+  // A failed factorisation or a non-finite criterion (round-off at the top of the range: negative
+  // pivots make log det NaN) counts as +∞: NaN compares false both ways and would stall the
+  // minimum at the first grid point.
+  auto eval = [&](TikhonovSolver& s, double log_lambda) {
+    const Criterion c = crit(s, std::pow(10.0, log_lambda));
+    return c.ok ? c.value : std::numeric_limits<double>::infinity();
+  };
+  in_parallel(threads, [&](int t, TikhonovSolver& s) {
+    for (int i = t; i < count; i += threads)
+      val[static_cast<std::size_t>(i)] = eval(s, grid[static_cast<std::size_t>(i)]);
+  });
   SearchOutcome out;
-  for (const auto& w : workers)
-    out.worker_factorizations += w->stats().factorizations;
+  for (std::size_t q = 0; q < grid.size(); ++q)
+    if (std::isfinite(val[q])) {
+      out.grid_lambda.push_back(std::pow(10.0, grid[q]));
+      out.grid_criterion.push_back(val[q]);
+    }
   const auto best = static_cast<int>(std::min_element(val.begin(), val.end()) - val.begin());
   if (!std::isfinite(val[static_cast<std::size_t>(best)]))
     throw std::runtime_error("lambda search: the factorisation failed at every lambda of the grid");
   out.at_edge = best == 0 || best == count - 1;
-  double a = grid[static_cast<std::size_t>(std::max(0, best - 1))];
-  double b = grid[static_cast<std::size_t>(std::min(count - 1, best + 1))];
   double best_l = grid[static_cast<std::size_t>(best)],
          best_v = val[static_cast<std::size_t>(best)];
-  const double g = 0.5 * (std::sqrt(5.0) - 1.0);
-  double c = b - g * (b - a), d = a + g * (b - a);
-  double fc = crit(solver, std::pow(10.0, c)).value, fd = crit(solver, std::pow(10.0, d)).value;
+  double h = grid[1] - grid[0];
+  const double lo = grid.front(), hi = grid.back();
   for (int it = 0; it < o.refine_iterations; ++it) {
-    if (fc < fd) {
-      b = d;
-      d = c;
-      fd = fc;
-      c = b - g * (b - a);
-      fc = crit(solver, std::pow(10.0, c)).value;
-    } else {
-      a = c;
-      c = d;
-      fc = fd;
-      d = a + g * (b - a);
-      fd = crit(solver, std::pow(10.0, d)).value;
-    }
+    h *= 0.5;
+    const double at[2] = {best_l - h, best_l + h};
+    double v[2] = {std::numeric_limits<double>::infinity(),
+                   std::numeric_limits<double>::infinity()};
+    auto job = [&](int t, TikhonovSolver& s) {
+      for (int i = t; i < 2; i += std::min(threads, 2))
+        if (at[i] >= lo - 1e-12 && at[i] <= hi + 1e-12)  // inside the range only
+          v[i] = eval(s, at[i]);
+    };
+    in_parallel(std::min(threads, 2), job);
+    for (int i = 0; i < 2; ++i)
+      if (v[i] < best_v) best_v = v[i], best_l = at[i];
   }
-  if (fc < best_v) best_l = c, best_v = fc;
-  if (fd < best_v) best_l = d, best_v = fd;
+  for (const auto& w : workers)
+    out.worker_factorizations += w->stats().factorizations;
   out.lambda = std::pow(10.0, best_l);
   return out;
 }
@@ -473,7 +521,7 @@ void line_weights(const FourSensorConfig& cfg, Eigen::Vector4d& w_S, Eigen::Vect
 // ---------------------------------------------------------------------------------------------
 
 FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
-                                    const FourSensorOptions& opts) {
+                                    const FourSensorOptions& opts, double known_sigma_um) {
   const auto t0 = std::chrono::steady_clock::now();
   const int N = cfg.N, P = cfg.positions();
   FourSensorResult res;
@@ -496,7 +544,9 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
   if (res.redundancy_dof < 1)
     throw std::invalid_argument("N = " + std::to_string(N) +
                                 " leaves no redundant readings to estimate the noise from");
-  res.sigma_um = std::sqrt((ls->A() * x_ls - b).squaredNorm() / res.redundancy_dof);
+  res.sigma_um = known_sigma_um > 0.0
+                     ? known_sigma_um
+                     : std::sqrt((ls->A() * x_ls - b).squaredNorm() / res.redundancy_dof);
   const double sigma2 = std::max(res.sigma_um * res.sigma_um, 1e-30);
 
   const bool prior = opts.penalty != Penalty::none && opts.rule != LambdaRule::least_squares;
@@ -523,6 +573,8 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         lambda = o.lambda;
         res.lambda_at_edge = o.at_edge;
         extra_factorizations = o.worker_factorizations;
+        res.lambda_grid = o.grid_lambda;
+        res.lambda_criterion = o.grid_criterion;
         break;
       }
       case LambdaRule::gcv: {
@@ -532,6 +584,8 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         lambda = o.lambda;
         res.lambda_at_edge = o.at_edge;
         extra_factorizations = o.worker_factorizations;
+        res.lambda_grid = o.grid_lambda;
+        res.lambda_criterion = o.grid_criterion;
         break;
       }
       case LambdaRule::lcurve: {
@@ -739,6 +793,29 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
   }
   res.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return res;
+}
+
+FourSensorPrediction predict_four_sensor_uncertainty(const FourSensorConfig& cfg, double sigma_um) {
+  if (!(std::isfinite(sigma_um) && sigma_um > 0.0))
+    throw std::invalid_argument("predict_four_sensor_uncertainty: sigma_um = " +
+                                std::to_string(sigma_um) + ": must be a positive finite noise");
+  std::string why;
+  if (!cfg.is_valid(&why)) throw std::invalid_argument("invalid configuration: " + why);
+  FourSensorOptions o;
+  o.penalty = Penalty::none;
+  o.rule = LambdaRule::least_squares;
+  // Zero readings: the estimate is zero, and the covariance is what any readings would give.
+  FourSensorResult r =
+      separate_posterior(cfg, Eigen::MatrixXd::Zero(cfg.positions(), 4), o, sigma_um);
+  FourSensorPrediction out;
+  out.config = cfg;
+  out.sigma_um = sigma_um;
+  out.x_mm = std::move(r.x_mm);
+  out.u_S_um = std::move(r.u_S_um);
+  out.u_gamma_rad = std::move(r.u_gamma_rad);
+  out.u_f_um = std::move(r.u_f_um);
+  out.covariance = std::move(r.covariance);
+  return out;
 }
 
 }  // namespace errsep::core

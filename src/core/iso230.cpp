@@ -416,6 +416,13 @@ const char* to_string(ReferenceLine r) {
   return "?";
 }
 
+std::optional<ReferenceLine> parse_reference_line(std::string_view s) {
+  for (const auto r :
+       {ReferenceLine::end_points, ReferenceLine::least_squares, ReferenceLine::minimum_zone})
+    if (s == to_string(r)) return r;
+  return std::nullopt;
+}
+
 const char* label(ReferenceLine r) {
   switch (r) {
     case ReferenceLine::end_points:

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <limits>
 #include <new>
+#include <optional>
 #include <stdexcept>
 #include <vector>
 
@@ -97,6 +98,9 @@ struct TikhonovSolver::Normal {
   /// shift λ²I), its coupling with the border C_P (m × k) and border block D_P (k × k), and
   /// U_P = C_P·V (V spans the rows of both C and C_P).
   std::vector<double> pen_x;
+  /// Where pen_x is not zero (a second-difference penalty fills 3 of a column's 8 entries of the
+  /// four-sensor band): a λ's values are AᵀA copied, plus λ² times these.
+  std::vector<std::size_t> pen_nz;
   Eigen::MatrixXd C_P, D_P, U_P;
   Normal() { start_common(cm); }
   ~Normal() {
@@ -131,6 +135,9 @@ struct TikhonovSolver::Impl {
   // arbitrary in that one direction (Fig. 3(d)) but still usable for σ̂ from the residual.
   Eigen::LDLT<Eigen::MatrixXd> S;  ///< Schur complement D + λ²I − WᵀD⁻¹W of the border
   bool factor_ok = false;
+  /// The selected inverse of the current factorisation once computed (a λ rule's edf and the
+  /// posterior's u both ask for it at the chosen λ; at N = 10⁶ it costs 0.2 s).
+  std::optional<SelectedInverse> selinv;
   /// With a penalty: the values of AᵀA + λ²P on the shared pattern (one array per solver, so
   /// workers factorise different λ at once), and the matrix header that points to them.
   std::vector<double> work_x;
@@ -341,6 +348,8 @@ bool TikhonovSolver::build_banded(const Eigen::SparseMatrix<double>& At,
     }
   }
   up[m] = k;
+  for (std::size_t q = 0; q < normal_->pen_x.size(); ++q)
+    if (normal_->pen_x[q] != 0.0) normal_->pen_nz.push_back(q);
   normal_->band = *normal_->upper;
   normal_->C = std::move(C);
   normal_->D = std::move(D);
@@ -459,7 +468,7 @@ std::unique_ptr<TikhonovSolver> TikhonovSolver::worker() const {
 }
 
 SolverStatus TikhonovSolver::factorize(double lambda) {
-  return factorize_impl(lambda, nullptr, nullptr);
+  return factorize_impl(lambda, nullptr, nullptr, nullptr);
 }
 
 SolverStatus TikhonovSolver::factorize_and_solve(double lambda, const Eigen::VectorXd& rhs,
@@ -469,13 +478,24 @@ SolverStatus TikhonovSolver::factorize_and_solve(double lambda, const Eigen::Vec
     throw std::invalid_argument("TikhonovSolver::factorize_and_solve: right-hand side has " +
                                 std::to_string(rhs.size()) + " entries, expected " +
                                 std::to_string(m + border_));
-  return factorize_impl(lambda, &rhs, &x);
+  return factorize_impl(lambda, &rhs, &x, nullptr);
+}
+
+SolverStatus TikhonovSolver::factorize_and_quadratic_form(double lambda, const Eigen::VectorXd& v,
+                                                          double& q) {
+  const auto m = static_cast<Eigen::Index>(impl_->L->n);
+  if (v.size() != m + border_)
+    throw std::invalid_argument("TikhonovSolver::factorize_and_quadratic_form: vector has " +
+                                std::to_string(v.size()) + " entries, expected " +
+                                std::to_string(m + border_));
+  return factorize_impl(lambda, &v, nullptr, &q);
 }
 
 SolverStatus TikhonovSolver::factorize_impl(double lambda, const Eigen::VectorXd* rhs,
-                                            Eigen::VectorXd* x) {
+                                            Eigen::VectorXd* x, double* quad) {
   const auto t0 = std::chrono::steady_clock::now();
   const bool general_form = has_penalty();
+  impl_->selinv.reset();
   // B + βI with β = λ² (CHOLMOD's shift), or B + λ²P written into this solver's value array.
   double beta[2] = {general_form ? 0.0 : lambda * lambda, 0.0};
   if (general_form) {
@@ -483,8 +503,9 @@ SolverStatus TikhonovSolver::factorize_impl(double lambda, const Eigen::VectorXd
     const auto* a = static_cast<const double*>(normal_->band.x);
     const double* pen = normal_->pen_x.data();
     double* wx = impl_->work_x.data();
-    for (std::size_t q = 0; q < impl_->work_x.size(); ++q)
-      wx[q] = a[q] + l2 * pen[q];
+    std::copy_n(a, impl_->work_x.size(), wx);
+    for (const std::size_t q : normal_->pen_nz)
+      wx[q] += l2 * pen[q];
   }
   const int ok = cholmod_factorize_p(general_form ? &impl_->work : &normal_->band, beta, nullptr, 0,
                                      impl_->L, &impl_->cm);
@@ -549,9 +570,16 @@ SolverStatus TikhonovSolver::factorize_impl(double lambda, const Eigen::VectorXd
       impl_->factor_ok = impl_->S.info() == Eigen::Success;
       if (fuse && impl_->factor_ok) {
         const auto t1 = std::chrono::steady_clock::now();
-        Eigen::VectorXd z =
-            Eigen::Map<const Eigen::VectorXd>(static_cast<const double*>(impl_->Xk->x) + r * m, m);
-        finish_solve(*rhs, z, *x);
+        const Eigen::Map<const Eigen::VectorXd> zf(static_cast<const double*>(impl_->Xk->x) + r * m,
+                                                   m);
+        if (quad != nullptr) {
+          // vᵀM⁻¹v from the forward substitution alone (as inverse_quadratic_form): no back
+          // substitution, which is a third of a λ's passes over the factor.
+          *quad = quadratic_form_from_forward(*rhs, zf);
+        } else {
+          Eigen::VectorXd z = zf;
+          finish_solve(*rhs, z, *x);
+        }
         ++stats_.solves;
         stats_.solve_s += seconds_since(t1);
         solved = true;
@@ -560,8 +588,25 @@ SolverStatus TikhonovSolver::factorize_impl(double lambda, const Eigen::VectorXd
   }
   stats_.factorize_s += seconds_since(t0);
   if (!impl_->factor_ok) return SolverStatus::not_positive_definite;
-  if (rhs != nullptr && !solved) *x = solve_normal(*rhs);
+  if (rhs != nullptr && !solved) {
+    if (quad != nullptr)
+      *quad = inverse_quadratic_form(*rhs);
+    else
+      *x = solve_normal(*rhs);
+  }
   return SolverStatus::success;
+}
+
+// zᵀD_B⁻¹z + tᵀS⁻¹t with t = v₂ − V·WᵀD_B⁻¹z, z = L⁻¹v₁: vᵀM⁻¹v of the block LDLᵀ.
+double TikhonovSolver::quadratic_form_from_forward(const Eigen::VectorXd& v,
+                                                   const Eigen::Ref<const Eigen::VectorXd>& z) {
+  impl_->zd = z.cwiseQuotient(impl_->d);
+  double q = z.dot(impl_->zd);
+  if (border_ > 0) {
+    const Eigen::VectorXd t = v.tail(border_) - normal_->V * (impl_->W.transpose() * impl_->zd);
+    q += t.dot(impl_->S.solve(t));
+  }
+  return q;
 }
 
 // From z = L⁻¹r₁: y = S⁻¹(r₂ − V·WᵀD_B⁻¹z), x = (D_B Lᵀ)⁻¹(z − W·Vᵀy).
@@ -615,12 +660,7 @@ double TikhonovSolver::inverse_quadratic_form(const Eigen::VectorXd& v) {
   // vᵀM⁻¹v = zᵀD_B⁻¹z + tᵀS⁻¹t with z = L⁻¹v₁, t = v₂ − V·WᵀD_B⁻¹z: one triangular solve.
   Eigen::VectorXd z(m);
   impl_->band_solve(CHOLMOD_L, v.data(), m, z.data());
-  const Eigen::VectorXd zd = z.cwiseQuotient(impl_->d);
-  double q = z.dot(zd);
-  if (border_ > 0) {
-    const Eigen::VectorXd t = v.tail(border_) - normal_->V * (impl_->W.transpose() * zd);
-    q += t.dot(impl_->S.solve(t));
-  }
+  const double q = quadratic_form_from_forward(v, z);
   ++stats_.solves;
   stats_.solve_s += seconds_since(t0);
   return q;
@@ -686,14 +726,18 @@ double SelectedInverse::operator()(Eigen::Index i, Eigen::Index j) const {
 }
 
 // Takahashi's recurrence on the band's LDLᵀ (L unit lower): Z = D⁻¹L⁻¹ + (I − Lᵀ)Z gives, column
-// by column from the last, Z(i, j) = −Σ_k L(k, j)·Z(k, i) for i in the pattern of column j (k over
-// it too) and Z(j, j) = 1/D_j − Σ_k L(k, j)·Z(k, j): every Z(k, i) needed lies inside the pattern
-// of L, so the band of the inverse costs O(m·b²) and nothing outside it is formed.  The border
+// by column from the last, Z(i, j) = −Σ_k L(k, j)·Z(k, i) for j < i <= j + b (k over the pattern
+// of column j) and Z(j, j) = 1/D_j − Σ_k L(k, j)·Z(k, j): every Z(k, i) needed lies inside the
+// band, so the band of the inverse costs O(m·b²) and nothing outside it is formed.  The whole
+// band, not only the pattern of L: a pair of unknowns that a quantity couples can lie outside the
+// pattern where AᵀA has an exact zero near the start of the band (the four-sensor spacings
+// (2, 3, 10): QQᵀ has a zero entry, and u_S at the first positions needs it).  The border
 // adds the low-rank term of the block inverse: with Y = B⁻¹C and the Schur block S,
 // M⁻¹ = [B⁻¹ + Y S⁻¹Yᵀ, −Y S⁻¹; −S⁻¹Yᵀ, S⁻¹].
 SelectedInverse TikhonovSolver::selected_inverse() {
   if (!impl_->factor_ok)
     throw std::logic_error("TikhonovSolver::selected_inverse without a successful factorisation");
+  if (impl_->selinv) return *impl_->selinv;
   const auto t0 = std::chrono::steady_clock::now();
   const cholmod_factor* L = impl_->L;
   const auto m = static_cast<Eigen::Index>(L->n);
@@ -723,11 +767,12 @@ SelectedInverse TikhonovSolver::selected_inverse() {
       rows.push_back(Li[q]);
       vals.push_back(Lx[q]);
     }
-    for (std::size_t a = 0; a < rows.size(); ++a) {
+    const Eigen::Index last = std::min<Eigen::Index>(m - 1, j + bw);
+    for (Eigen::Index i = j + 1; i <= last; ++i) {
       double s = 0.0;
       for (std::size_t b = 0; b < rows.size(); ++b)
-        s += vals[b] * at(rows[b], rows[a]);
-      at(rows[a], j) = -s;
+        s += vals[b] * at(rows[b], i);
+      at(j, i) = -s;
     }
     double s = 0.0;
     for (std::size_t b = 0; b < rows.size(); ++b)
@@ -736,28 +781,52 @@ SelectedInverse TikhonovSolver::selected_inverse() {
   }
   if (border_ > 0) {
     // Y = B⁻¹C = (B⁻¹U)·Vᵀ, B⁻¹U = L⁻ᵀD⁻¹·(L⁻¹U) from the W kept by the factorisation.
+    // All r columns in one pass over the factor (into their own CHOLMOD buffers: Xk holds W).
     const Eigen::Index r = normal_->U.cols();
     Eigen::MatrixXd BinvU(m, r);
-    for (Eigen::Index c = 0; c < r; ++c) {
-      Eigen::VectorXd col = impl_->W.col(c);
-      impl_->band_solve(CHOLMOD_DLt, col.data(), m, BinvU.col(c).data());
+    if (r > 0) {
+      cholmod_dense wv = view(impl_->W.data(), m, r);
+      cholmod_dense *X = nullptr, *Y = nullptr, *E = nullptr;
+      const int ok =
+          cholmod_solve2(CHOLMOD_DLt, impl_->L, &wv, nullptr, &X, nullptr, &Y, &E, &impl_->cm);
+      if (ok) BinvU = Eigen::Map<const Eigen::MatrixXd>(static_cast<const double*>(X->x), m, r);
+      cholmod_free_dense(&X, &impl_->cm);
+      cholmod_free_dense(&Y, &impl_->cm);
+      cholmod_free_dense(&E, &impl_->cm);
+      if (!ok)
+        throw std::runtime_error("CHOLMOD solve failed (status " +
+                                 std::to_string(impl_->cm.status) + ")");
     }
-    const Eigen::MatrixXd Y = BinvU * normal_->V.transpose();
     z.border = impl_->S.solve(Eigen::MatrixXd::Identity(border_, border_));
-    const Eigen::MatrixXd G = Y * z.border;  // Y·S⁻¹
-    z.cross = -G;
-    for (Eigen::Index i = 0; i < m; ++i)
-      for (Eigen::Index j = i; j <= std::min<Eigen::Index>(m - 1, i + bw); ++j) {
-        double& v = at(i, j);
-        if (!std::isnan(v)) v += G.row(i).dot(Y.row(j));
+    z.cross = -(BinvU * (normal_->V.transpose() * z.border));  // −Y·S⁻¹, Y = B⁻¹U·Vᵀ
+    // The band of Y·S⁻¹·Yᵀ = B⁻¹U·H·(B⁻¹U)ᵀ, H = VᵀS⁻¹V (r × r): rows of B⁻¹U and of B⁻¹U·H
+    // row-major, r multiply-adds per entry (a dynamic-size row product per entry cost more than
+    // the whole recurrence at N = 10⁶).
+    using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+    const RowMajor Bu = BinvU;
+    const RowMajor Ch = Bu * (normal_->V.transpose() * z.border * normal_->V);
+    const double* bu = Bu.data();
+    const double* ch = Ch.data();
+    for (Eigen::Index i = 0; i < m; ++i) {
+      const double* ci = ch + i * r;
+      double* zi = z.band.data() + static_cast<std::size_t>(i) * w;
+      const Eigen::Index last = std::min<Eigen::Index>(m - 1, i + bw);
+      for (Eigen::Index j = i; j <= last; ++j) {
+        const double* bj = bu + j * r;
+        double acc = 0.0;
+        for (Eigen::Index a = 0; a < r; ++a)
+          acc += ci[a] * bj[a];
+        zi[j - i] += acc;
       }
+    }
   } else {
     z.cross.resize(m, 0);
     z.border.resize(0, 0);
   }
   ++stats_.selected_inversions;
   stats_.selected_inverse_s += seconds_since(t0);
-  return z;
+  impl_->selinv = std::move(z);
+  return *impl_->selinv;
 }
 
 double TikhonovSolver::trace_inverse_penalty(const SelectedInverse& z) const {

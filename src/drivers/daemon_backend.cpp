@@ -6,6 +6,8 @@
 #include <thread>
 
 #include "errsep/acq/sampler.hpp"
+#include "errsep/acq/scan_runner.hpp"
+#include "errsep/io/machine_axes_metadata.hpp"
 
 namespace errsep::drivers {
 namespace {
@@ -118,9 +120,12 @@ ScanEnd DeviceScanBackend::run_scan(acq::ScanContext& ctx) {
   for (std::size_t n = 0; n < P; ++n)
     layout.x_mm[n] = static_cast<double>(n) * g.dx_mm;
   layout.metadata = {{"machine_config", cfg_.source.string()},
-                     {"slide_start_mm", std::to_string(sc.slide_start_mm)},
                      {"averages", std::to_string(sc.averages)},
                      {"single_sensor", sc.single_sensor ? "true" : "false"}};
+  const auto ranges = acq::sensor_range_metadata(cfg_, acq::ScanKind::four_sensor);
+  layout.metadata.insert(layout.metadata.end(), ranges.begin(), ranges.end());
+  for (auto& kv : io::machine_axes_metadata(cfg_.axes))  // where the scan runs, machine coords
+    layout.metadata.push_back(std::move(kv));
   ctx.begin(layout);
 
   // Channels: scan sensors grouped by bus so that each bus's sampler gets contiguous channels.
@@ -251,7 +256,8 @@ ScanEnd DeviceScanBackend::run_scan(acq::ScanContext& ctx) {
     }
     for (std::size_t n = 0; n < P; ++n) {
       if (ctx.abort_requested()) return aborted();
-      if (move(slide, sc.slide_start_mm + layout.x_mm[n], &why) != IoStatus::ok)
+      if (move(slide, sc.slide_start_mm + cfg_.axes.scan_direction * layout.x_mm[n], &why) !=
+          IoStatus::ok)
         return fail(ScanOutcome::device_fault, why);
       if (ctx.abort_requested()) return aborted();
       if (!measure(n, i, &why)) return fail(ScanOutcome::device_fault, why);

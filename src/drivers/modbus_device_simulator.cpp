@@ -13,6 +13,7 @@
 #include <cstring>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <random>
 #include <stdexcept>
 #include <vector>
@@ -20,6 +21,7 @@
 #include "errsep/acq/register_map.hpp"
 #include "errsep/core/four_sensor_model.hpp"
 #include "errsep/core/four_sensor_simulation.hpp"
+#include "errsep/io/cnc/compensation_format.hpp"
 
 namespace errsep::drivers {
 namespace {
@@ -78,6 +80,7 @@ int space_of(const io::RegisterSpec& s) {
 struct ModbusDeviceSimulator::Impl {
   io::MachineConfig cfg;
   core::SlidewayTruth truth;
+  std::optional<io::ControllerTable> compensation;  ///< the controller's table, if loaded
   std::array<double, 4> offsets_mm{};
   std::vector<SimStage> stages;
   std::vector<SimSensor> sensors;
@@ -123,6 +126,18 @@ struct ModbusDeviceSimulator::Impl {
     }
     truth.e_um = sim.e_um;
     faults = sim.faults;
+    if (!sim.compensation_table.empty()) {
+      compensation = io::read_compensation_file(sim.compensation_table);
+      const auto& ct = *compensation;
+      const auto& a = cfg.axes;
+      if ((ct.input_axis && ct.input_axis != a.input_axis) ||
+          (ct.output_axis && ct.output_axis != a.output_axis))
+        throw std::runtime_error(
+            "simulator: " + sim.compensation_table.string() + " compensates " +
+            std::string(1, ct.output_axis ? ct.output_axis : '?') + " as a function of " +
+            std::string(1, ct.input_axis ? ct.input_axis : '?') + ", but the scan of " +
+            cfg.source.string() + " measures " + a.symbol() + " ([axes] input/output)");
+    }
 
     stages.reserve(cfg.stages.size());
     for (const auto& s : cfg.stages) {
@@ -245,8 +260,16 @@ struct ModbusDeviceSimulator::Impl {
     return acq::decode(r, tab + r.address);
   }
 
+  // A loaded compensation table moves the carriage by c(p) along the output axis; the reading
+  // sees reading_sign * c (core/machine_axes.hpp), like a change of S.
+  double compensation_um(double p) const {
+    return compensation ? cfg.axes.reading_sign * compensation->apply_um(p) : 0.0;
+  }
+
   double sensor_value(const SimSensor& s, double t) {
-    const double x = slide ? slide->position(t) - cfg.scan.slide_start_mm : 0.0;
+    // The truth is laid over the scan (x from its start); the machine position is the slide's.
+    const double p = slide ? slide->position(t) : cfg.scan.slide_start_mm;
+    const double x = (p - cfg.scan.slide_start_mm) * cfg.axes.scan_direction;
     double v = 0.0;
     switch (s.role) {
       case SensorRole::single: {
@@ -256,12 +279,13 @@ struct ModbusDeviceSimulator::Impl {
         std::size_t nearest = 0;
         for (std::size_t i = 1; i < 4; ++i)
           if (std::abs(o - offsets_mm[i]) < std::abs(o - offsets_mm[nearest])) nearest = i;
-        v = core::four_sensor_reading_um(truth, x, o) + truth.e_um[nearest];
+        v = core::four_sensor_reading_um(truth, x, o) + truth.e_um[nearest] + compensation_um(p);
         break;
       }
       case SensorRole::fixed: {
         const auto i = static_cast<std::size_t>(s.config_index);
-        v = core::four_sensor_reading_um(truth, x, offsets_mm[i]) + truth.e_um[i];
+        v = core::four_sensor_reading_um(truth, x, offsets_mm[i]) + truth.e_um[i] +
+            compensation_um(p);
         break;
       }
       case SensorRole::workpiece:  // Haramiishi 2024 Eq. (1): S1 = w(x) + m(x)

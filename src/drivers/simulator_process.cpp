@@ -3,7 +3,7 @@
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
-#include <spawn.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -56,32 +56,59 @@ SimulatorProcess::SimulatorProcess(const std::filesystem::path& exe,
     argv.push_back(a.data());
   argv.push_back(nullptr);
 
-  posix_spawn_file_actions_t fa;
-  posix_spawnattr_t attr;
-  ::posix_spawn_file_actions_init(&fa);
-  ::posix_spawn_file_actions_adddup2(&fa, fds[1], STDOUT_FILENO);
-  ::posix_spawnattr_init(&attr);
-  // Own process group: the terminal's Ctrl-C goes to the scan, which stops the stages first.
-  ::posix_spawnattr_setflags(
-      &attr, POSIX_SPAWN_SETPGROUP | POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
-  ::posix_spawnattr_setpgroup(&attr, 0);
-  sigset_t none, deflt;
+  // Prepared before fork(): the child may only make async-signal-safe calls until exec.
+  const pid_t parent = ::getpid();
+  struct sigaction dfl {};
+  dfl.sa_handler = SIG_DFL;
+  sigemptyset(&dfl.sa_mask);
+  sigset_t none;
   sigemptyset(&none);
-  sigemptyset(&deflt);
-  sigaddset(&deflt, SIGINT);
-  sigaddset(&deflt, SIGTERM);
-  sigaddset(&deflt, SIGPIPE);
-  ::posix_spawnattr_setsigmask(&attr, &none);
-  ::posix_spawnattr_setsigdefault(&attr, &deflt);
-  const int err = ::posix_spawn(&pid_, exe.c_str(), &fa, &attr, argv.data(), environ);
-  ::posix_spawn_file_actions_destroy(&fa);
-  ::posix_spawnattr_destroy(&attr);
-  ::close(fds[1]);
-  if (err != 0) {
+  int err_pipe[2];  // the child's errno when exec fails; closed by a successful exec
+  if (::pipe2(err_pipe, O_CLOEXEC) != 0) {
+    const int e = errno;
     ::close(fds[0]);
+    ::close(fds[1]);
+    throw std::runtime_error(std::string("device simulator: pipe: ") + std::strerror(e));
+  }
+  pid_ = ::fork();
+  if (pid_ == 0) {
+    // Own process group: the terminal's Ctrl-C goes to the scan, which stops the stages first.
+    ::setpgid(0, 0);
+    ::sigaction(SIGINT, &dfl, nullptr);
+    ::sigaction(SIGTERM, &dfl, nullptr);
+    ::sigaction(SIGPIPE, &dfl, nullptr);
+    ::sigprocmask(SIG_SETMASK, &none, nullptr);
+    // The simulator ends when the program that started it dies, however it dies (SIGKILL, OOM
+    // killer, a crash): the kernel sends SIGKILL when the parent thread ends.  A parent that died
+    // before this line was not seen by it: the child has been re-parented already, and gives up.
+    int e = 0;
+    if (::prctl(PR_SET_PDEATHSIG, SIGKILL) != 0) e = errno;
+    if (e == 0 && ::getppid() != parent) e = ESRCH;
+    if (e == 0 && ::dup2(fds[1], STDOUT_FILENO) < 0) e = errno;
+    if (e == 0) {
+      ::execve(exe.c_str(), argv.data(), environ);
+      e = errno;
+    }
+    [[maybe_unused]] const ssize_t n = ::write(err_pipe[1], &e, sizeof e);
+    ::_exit(127);
+  }
+  const int fork_err = pid_ < 0 ? errno : 0;
+  ::close(err_pipe[1]);
+  ::close(fds[1]);
+  int child_err = fork_err;
+  if (pid_ > 0) {
+    ssize_t n;
+    while ((n = ::read(err_pipe[0], &child_err, sizeof child_err)) < 0 && errno == EINTR) {
+    }
+    if (n != static_cast<ssize_t>(sizeof child_err)) child_err = 0;  // exec succeeded
+  }
+  ::close(err_pipe[0]);
+  if (child_err != 0) {
+    ::close(fds[0]);
+    if (pid_ > 0) ::waitpid(pid_, nullptr, 0);
     pid_ = -1;
     throw std::runtime_error("device simulator '" + exe.string() +
-                             "': cannot start: " + std::strerror(err));
+                             "': cannot start: " + std::strerror(child_err));
   }
   out_fd_ = fds[0];
 

@@ -26,7 +26,12 @@ std::string describe(int err) {
 
 void write_file_atomic(const std::filesystem::path& path, std::string_view content) {
   const auto dir = path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
-  std::string tmpl = (dir / ("." + path.filename().string() + ".tmp.XXXXXX")).string();
+  // ".<name>.tmp.<pid>.XXXXXX": the pid tells a later run whether the writer is gone, so that
+  // what a killed writer left can be removed without touching a live writer's file
+  // (remove_stale_temporaries, io/staged_directory.hpp).
+  std::string tmpl =
+      (dir / ("." + path.filename().string() + ".tmp." + std::to_string(::getpid()) + ".XXXXXX"))
+          .string();
   int fd = ::mkstemp(tmpl.data());
   if (fd < 0) fail(path, "create temporary file", errno);
   const std::filesystem::path tmp = tmpl;

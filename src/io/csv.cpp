@@ -66,6 +66,12 @@ std::vector<double> CsvTable::column(const std::string& name,
   return v;
 }
 
+std::optional<std::string> CsvTable::meta(const std::string& key) const {
+  for (const auto& [k, v] : metadata)
+    if (k == key) return v;
+  return std::nullopt;
+}
+
 std::optional<double> CsvTable::meta_number(const std::string& key,
                                             const std::filesystem::path& file) const {
   const auto v = meta(key);
@@ -75,12 +81,6 @@ std::optional<double> CsvTable::meta_number(const std::string& key,
   if (ec != std::errc() || p != v->data() + v->size() || !std::isfinite(out))
     throw CsvError(file, 0, "metadata '" + key + ": " + *v + "': not a number");
   return out;
-}
-
-std::optional<std::string> CsvTable::meta(const std::string& key) const {
-  for (const auto& [k, v] : metadata)
-    if (k == key) return v;
-  return std::nullopt;
 }
 
 void CsvTable::set_meta(const std::string& key, const std::string& value) {
@@ -102,9 +102,10 @@ void CsvTable::add_column(const std::string& name, const std::vector<double>& va
     rows[i].push_back(values[i]);
 }
 
-CsvTable read_csv(const std::filesystem::path& file, const CsvReadOptions& opts) {
-  std::ifstream in(file);
-  if (!in) throw CsvError(file, 0, "cannot open file");
+namespace {
+
+CsvTable read_stream(std::istream& in, const std::filesystem::path& file,
+                     const CsvReadOptions& opts) {
   CsvTable t;
   std::string line;
   std::size_t lineno = 0;
@@ -166,6 +167,20 @@ CsvTable read_csv(const std::filesystem::path& file, const CsvReadOptions& opts)
                    "only " + std::to_string(t.rows.size()) + " data rows, at least " +
                        std::to_string(opts.min_rows) + " needed");
   return t;
+}
+
+}  // namespace
+
+CsvTable read_csv(const std::filesystem::path& file, const CsvReadOptions& opts) {
+  std::ifstream in(file);
+  if (!in) throw CsvError(file, 0, "cannot open file");
+  return read_stream(in, file, opts);
+}
+
+CsvTable parse_csv(const std::string& text, const std::filesystem::path& name,
+                   const CsvReadOptions& opts) {
+  std::istringstream in(text);
+  return read_stream(in, name, opts);
 }
 
 std::string format_csv(const CsvTable& table, int significant_digits) {

@@ -1,11 +1,11 @@
 #include "errsep/io/displacement_csv.hpp"
 
 #include <algorithm>
-#include <charconv>
 #include <cmath>
 #include <map>
 #include <sstream>
 
+#include "errsep/io/plausibility.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 
 namespace errsep::io {
@@ -72,12 +72,40 @@ std::vector<double> grid_axis(const CsvTable& t, const std::vector<double>& v,
                          ") are not evenly spaced");
     }
   }
-  const auto count = static_cast<std::size_t>(std::lround((u.back() - u[0]) / d)) + 1;
+  // Every lattice position needs a row: a span that needs more positions than the file has rows
+  // is a ragged grid (checked here, before the lattice is allocated: 0, 5, 1e308 would need
+  // 2e307 positions).
+  const double positions = std::round((u.back() - u[0]) / d) + 1;
+  if (!(positions <= static_cast<double>(v.size()))) {
+    double missing = u[0] + d;
+    for (std::size_t k = 0; k + 1 < u.size(); ++k)
+      if (u[k + 1] - u[k] > 1.5 * d) {
+        missing = u[k] + d;
+        break;
+      }
+    throw CsvError(file, 0,
+                   std::string("ragged grid: ") + col + " from " + num(u[0]) + " to " +
+                       num(u.back()) + " in steps of " + num(d) + " needs " + num(positions) +
+                       " values, the file has " + std::to_string(v.size()) + " rows; missing (" +
+                       col + " = " + num(missing) + ")");
+  }
+  const auto count = static_cast<std::size_t>(positions);
   std::vector<double> axis(count);
   for (std::size_t k = 0; k < count; ++k)
     axis[k] = u[0] + static_cast<double>(k) * d;
   *spacing = d;
   return axis;
+}
+
+/// Every reading column of the table (a name "<sensor>_..._um" other than x_mm, y_mm) within its
+/// sensor's range (the file's metadata, else the default bound): before anything is computed.
+void check_reading_columns(const CsvTable& t, const std::filesystem::path& file) {
+  for (const auto& c : t.columns) {
+    if (c == "x_mm" || c == "y_mm" || c.size() < 4 || c.compare(c.size() - 3, 3, "_um") != 0)
+      continue;
+    const std::string sensor = c.substr(0, c.find('_'));
+    check_readings(t, c, reading_range(t, sensor, file), file, false);
+  }
 }
 
 std::size_t index_of(const std::vector<double>& axis, double v) {
@@ -105,18 +133,13 @@ OneAxisInput read_one_axis_csv(const std::filesystem::path& file) {
     in.d_mm = raw.d_mm;
   } else {
     const CsvTable strict = read_csv(file, CsvReadOptions{false, 2});  // nan -> file:line
+    check_reading_columns(strict, file);
     x = strict.column("x_mm", file);
     in.s1_1_um = to_vec(strict.column("s1_scan1_um", file));
     in.s2_1_um = to_vec(strict.column("s2_scan1_um", file));
     in.s2_2_um = to_vec(strict.column("s2_scan2_um", file));
     if (strict.find_column("s1_scan2_um")) in.s1_2_um = to_vec(strict.column("s1_scan2_um", file));
-    if (const auto d = strict.meta("d_mm")) {
-      double v = 0;
-      const auto [p, ec] = std::from_chars(d->data(), d->data() + d->size(), v);
-      if (ec != std::errc() || p != d->data() + d->size() || !std::isfinite(v))
-        throw CsvError(file, 0, "metadata 'd_mm: " + *d + "': not a number");
-      in.d_mm = v;
-    }
+    in.d_mm = strict.meta_number("d_mm", file);
   }
   in.dx_mm = uniform_interval(t, x, file, "x_mm");
   in.x_mm = to_vec(x);
@@ -125,6 +148,7 @@ OneAxisInput read_one_axis_csv(const std::filesystem::path& file) {
 
 ThreePointInput read_three_point_csv(const std::filesystem::path& file) {
   const CsvTable t = read_csv(file, CsvReadOptions{false, 2});
+  check_reading_columns(t, file);
   ThreePointInput in;
   const auto x = t.column("x_mm", file);
   const char* cols[3] = {"m1_um", "m2_um", "m3_um"};
@@ -138,6 +162,7 @@ ThreePointInput read_three_point_csv(const std::filesystem::path& file) {
 
 TwoAxisInput read_two_axis_csv(const std::filesystem::path& file) {
   const CsvTable t = read_csv(file, CsvReadOptions{false, 4});
+  check_reading_columns(t, file);
   const auto x = t.column("x_mm", file), y = t.column("y_mm", file);
   const char* names[9] = {"s0_scan1_um", "s1_scan1_um", "s1_scan2_um", "s2_scan1_um", "s2_scan2_um",
                           "s3_scan1_um", "s3_scan2_um", "s4_scan1_um", "s4_scan2_um"};
@@ -169,6 +194,11 @@ TwoAxisInput read_two_axis_csv(const std::filesystem::path& file) {
   const auto xs = grid_axis(t, x, file, "x_mm", &in.dx_mm);
   const auto ys = grid_axis(t, y, file, "y_mm", &in.dy_mm);
   const auto nx = static_cast<Eigen::Index>(xs.size()), ny = static_cast<Eigen::Index>(ys.size());
+  if (xs.size() * ys.size() > 4 * t.rows.size())  // before allocating nx x ny matrices
+    throw CsvError(file, 0,
+                   "ragged grid: " + std::to_string(nx) + " x values times " + std::to_string(ny) +
+                       " y values need " + std::to_string(nx * ny) + " points, the file has " +
+                       std::to_string(t.rows.size()));
   core::TwoAxisScan& s = in.scan;
   s.x_mm = to_vec(xs);
   s.y_mm = to_vec(ys);

@@ -6,6 +6,7 @@
 #include "errsep/core/four_sensor_model.hpp"
 #include "errsep/io/atomic_file.hpp"
 #include "errsep/io/csv.hpp"
+#include "errsep/io/machine_axes_metadata.hpp"
 #include "errsep/version.hpp"
 
 namespace errsep::io {
@@ -51,6 +52,16 @@ void common_meta(CsvTable& t, const core::FourSensorResult& r, const ResultWrite
 }
 
 }  // namespace
+
+void carry_machine_axes(const std::vector<std::pair<std::string, std::string>>& raw_metadata,
+                        ResultWriteInfo& info) {
+  const auto axes = machine_axes_from_metadata(raw_metadata);
+  if (!axes) return;
+  info.axis = std::string(1, axes->input_axis);
+  info.straightness_direction = std::string(1, axes->output_axis);
+  for (auto& kv : machine_axes_metadata(*axes))
+    info.extra_metadata.push_back(std::move(kv));
+}
 
 void write_four_sensor_result(const std::filesystem::path& dir, const core::FourSensorResult& r,
                               const ResultWriteInfo& info) {
@@ -106,9 +117,17 @@ void write_four_sensor_result(const std::filesystem::path& dir, const core::Four
     sn.push_back(p.solution_norm);
     k.push_back(p.curvature);
   }
-  lc.columns = {"lambda", "residual_norm", "solution_norm", "curvature"};
-  for (std::size_t i = 0; i < l.size(); ++i)
-    lc.rows.push_back({l[i], rn[i], sn[i], k[i]});
+  if (!r.lambda_grid.empty() && r.lambda_grid.size() == r.lambda_criterion.size()) {
+    // Rules reml and gcv: the search's grid and the criterion it minimised (no L-curve drawn).
+    lc.set_meta("curve", std::string("the lambda search of rule ") + core::to_string(r.rule));
+    lc.columns = {"lambda", std::string(core::to_string(r.rule)) + "_criterion"};
+    for (std::size_t i = 0; i < r.lambda_grid.size(); ++i)
+      lc.rows.push_back({r.lambda_grid[i], r.lambda_criterion[i]});
+  } else {
+    lc.columns = {"lambda", "residual_norm", "solution_norm", "curvature"};
+    for (std::size_t i = 0; i < l.size(); ++i)
+      lc.rows.push_back({l[i], rn[i], sn[i], k[i]});
+  }
 
   CsvTable res;
   common_meta(res, r, info);

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <initializer_list>
 #include <limits>
@@ -21,7 +22,7 @@ ConfigError::ConfigError(const std::string& file, int line, const std::string& k
 
 double ProfileSpec::eval(double x_mm) const noexcept {
   constexpr double kTwoPi = 6.283185307179586;
-  double v = offset + slope_per_mm * x_mm;
+  double v = offset + slope_per_mm * x_mm + quadratic_per_mm2 * x_mm * x_mm;
   for (const Harmonic& h : harmonics)
     v += h.amplitude * std::sin(kTwoPi * x_mm / h.period_mm + h.phase_rad);
   return v;
@@ -263,9 +264,10 @@ ProfileSpec read_profile(const Reader& parent, const std::string& key) {
   const toml::table* t = parent.sub(key);
   if (!t) return p;
   Reader r(parent.file(), *t, parent.full(key));
-  r.only({"offset", "slope_per_mm", "harmonics"});
+  r.only({"offset", "slope_per_mm", "quadratic_per_mm2", "harmonics"});
   r.get("offset", p.offset);
   r.get("slope_per_mm", p.slope_per_mm);
+  r.get("quadratic_per_mm2", p.quadratic_per_mm2);
   if (const toml::node* hn = t->get("harmonics")) {
     const toml::array* arr = hn->as_array();
     if (!arr) r.fail("harmonics", "expected an array of { amplitude, period_mm, phase_rad }");
@@ -650,11 +652,166 @@ void read_refine(const Reader& root, MachineConfig& c) {
   r.check("alpha", c.refine.alpha > 0.0 && c.refine.alpha < 1.0, "must be in (0, 1)");
 }
 
+void read_mqtt(const Reader& root, MachineConfig& c) {
+  const toml::table* t = root.sub("mqtt");
+  if (!t) return;
+  Reader r(root.file(), *t, "mqtt");
+  r.only({"host", "port", "machine", "client_id", "topic_prefix", "qos", "keepalive_s", "username",
+          "password_file", "tls_ca_file", "tls_cert_file", "tls_key_file", "queue_dir", "commands",
+          "straightness_tolerance_um"});
+  MqttConfig m;
+  r.get("host", m.host);
+  r.check("host", !m.host.empty(), "must name the broker");
+  r.get_int("port", m.port, 1, 65535);
+  r.get("machine", m.machine, true);
+  // A topic level: no wildcards, no separator, nothing a subscription could misread.
+  auto level_ok = [](const std::string& v) {
+    return !v.empty() && v.find_first_of("/+#") == std::string::npos &&
+           std::all_of(v.begin(), v.end(), [](char ch) { return ch > ' ' && ch != 0x7f; });
+  };
+  r.check("machine", level_ok(m.machine),
+          "must be one topic level: no '/', '+', '#', spaces or control characters");
+  r.get("client_id", m.client_id);
+  r.get("topic_prefix", m.topic_prefix);
+  r.check("topic_prefix",
+          !m.topic_prefix.empty() && m.topic_prefix.find_first_of("+#") == std::string::npos &&
+              m.topic_prefix.front() != '/' && m.topic_prefix.back() != '/',
+          "must be a topic without wildcards and without a leading or trailing '/'");
+  r.get_int("qos", m.qos, 1, 2);
+  r.get_int("keepalive_s", m.keepalive_s, 5, 3600);
+  r.get("username", m.username);
+  std::string s;
+  r.get("password_file", s);
+  m.password_file = s;
+  r.check("password_file", m.password_file.empty() || !m.username.empty(),
+          "a password needs a username");
+  s.clear();
+  r.get("tls_ca_file", s);
+  m.tls_ca_file = s;
+  s.clear();
+  r.get("tls_cert_file", s);
+  m.tls_cert_file = s;
+  s.clear();
+  r.get("tls_key_file", s);
+  m.tls_key_file = s;
+  r.check("tls_cert_file", m.tls_cert_file.empty() == m.tls_key_file.empty(),
+          "tls_cert_file and tls_key_file go together");
+  r.check("tls_cert_file", m.tls_cert_file.empty() || !m.tls_ca_file.empty(),
+          "a client certificate needs tls_ca_file");
+  s.clear();
+  r.get("queue_dir", s);
+  m.queue_dir = s;
+  r.get("commands", m.commands);
+  r.get("straightness_tolerance_um", m.straightness_tolerance_um);
+  r.check("straightness_tolerance_um", m.straightness_tolerance_um >= 0.0,
+          "must be >= 0 (0 = no alarm)");
+  c.mqtt = m;
+}
+
+void read_axes(const Reader& root, MachineConfig& c) {
+  c.axes.slide_start_mm = c.scan.slide_start_mm;
+  const toml::table* t = root.sub("axes");
+  if (!t) return;
+  Reader r(root.file(), *t, "axes");
+  r.only({"input", "output", "scan_direction", "reading_sign"});
+  for (const auto& [key, axis] : {std::pair<const char*, char*>{"input", &c.axes.input_axis},
+                                  {"output", &c.axes.output_axis}}) {
+    std::string v(1, *axis);
+    r.get(key, v);
+    const char a = core::parse_linear_axis(v);
+    r.check(key, a != 0, "'" + v + "' is not X, Y or Z");
+    *axis = a;
+  }
+  r.check("output", c.axes.output_axis != c.axes.input_axis,
+          "equals input: the sensors read across the moving axis");
+  r.get_int("scan_direction", c.axes.scan_direction, -1, 1);
+  r.check("scan_direction", c.axes.scan_direction != 0,
+          "must be 1 (the scan runs towards + of the input axis) or -1");
+  r.get_int("reading_sign", c.axes.reading_sign, -1, 1);
+  r.check("reading_sign", c.axes.reading_sign != 0,
+          "must be 1 (a reading grows when the carriage moves towards + output) or -1");
+}
+
+void read_compensation(const Reader& root, MachineConfig& c) {
+  const toml::table* t = root.sub("compensation");
+  if (!t) return;
+  Reader r(root.file(), *t, "compensation");
+  auto& cc = c.compensation;
+  for (const auto& [k, v] : *t) {
+    const std::string key(k.str());
+    if (key == "formats") {
+      cc.tables.formats.clear();
+      for (const auto& name : read_string_list(r, "formats")) {
+        const auto f = parse_compensation_format(name);
+        r.check("formats", f.has_value(),
+                "'" + name + "' is not one of " + compensation_format_names());
+        cc.tables.formats.push_back(*f);
+      }
+      r.check("formats", !cc.tables.formats.empty(), "must name at least one format");
+    } else if (key == "remove_line") {
+      std::string line;
+      r.get("remove_line", line);
+      if (line == "none") {
+        cc.profile.remove_line.reset();
+      } else {
+        const auto l = core::parse_reference_line(line);
+        r.check("remove_line", l.has_value(),
+                "'" + line + "' is not one of end_points, least_squares, minimum_zone, none");
+        cc.profile.remove_line = *l;
+      }
+    } else if (const auto f = parse_compensation_format(key)) {
+      // A format's own parameters: the parser passes them on as text and lets the format judge.
+      const toml::table* ft = r.sub(key);
+      CncParameters params;
+      for (const auto& [pk, pv] : *ft) {
+        std::string text;
+        if (pv.is_string()) {
+          text = pv.as_string()->get();
+        } else if (pv.is_integer()) {
+          text = std::to_string(pv.as_integer()->get());
+        } else if (pv.is_floating_point()) {
+          char buf[48];
+          std::snprintf(buf, sizeof buf, "%.17g", pv.as_floating_point()->get());
+          text = buf;
+        } else {
+          throw ConfigError(root.file(), line_of(pv),
+                            "compensation." + key + "." + std::string(pk.str()),
+                            "expected a string or a number");
+        }
+        params[std::string(pk.str())] = text;
+      }
+      try {
+        compensation_writer(*f).validate(params);
+      } catch (const std::invalid_argument& e) {
+        // "<format>.<key>: problem": point at the key's line.
+        const std::string msg = e.what();
+        const auto dot = msg.find('.'), colon = msg.find(": ");
+        const std::string pkey =
+            dot != std::string::npos && colon != std::string::npos && colon > dot
+                ? msg.substr(dot + 1, colon - dot - 1)
+                : std::string();
+        const toml::node* n = pkey.empty() ? nullptr : ft->get(pkey);
+        throw ConfigError(
+            root.file(), n ? line_of(*n) : line_of(*ft),
+            "compensation." + (colon == std::string::npos ? key : msg.substr(0, colon)),
+            msg.substr(colon == std::string::npos ? 0 : colon + 2));
+      }
+      cc.tables.parameters[*f] = std::move(params);
+    } else {
+      throw ConfigError(root.file(), line_of(v), "compensation." + key,
+                        "unknown key (allowed here: formats, remove_line, and a table per "
+                        "format: " +
+                            compensation_format_names() + ")");
+    }
+  }
+}
+
 MachineConfig build(const toml::table& root, const std::string& name) {
   MachineConfig c;
   c.source = name;
   Reader r(name, root, "");
-  r.only({"bus", "sensor", "stage", "gpio", "sampler", "scan", "refine", "simulator"});
+  r.only({"bus", "sensor", "stage", "gpio", "sampler", "scan", "axes", "compensation", "refine",
+          "simulator", "mqtt"});
   read_buses(name, root, c);
   if (c.buses.empty()) throw ConfigError(name, 0, "bus", "at least one [[bus]] is required");
   read_sensors(name, root, c);
@@ -662,8 +819,11 @@ MachineConfig build(const toml::table& root, const std::string& name) {
   read_gpio(r, c);
   read_sampler(r, c);
   read_scan(r, c);
+  read_axes(r, c);
+  read_compensation(r, c);
   read_refine(r, c);
   read_simulator(r, c);
+  read_mqtt(r, c);
   // Port 0 means "the embedded simulator's ephemeral port"; without it nothing fills it in.
   for (std::size_t i = 0; i < c.buses.size(); ++i) {
     const auto& b = c.buses[i];

@@ -65,15 +65,21 @@ std::string read_text(const std::filesystem::path& p) {
   return ss.str();
 }
 
-// Runs `gnuplot script` with stdout/stderr to `log`; returns the exit status (-1: not started).
+// Runs `gnuplot script` in the script's folder (the script names its files relative to it, so
+// that it runs from where it is written, whatever the folder is called later: a report is drawn
+// in a staging folder and moved into place) with stdout/stderr to `log`; returns the exit status
+// (-1: not started).
 int run_gnuplot(const std::string& program, const std::filesystem::path& script,
                 const std::filesystem::path& log, std::string* err) {
+  const std::filesystem::path dir =
+      script.has_parent_path() ? script.parent_path() : std::filesystem::path(".");
   posix_spawn_file_actions_t fa;
   posix_spawn_file_actions_init(&fa);
   posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   posix_spawn_file_actions_adddup2(&fa, 1, 2);
   posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
-  std::string prog = program, scr = script.string();
+  posix_spawn_file_actions_addchdir_np(&fa, dir.c_str());  // after the opens: log stays as given
+  std::string prog = program, scr = script.filename().string();
   char* argv[] = {prog.data(), scr.data(), nullptr};
   pid_t pid = 0;
   const int rc = posix_spawnp(&pid, prog.c_str(), &fa, nullptr, argv, environ);
@@ -101,12 +107,12 @@ std::string terminals(const PlotOptions& o, const PlotFiles& f, const std::strin
   if (o.png) {
     s << "set terminal pngcairo size " << o.width_px << "," << o.height_px
       << " enhanced font 'sans,10'\n";
-    s << "set output " << q(f.png.string()) << "\n" << body << "unset output\n";
+    s << "set output " << q(f.png.filename().string()) << "\n" << body << "unset output\n";
   }
   if (o.svg) {
     s << "set terminal svg size " << o.width_px << "," << o.height_px
       << " enhanced font 'sans,10' background '#ffffff'\n";
-    s << "set output " << q(f.svg.string()) << "\n" << body << "unset output\n";
+    s << "set output " << q(f.svg.filename().string()) << "\n" << body << "unset output\n";
   }
   return s.str();
 }
@@ -124,7 +130,7 @@ PlotFiles run(const std::string& name, const std::filesystem::path& dir, const P
   write_file_atomic(f.data, data);
   std::string script = "# errsep figure '" + name + "': run `gnuplot " + name + ".gp`\n";
   script += "set encoding utf8\n";
-  script += "datafile = " + q(f.data.string()) + "\n";
+  script += "datafile = " + q(f.data.filename().string()) + "\n";
   script += terminals(o, f, body);
   write_file_atomic(f.script, script);
   const auto log = dir / (name + ".log");

@@ -5,6 +5,9 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "errsep/io/plausibility.hpp"
+#include "errsep/io/staged_directory.hpp"
+
 namespace errsep::io {
 namespace {
 
@@ -47,16 +50,6 @@ void require_complete(bool complete, const CsvTable& t, const std::filesystem::p
   }
 }
 
-void check_finite(const CsvTable& t, const std::filesystem::path& file) {
-  for (std::size_t r = 0; r < t.rows.size(); ++r)
-    for (std::size_t c = 0; c < t.columns.size(); ++c)
-      if (!std::isfinite(t.rows[r][c]))
-        throw CsvError(file, t.row_line.empty() ? 0 : t.row_line[r],
-                       "column '" + t.columns[c] +
-                           "': value not measured (nan) in a scan marked "
-                           "complete");
-}
-
 std::vector<std::pair<std::string, std::string>> other_meta(
     const CsvTable& t, std::initializer_list<const char*> known) {
   std::vector<std::pair<std::string, std::string>> out;
@@ -75,16 +68,6 @@ int parse_int_meta(const CsvTable& t, const std::string& key, const std::filesys
   const auto [p, ec] = std::from_chars(v.data(), v.data() + v.size(), out);
   if (ec != std::errc() || p != v.data() + v.size())
     throw CsvError(file, 0, "metadata '" + key + ": " + v + "': not an integer");
-  return out;
-}
-
-double parse_double_meta(const CsvTable& t, const std::string& key,
-                         const std::filesystem::path& file) {
-  const std::string v = *t.meta(key);
-  double out = 0;
-  const auto [p, ec] = std::from_chars(v.data(), v.data() + v.size(), out);
-  if (ec != std::errc() || p != v.data() + v.size() || !std::isfinite(out))
-    throw CsvError(file, 0, "metadata '" + key + ": " + v + "': not a number");
   return out;
 }
 
@@ -166,6 +149,7 @@ void write_raw_displacement_csv(const std::filesystem::path& file,
 
 RawFourSensorScan read_raw_four_sensor_csv(const std::filesystem::path& file,
                                            const RawReadOptions& opts) {
+  require_whole_set_of(file);  // a raw scan in a result folder: the folder must be one whole run
   CsvReadOptions ro;
   ro.allow_non_finite = true;  // nan marks cells an incomplete scan did not reach
   const CsvTable t = read_csv(file, ro);
@@ -176,7 +160,6 @@ RawFourSensorScan read_raw_four_sensor_csv(const std::filesystem::path& file,
   RawFourSensorScan s;
   s.complete = read_complete(t, file);
   require_complete(s.complete, t, file, opts);
-  if (s.complete) check_finite(t, file);
   s.x_mm = t.column("x_mm", file);
   s.row_line = t.row_line;
   for (int i = 0; i < 4; ++i)
@@ -186,6 +169,15 @@ RawFourSensorScan read_raw_four_sensor_csv(const std::filesystem::path& file,
     n_t += t.find_column("t" + std::to_string(i + 1) + "_s") ? 1 : 0;
   if (n_t != 0 && n_t != 4)
     throw CsvError(file, 1, "timestamp columns t1_s..t4_s: give all four or none");
+  // Plausibility before anything is computed: positions increase, each reading lies within its
+  // sensor's range, the time of each configuration's readings does not go backwards (each is
+  // read position by position).  NaN only where an incomplete scan did not measure.
+  check_increasing(t, "x_mm", true, file, false);
+  for (int i = 1; i <= 4; ++i) {
+    const std::string m = "m" + std::to_string(i);
+    check_readings(t, m + "_um", reading_range(t, m, file), file, !s.complete);
+    if (n_t == 4) check_increasing(t, "t" + std::to_string(i) + "_s", false, file, !s.complete);
+  }
   if (n_t == 4) {
     s.t_s.emplace();
     for (int i = 0; i < 4; ++i)
@@ -198,7 +190,7 @@ RawFourSensorScan read_raw_four_sensor_csv(const std::filesystem::path& file,
                        std::string("metadata has dx_mm but not '") + k +
                            "': give the whole geometry (dx_mm, s2, s3, s4, N) or none");
     core::FourSensorConfig g;
-    g.dx_mm = parse_double_meta(t, "dx_mm", file);
+    g.dx_mm = *t.meta_number("dx_mm", file);
     g.s2 = parse_int_meta(t, "s2", file);
     g.s3 = parse_int_meta(t, "s3", file);
     g.s4 = parse_int_meta(t, "s4", file);
@@ -218,6 +210,7 @@ RawFourSensorScan read_raw_four_sensor_csv(const std::filesystem::path& file,
 
 RawDisplacementScan read_raw_displacement_csv(const std::filesystem::path& file,
                                               const RawReadOptions& opts) {
+  require_whole_set_of(file);
   CsvReadOptions ro;
   ro.allow_non_finite = true;
   const CsvTable t = read_csv(file, ro);
@@ -228,15 +221,24 @@ RawDisplacementScan read_raw_displacement_csv(const std::filesystem::path& file,
   RawDisplacementScan s;
   s.complete = read_complete(t, file);
   require_complete(s.complete, t, file, opts);
-  if (s.complete) check_finite(t, file);
   if (!t.meta("d_mm")) throw CsvError(file, 0, "metadata 'd_mm' (displacement d) missing");
-  s.d_mm = parse_double_meta(t, "d_mm", file);
+  s.d_mm = *t.meta_number("d_mm", file);
   s.x_mm = t.column("x_mm", file);
   s.s1_scan1_um = t.column("s1_scan1_um", file);
   s.s2_scan1_um = t.column("s2_scan1_um", file);
   s.s1_scan2_um = t.column("s1_scan2_um", file);
   s.s2_scan2_um = t.column("s2_scan2_um", file);
-  if (t.find_column("t_scan1_s") && t.find_column("t_scan2_s")) {
+  const bool times = t.find_column("t_scan1_s") && t.find_column("t_scan2_s");
+  // Plausibility, as for the four-sensor scan: S1 reads the workpiece in both scans, S2 the
+  // reference piece; each scan reads the positions in order.
+  check_increasing(t, "x_mm", true, file, false);
+  for (const char* sensor : {"s1", "s2"})
+    for (const char* scan : {"_scan1_um", "_scan2_um"})
+      check_readings(t, sensor + std::string(scan), reading_range(t, sensor, file), file,
+                     !s.complete);
+  if (times) {
+    check_increasing(t, "t_scan1_s", false, file, !s.complete);
+    check_increasing(t, "t_scan2_s", false, file, !s.complete);
     s.t_scan1_s = t.column("t_scan1_s", file);
     s.t_scan2_s = t.column("t_scan2_s", file);
   }

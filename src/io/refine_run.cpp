@@ -12,6 +12,7 @@
 #include "errsep/io/reference_csv.hpp"
 #include "errsep/io/refine_report.hpp"
 #include "errsep/io/staged_directory.hpp"
+#include "errsep/version.hpp"
 
 namespace errsep::io {
 
@@ -168,13 +169,18 @@ RefineRunResult run_refine(const FourSensorInputs& in, const fs::path& out_dir,
   out.text = format_refine_text(r);
   if (out.reference) out.text += format_reference_text(*out.reference);
 
-  StagedDirectory stage(out_dir, "refine");  // the files appear in DIR only when all are written
+  // One result set: the files appear in DIR only when all are written, replacing an earlier
+  // refine result whole (io/staged_directory.hpp).
+  StagedDirectory stage(out_dir, {"refine", std::string("errsep-refine ") + kVersion, false, {}});
+  out.swept = stage.swept();
   CsvTable steps = refine_csv(r);
   steps.set_meta("source", opts.source);
+  steps.set_meta("run_id", stage.run_id());
   write_csv(stage.dir() / "refine_steps.csv", steps);
   write_file_atomic(stage.dir() / "refine_report.txt", out.text);
   ResultWriteInfo info{opts.source, "X", "Y", {}};
-  info.extra_metadata = {{"model", r.model_name},
+  info.extra_metadata = {{"run_id", stage.run_id()},
+                         {"model", r.model_name},
                          {"refine_residual_white", r.residual_white() ? "true" : "false"},
                          {"refine_stop_reason", r.stop_reason}};
   write_four_sensor_result(stage.dir(), r.after, info);
@@ -186,6 +192,7 @@ RefineRunResult run_refine(const FourSensorInputs& in, const fs::path& out_dir,
     CsvTable t;
     t.set_meta("format", "errsep refine residual");
     t.set_meta("source", opts.source);
+    t.set_meta("run_id", stage.run_id());
     t.set_meta("model", r.model_name);
     t.set_meta("sigma_hat_um", std::to_string(ra.sigma_um));
     t.set_meta("dof", std::to_string(ra.dof));
@@ -207,6 +214,7 @@ RefineRunResult run_refine(const FourSensorInputs& in, const fs::path& out_dir,
     const ReferenceReport& rep = *out.reference;
     CsvTable t;
     t.set_meta("format", "errsep reference comparison");
+    t.set_meta("run_id", stage.run_id());
     t.set_meta("reference", rep.file);
     t.set_meta("model", r.model_name);
     t.set_meta("profile", "0 = S (um), 1 = gamma (urad), 2 = f (um)");

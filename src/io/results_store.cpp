@@ -13,6 +13,7 @@
 #include <set>
 
 #include "errsep/io/atomic_file.hpp"
+#include "errsep/io/staged_directory.hpp"
 
 namespace errsep::io {
 namespace fs = std::filesystem;
@@ -156,17 +157,9 @@ std::uint64_t ResultsStore::next_scan_id() const {
 }
 
 int ResultsStore::clean_stale_temporaries() {
-  int n = 0;
-  std::error_code ec;
-  for (const auto& e : fs::directory_iterator(opts_.dir, ec)) {
-    const std::string name = e.path().filename().string();
-    // write_file_atomic's temporaries: ".<target name>.tmp.XXXXXX"
-    if (name.size() > 1 && name[0] == '.' && name.find(".tmp.") != std::string::npos &&
-        parse_store_name(name.substr(1, name.find(".tmp.") - 1)).has_value()) {
-      if (fs::remove(e.path(), ec)) ++n;
-    }
-  }
-  return n;
+  // write_file_atomic's temporaries (".<name>.tmp.<pid>.XXXXXX") of processes that are gone, and
+  // those of older versions without a pid: the daemon is the only writer of its directory.
+  return static_cast<int>(remove_stale_temporaries(opts_.dir, true).size());
 }
 
 int ResultsStore::remove_superseded() {
@@ -215,7 +208,12 @@ int ResultsStore::prune(std::chrono::system_clock::time_point now) {
     const bool time_known = now_plausible && t >= earliest_plausible_scan_time() && t <= now;
     const bool too_old = opts_.retention.max_age_days > 0 && time_known && t < now - max_age;
     if (!too_many && !too_old) continue;
-    for (const auto& f : it->second) {
+    // The raw file last: a stop in between leaves a raw file whose result is made again at the
+    // next start (and pruned again), never a result without the raw file it came from.
+    std::vector<StoredFile> files = it->second;
+    std::stable_partition(files.begin(), files.end(),
+                          [](const StoredFile& f) { return f.kind != "raw"; });
+    for (const auto& f : files) {
       std::error_code ec;
       if (fs::remove(f.path, ec)) ++removed;
     }

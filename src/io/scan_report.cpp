@@ -1,4 +1,5 @@
 #include "errsep/io/scan_report.hpp"
+#include "errsep/io/straightness_trend.hpp"
 
 #include <algorithm>
 #include <cctype>
@@ -13,6 +14,10 @@
 #include "errsep/io/atomic_file.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/html_report.hpp"
+#include "errsep/io/machine_axes_metadata.hpp"
+#include "errsep/io/raw_scan_csv.hpp"
+#include "errsep/io/staged_directory.hpp"
+#include "errsep/io/verification_report.hpp"
 #include "errsep/version.hpp"
 
 namespace errsep::io {
@@ -34,10 +39,6 @@ char upper_axis(char c, const char* what) {
     throw std::invalid_argument(std::string(what) + " '" + std::string(1, c) +
                                 "' is not X, Y or Z");
   return u;
-}
-
-int axis_number(char a) {
-  return a == 'X' ? 1 : a == 'Y' ? 2 : 3;
 }
 
 std::vector<double> optional_column(const CsvTable& t, const std::string& name) {
@@ -178,12 +179,11 @@ bool ScanReportOptions::is_valid(std::string* why) const {
   };
   std::string w;
   if (!evaluation.is_valid(&w)) return fail("evaluation: " + w);
-  if (!compensation.is_valid(&w)) return fail("compensation: " + w);
+  if (tables && !tables_export.is_valid(&w)) return fail("compensation tables: " + w);
+  if (axes && !axes->is_valid(&w)) return fail("axes: " + w);
   if (plots && !plot.is_valid(&w)) return fail("plot: " + w);
   if (local_length_mm < 0 || !std::isfinite(local_length_mm))
     return fail("local_length_mm = " + std::to_string(local_length_mm) + " must be >= 0");
-  if (lincurve_points < 2 || lincurve_points > 16)
-    return fail("lincurve_points = " + std::to_string(lincurve_points) + " must be 2..16");
   if (u_w_um < 0 || !std::isfinite(u_w_um))
     return fail("u_w_um = " + std::to_string(u_w_um) + " must be >= 0");
   for (char c : {axis, direction})
@@ -209,13 +209,38 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
   if (!fs::is_directory(dir))
     throw std::runtime_error(dir.string() + ": not a directory (expected a result directory)");
   ScanReportResult res;
+  // The report, figures and tables become part of the result set: the set is checked whole
+  // (refused otherwise, naming what is missing), its files are linked into a staging folder
+  // beside DIR, the outputs written there, and the whole set moved into place at the end
+  // (io/staged_directory.hpp): a kill leaves the earlier set, never a report of another run.
+  StagedDirectory stage(
+      dir, {"result",
+            std::string("errsep-report ") + kVersion,
+            true,
+            {"evaluation.csv", "evaluation.txt", "report.html", "plots", "compensation"}});
+  res.swept = stage.swept();
+  const fs::path out = stage.dir();
+  if (!fs::exists(dir / kManifestName))
+    res.warnings.push_back(dir.string() + " has no " + kManifestName +
+                           " (written by hand or by an older errsep): its files cannot be "
+                           "checked to be whole and of one run.");
+  for (const auto& e : check_result_set(dir).extra)
+    res.warnings.push_back(e + " is not part of the result set of " + dir.string() +
+                           " (added after its run): used as found.");
+  // Raw scans of the set are read as every reader of raw scans reads them (plausibility of each
+  // reading, position and time), incomplete ones included.
+  RawReadOptions inspect;
+  inspect.require_complete = false;
+  if (fs::exists(dir / "raw.csv")) (void)read_raw_four_sensor_csv(dir / "raw.csv", inspect);
+  if (fs::exists(dir / "raw_displacement.csv"))
+    (void)read_raw_displacement_csv(dir / "raw_displacement.csv", inspect);
   const double k = opts.evaluation.coverage_factor;
   std::vector<Row> rows;
   HtmlReport html;
   html.result_dir = fs::absolute(dir).lexically_normal().string();
   html.generated_by = std::string("errsep-report ") + kVersion;
   html.raw_data_file = "unknown (no '# source:' metadata)";
-  const fs::path plot_dir = dir / "plots";
+  const fs::path plot_dir = out / "plots";
   bool plots = opts.plots;
   if (plots && !gnuplot_available(opts.plot)) {
     plots = false;
@@ -223,7 +248,7 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
                            "') cannot be run: the report has no figures (apt-get install "
                            "gnuplot-nox).");
   }
-  const fs::path comp_dir = dir / "compensation";
+  const fs::path comp_dir = out / "compensation";
   std::vector<HtmlFigure> figures;
   CsvTable eval_csv;
   eval_csv.set_meta("errsep evaluation", std::string("v") + kVersion);
@@ -412,15 +437,20 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     if (fs::exists(dir / "lcurve.csv")) {
       const auto t = read_csv(dir / "lcurve.csv", {.allow_non_finite = false, .min_rows = 2});
       const auto lam = t.column("lambda", dir / "lcurve.csv");
-      const auto rn = t.column("residual_norm", dir / "lcurve.csv");
-      const auto sn = t.column("solution_norm", dir / "lcurve.csv");
+      // The L-curve (rule lcurve), or the criterion a likelihood rule minimised over λ.
+      const std::string rule = t.meta("lambda_rule").value_or("?");
+      const bool curve = t.find_column("residual_norm").has_value();
+      const auto rn = curve ? t.column("residual_norm", dir / "lcurve.csv") : lam;
+      const auto sn = curve ? t.column("solution_norm", dir / "lcurve.csv")
+                            : t.column(rule + "_criterion", dir / "lcurve.csv");
       LinePlot p;
       p.name = "lcurve";
-      p.title = "L-curve";
-      p.xlabel = "residual norm ||A x - b||";
-      p.ylabel = "solution norm ||x||";
-      p.log_x = p.log_y = true;
-      p.series.push_back({"L-curve", rn, sn, {}});
+      p.title = curve ? "L-curve" : "lambda search: " + rule + " criterion";
+      p.xlabel = curve ? "residual norm ||A x - b||" : "lambda";
+      p.ylabel = curve ? "solution norm ||x||" : rule + " criterion (smaller is better)";
+      p.log_x = true;
+      p.log_y = curve;
+      p.series.push_back({curve ? "L-curve" : rule, rn, sn, {}});
       if (auto lc = t.meta("lambda_chosen")) {
         double chosen = 0;
         try {
@@ -446,89 +476,82 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
       plot_line(p, "L-curve (log-log) with the chosen corner");
     }
 
-    // Compensation tables.
+    // Compensation tables, in machine coordinates.
     if (opts.tables) {
-      core::CompensationOptions co = opts.compensation;
-      const auto uni = core::make_uniform_table(md.x, md.s, co);
-      core::BreakpointOptions bo;
-      bo.max_points = opts.lincurve_points;
-      const auto lin = core::make_breakpoint_table(md.x, md.s, co, bo);
-      res.lincurve_max_error_um = lin.max_interpolation_error_um;
-      const std::string title = es + " from " + html.raw_data_file;
-      SinumerikCecOptions so;
-      so.table_index = opts.cec_table_index;
-      so.input_axis = opts.cec_input_axis.empty() ? "AX" + std::to_string(axis_number(axis))
-                                                  : opts.cec_input_axis;
-      so.output_axis = opts.cec_output_axis.empty() ? "AX" + std::to_string(axis_number(dirn))
-                                                    : opts.cec_output_axis;
-      so.title = title;
-      LinuxCncLincurveOptions lo;
-      lo.instance = "errsep-" + es;
-      std::transform(lo.instance.begin(), lo.instance.end(), lo.instance.begin(),
-                     [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-      lo.input_pin = std::string("axis.") + static_cast<char>(std::tolower(axis)) + ".pos-cmd";
-      lo.output_axis = dirn;
-      lo.title = title;
-      BeckhoffCrosscompOptions bko;
-      bko.axis_number = opts.beckhoff_axis_number ? opts.beckhoff_axis_number : axis_number(dirn);
-      bko.master_axis_number =
-          opts.beckhoff_master_axis_number ? opts.beckhoff_master_axis_number : axis_number(axis);
-      bko.axis_name = std::string(1, dirn);
-      bko.title = title;
-      const fs::path cec = comp_dir / (es + "_sinumerik_cec.ini");
-      const fs::path hal = comp_dir / (es + "_linuxcnc_lincurve.hal");
-      const fs::path bk = comp_dir / (es + "_beckhoff_crosscomp.lis");
-      const fs::path csv = comp_dir / (es + "_table.csv");
-      outputs.emplace_back(cec, format_sinumerik_cec(uni, so));
-      outputs.emplace_back(hal, format_linuxcnc_lincurve_hal(lin, lo));
-      outputs.emplace_back(bk, format_beckhoff_crosscomp(uni, bko));
-      CsvTable ct;
-      ct.set_meta("errsep compensation table", std::string("v") + kVersion);
-      ct.set_meta("sign", "comp = -(error), added to the " + std::string(1, dirn) + " command");
-      ct.set_meta("removed_line", opts.compensation.remove_line
-                                      ? core::to_string(*opts.compensation.remove_line)
-                                      : "none");
-      std::vector<double> tx;
-      for (std::size_t i = 0; i < uni.comp_um.size(); ++i)
-        tx.push_back(uni.start_mm + uni.step_mm * static_cast<double>(i));
-      ct.add_column("x_mm", tx);
-      ct.add_column("comp_um", uni.comp_um);
-      outputs.emplace_back(csv, format_csv(ct));
-      html.files.emplace_back("compensation/" + cec.filename().string(),
-                              "Sinumerik CEC table, step " + sig(uni.step_mm) + " mm, " +
-                                  std::to_string(uni.comp_um.size()) + " points");
-      html.files.emplace_back("compensation/" + hal.filename().string(),
-                              "LinuxCNC lincurve (" + std::to_string(lin.x_mm.size()) +
-                                  " points) to axis." + static_cast<char>(std::tolower(dirn)) +
-                                  ".eoffset-counts; max interpolation error " +
-                                  sig(lin.max_interpolation_error_um, 3) + " um");
-      html.files.emplace_back("compensation/" + bk.filename().string(),
-                              "Beckhoff TwinCAT CNC kw.crosscomp list (0.1 um)");
-      html.files.emplace_back("compensation/" + csv.filename().string(),
-                              "the uniform table as CSV");
-      eval_csv.add_column("lincurve_max_interpolation_error_um", {lin.max_interpolation_error_um});
-      eval_csv.add_column("table_step_mm", {uni.step_mm});
+      core::MachineAxes axes;
+      std::optional<core::MachineAxes> recorded;
+      try {
+        recorded = machine_axes_from_metadata(md.table.metadata);
+      } catch (const std::invalid_argument& e) {
+        throw CsvError(motion_file, 0, e.what());
+      }
+      if (recorded) {
+        axes = *recorded;
+      } else if (opts.axes) {
+        axes = *opts.axes;
+      } else {
+        axes.slide_start_mm = 0;
+        res.warnings.push_back(
+            "motion.csv does not record where the scan ran (slide_start_mm, scan_direction, "
+            "reading_sign): the compensation tables are in scan coordinates from 0 mm with "
+            "reading_sign +1; give the machine config (errsep-report --config) or rescan with "
+            "errsep-scan.");
+      }
+      axes.input_axis = axis;
+      axes.output_axis = dirn;
+      const auto profile = core::compensation_profile(md.x, md.s, md.u_s, axes, opts.compensation);
+      CompensationExportOptions eo = opts.tables_export;
+      eo.coverage_factor = k;
+      eo.title = es + " from " + html.raw_data_file;
+      const CompensationExport ex = export_compensation(profile, eo);
+      res.compensation_summary = ex.summary();
+      for (const auto& t : ex.tables) {
+        for (const auto& file : t.files) {
+          outputs.emplace_back(comp_dir / file.name, file.content);
+          html.files.emplace_back("compensation/" + file.name,
+                                  compensation_writer(t.format).description() + "; " +
+                                      std::to_string(t.read_back.table.points()) +
+                                      " points; max interpolation error " +
+                                      sig(t.accuracy.max_um, 3) + " um");
+        }
+      }
+      outputs.emplace_back(comp_dir / "accuracy.csv", format_csv(ex.accuracy_csv(), 10));
+      html.files.emplace_back("compensation/accuracy.csv",
+                              "each table's interpolation error against the measurement, with U");
       html.notes.push_back(
-          "Compensation sign: comp(x) = -error(x), added to the " + std::string(1, dirn) +
+          "Compensation sign: comp(p) = -error(p) at machine positions p of " +
+          std::string(1, axis) + " (from " + sig(profile.first_mm(), 6) + " to " +
+          sig(profile.last_mm(), 6) + " mm; reading_sign " + (axes.reading_sign > 0 ? "+1" : "-1") +
+          "), added to the " + std::string(1, dirn) +
           " command (actual = commanded + comp + error = commanded). The " +
           (opts.compensation.remove_line ? std::string(core::label(*opts.compensation.remove_line))
                                          : std::string("no line")) +
-          " was removed from S(x) first (the alignment of the artefact is not a machine error).");
+          " was removed from the error first (the alignment of the artefact is not a machine "
+          "error).");
+      {
+        std::istringstream lines(ex.summary());
+        for (std::string l; std::getline(lines, l);)
+          html.notes.push_back("Table " + l);
+      }
       {
         LinePlot p;
         p.name = "compensation";
         p.title = es + " compensation";
-        p.xlabel = "x / mm";
+        p.xlabel = std::string(1, axis) + " machine position / mm";
         p.ylabel = "\xC2\xB5m";
-        const auto e = core::error_to_compensate(md.x, md.s, co);
-        p.series.push_back({"-error (line removed)", md.x, scaled(e, -1.0), {}});
-        p.series.push_back({"uniform table", tx, uni.comp_um, {}});
-        p.series.push_back({"lincurve (" + std::to_string(lin.x_mm.size()) + " points)",
-                            lin.x_mm,
-                            lin.comp_um,
-                            {}});
-        plot_line(p, "Compensation: measured -error, uniform table and the " +
-                         std::to_string(lin.x_mm.size()) + " lincurve points");
+        p.series.push_back({"-error (line removed)", profile.position_mm, profile.comp_um,
+                            profile.u_um.empty() ? profile.u_um : scaled(profile.u_um, k)});
+        for (const auto& t : ex.tables) {
+          if (t.format == CompensationFormat::csv) continue;
+          p.series.push_back({std::string(to_string(t.format)) + " (" +
+                                  std::to_string(t.read_back.table.points()) + " points)",
+                              t.read_back.table.position_mm,
+                              t.read_back.table.comp_um,
+                              {}});
+        }
+        plot_line(p,
+                  "Compensation: the measured -error with its expanded uncertainty and each "
+                  "controller's table as read back");
       }
     }
   }
@@ -665,6 +688,20 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
                        : r.unit == "urad" ? "\xC2\xB5rad"
                                           : r.unit});
   html.tables.push_back(ev);
+  if (fs::exists(dir / "verification.csv")) {
+    const fs::path vf = dir / "verification.csv";
+    const auto vt = read_csv(vf, {.allow_non_finite = false, .min_rows = 1});
+    HtmlTable v;
+    v.id = "verification";
+    v.caption = "Measure - compensate - verify (minimum-zone straightness, U with k = " +
+                vt.meta("coverage_factor").value_or("?") + ")";
+    v.header = {"", "value"};
+    for (const auto& [q, val] : verification_rows(vt, vf))
+      v.rows.push_back({q, val});
+    html.tables.push_back(v);
+    html.files.emplace_back("verification.csv",
+                            "before, predicted and measured residual at machine positions");
+  }
   if (fs::exists(dir / "refine.csv")) {
     const auto t = read_csv(dir / "refine.csv", {.allow_non_finite = true, .min_rows = 1});
     HtmlTable rt;
@@ -701,14 +738,25 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
   html.files.insert(html.files.begin() + 1, {"evaluation.txt", "the evaluation as text"});
 
   res.text = text_table(rows, k);
-  outputs.emplace_back(dir / "evaluation.csv", format_csv(eval_csv, 12));
-  outputs.emplace_back(dir / "evaluation.txt", res.text);
-  outputs.emplace_back(dir / "report.html", render_html_report(html));
+  if (!opts.trend_results_dir.empty()) {
+    const StraightnessTrend trend = straightness_trend(opts.trend_results_dir);
+    res.text += "\n" + format_trend(trend);
+    outputs.emplace_back(out / "trend.csv", format_csv(trend_table(trend), 10));
+    html.files.push_back({"trend.csv", "straightness over the machine's past scans"});
+    if (trend.any_significant())
+      res.warnings.push_back("straightness changed beyond the combined U (see trend.csv)");
+  }
+  outputs.emplace_back(out / "evaluation.csv", format_csv(eval_csv, 12));
+  outputs.emplace_back(out / "evaluation.txt", res.text);
+  outputs.emplace_back(out / "report.html", render_html_report(html));
   for (const auto& [path, content] : outputs) {
     fs::create_directories(path.parent_path());
     write_file_atomic(path, content);
     res.written.push_back(path);
   }
+  stage.commit();
+  for (auto& p : res.written)  // where they are now
+    p = dir / p.lexically_relative(out);
   return res;
 }
 

@@ -13,15 +13,14 @@
 //    does not reuse a scan id on disk;
 //  - mid-scan: the checkpoint written while the scan ran is on disk, parses, and is marked
 //    incomplete (outcome in_progress) with the points measured up to it.
-#include <poll.h>
 #include <signal.h>
-#include <sys/inotify.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <map>
 #include <random>
@@ -32,7 +31,9 @@
 #include "errsep/io/csv.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/results_store.hpp"
+#include "errsep/io/staged_directory.hpp"
 #include "support/daemon_rig.hpp"
+#include "support/kill_campaign.hpp"
 
 using namespace errsep;
 using namespace std::chrono_literals;
@@ -42,113 +43,11 @@ using test::DaemonRig;
 namespace {
 
 bool is_temporary(const std::string& name) {
-  return name.size() > 1 && name[0] == '.' && name.find(".tmp.") != std::string::npos;
+  return io::temporary_owner_pid(name) >= 0;
 }
 
-/// Checks every file of the store ("" = all whole); counts them by kind.
-std::string check_store(const std::filesystem::path& dir, std::map<std::string, int>& kinds) {
-  kinds.clear();
-  std::map<std::uint64_t, std::map<std::string, std::filesystem::path>> scans;
-  for (const auto& e : std::filesystem::directory_iterator(dir)) {
-    const std::string name = e.path().filename().string();
-    if (is_temporary(name)) {
-      ++kinds["temporary"];  // a killed writer's temporary file: not a result, removed at start
-      continue;
-    }
-    const auto f = io::parse_store_name(e.path());
-    if (!f) return name + ": not a store file";
-    scans[f->scan_id][f->kind] = e.path();
-    ++kinds[f->kind];
-  }
-  for (const auto& [id, files] : scans) {
-    io::RawFourSensorScan raw;
-    bool have_raw = false;
-    for (const auto& [kind, path] : files) {
-      std::string why;
-      if (kind == "raw") {
-        why = test::check_raw_file(path, &raw);
-        have_raw = why.empty();
-      } else if (kind == "raw-incomplete") {
-        io::RawFourSensorScan cp;
-        why = test::check_checkpoint_file(path, &cp);
-        // No clean stop happened: every incomplete file is a checkpoint of a running scan.
-        if (why.empty() && cp.meta("outcome") != std::optional<std::string>("in_progress"))
-          why = "outcome " + cp.meta("outcome").value_or("(none)") + ", not in_progress";
-      } else if (kind != "result") {
-        why = "unexpected kind '" + kind + "' (no clean stop happened)";
-      }
-      if (!why.empty()) return path.filename().string() + ": " + why;
-    }
-    if (const auto r = files.find("result"); r != files.end()) {
-      // A result is written after its raw file.
-      if (!have_raw) return r->second.filename().string() + ": no complete raw file beside it";
-      const std::string why = test::check_result_file(r->second, raw);
-      if (!why.empty()) return r->second.filename().string() + ": " + why;
-    }
-  }
-  return {};
-}
-
-/// Where a kill landed, from the files of its scan.
-std::string landed(const std::filesystem::path& dir, std::uint64_t id) {
-  std::set<std::string> kinds;
-  std::string temporary;  // kind of the file whose write was cut
-  for (const auto& e : std::filesystem::directory_iterator(dir)) {
-    const std::string name = e.path().filename().string();
-    if (is_temporary(name)) {
-      const auto f = io::parse_store_name(name.substr(1, name.find(".tmp.") - 1));
-      if (f && f->scan_id == id) temporary = f->kind;
-      continue;
-    }
-    const auto f = io::parse_store_name(e.path());
-    if (f && f->scan_id == id) kinds.insert(f->kind);
-  }
-  if (temporary == "raw-incomplete") return "inside a checkpoint's write (temporary left)";
-  if (!temporary.empty()) return "inside the " + temporary + " file's write (temporary left)";
-  if (kinds.count("result")) return "after the result file";
-  if (kinds.count("raw") && kinds.count("raw-incomplete"))
-    return "between the raw file and the checkpoint's removal";
-  if (kinds.count("raw")) return "between the raw and the result file";
-  if (kinds.count("raw-incomplete")) return "before the raw file (checkpoint on disk)";
-  return "before the first checkpoint";
-}
-
-/// inotify on the results directory: the moment the daemon creates a file.
-class DirWatch {
- public:
-  explicit DirWatch(const std::filesystem::path& dir)
-      : fd_(::inotify_init1(IN_CLOEXEC | IN_NONBLOCK)) {
-    if (fd_ < 0 || ::inotify_add_watch(fd_, dir.c_str(), IN_CREATE) < 0)
-      throw std::runtime_error("inotify on " + dir.string() + " failed");
-  }
-  ~DirWatch() { ::close(fd_); }
-  DirWatch(const DirWatch&) = delete;
-  DirWatch& operator=(const DirWatch&) = delete;
-  /// Waits for the n-th file created whose name contains `needle` (or the first containing
-  /// `or_needle`, when given); false at the timeout.
-  bool wait_create(const std::string& needle, int n, std::chrono::milliseconds timeout,
-                   const std::string& or_needle = {}) {
-    const auto until = clk::now() + timeout;
-    int seen = 0;
-    alignas(inotify_event) char buf[8192];
-    while (clk::now() < until) {
-      pollfd pfd{fd_, POLLIN, 0};
-      if (::poll(&pfd, 1, 100) <= 0) continue;
-      const ssize_t len = ::read(fd_, buf, sizeof buf);
-      for (ssize_t off = 0; off < len;) {
-        const auto* ev = reinterpret_cast<const inotify_event*>(buf + off);
-        off += static_cast<ssize_t>(sizeof(inotify_event) + ev->len);
-        const std::string name = ev->len > 0 ? ev->name : "";
-        if (name.find(needle) != std::string::npos && ++seen == n) return true;
-        if (!or_needle.empty() && name.find(or_needle) != std::string::npos) return true;
-      }
-    }
-    return false;
-  }
-
- private:
-  int fd_;
-};
+using test::check_store;
+using test::DirWatch;
 
 /// Truncations of `file` that `check` accepts (0 expected): cut at every line boundary and one
 /// byte either side of it, at every byte of the last line, and at every 7th byte elsewhere.
@@ -260,7 +159,7 @@ TEST_CASE("SIGKILL at the end of scans and mid-scan leaves only whole files") {
     rig.daemon->signal(SIGKILL);
     REQUIRE(rig.daemon->wait(5s));
     rig.daemon.reset();
-    const std::string w = landed(rig.results, id);
+    const std::string w = test::landed_in_store(rig.results, id);
     ++where[kind][w];
     if ((kind == "points" || kind == "write") && w != "after the result file") ++end_window;
     if (w.find("temporary left") != std::string::npos) ++cut_writes;
@@ -344,6 +243,18 @@ TEST_CASE("SIGKILL at the end of scans and mid-scan leaves only whole files") {
       break;
     }
   REQUIRE_FALSE(unresulted.empty());
+  // A result that is not of its raw file (its raw_crc32 differs): made again from the raw file.
+  std::string foreign;
+  for (const auto& f : io::ResultsStore({rig.results, 0, {}}).list())
+    if (f.kind == "result") {
+      io::CsvTable t = io::read_csv(f.path);
+      REQUIRE(t.meta("raw_crc32"));
+      t.set_meta("raw_crc32", "00000000");
+      io::write_csv(f.path, t);
+      foreign = f.stem;
+      break;
+    }
+  REQUIRE_FALSE(foreign.empty());
   rig.start_daemon();
   REQUIRE(rig.notify->wait_for("READY=1", 15s));
   std::set<std::string> raw_stems, result_stems;
@@ -368,6 +279,16 @@ TEST_CASE("SIGKILL at the end of scans and mid-scan leaves only whole files") {
     CHECK(test::check_result_file(rig.results / (stem + ".result.csv"), raw) == "");
   }
   CHECK(result_stems.count(unresulted) == 1);
+  // The result set to another raw file's CRC was made again from its own raw file.
+  {
+    char hex[16];
+    std::snprintf(hex, sizeof hex, "%08x",
+                  io::file_size_and_crc32(rig.results / (foreign + ".raw.csv")).second);
+    CHECK(io::read_csv(rig.results / (foreign + ".result.csv")).meta("raw_crc32") ==
+          std::optional<std::string>(hex));
+  }
+  std::map<std::string, int> kinds_after;
+  CHECK(check_store(rig.results, kinds_after) == "");
   REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1) == 0);
   // The quick machine may finish the scan between two reads: its id is then the last scan id.
   const auto r = rig.wait_regs(

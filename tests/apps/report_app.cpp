@@ -55,12 +55,15 @@ TEST_CASE("errsep-report evaluates a bow and a sine tilt exactly and writes ever
 
   std::string out;
   const int rc = run_command(
-      quote(app_path("report")) + " " + quote(dir) + " --table-step 10 --local-length 50", &out);
+      quote(app_path("report")) + " " + quote(dir) +
+          " --table-step 10 --local-length 50 --table-param sinumerik_cec.input_axis=X1",
+      &out);
   INFO(out);
   REQUIRE(rc == 0);
   for (const char* f :
        {"evaluation.csv", "evaluation.txt", "report.html", "compensation/EYX_sinumerik_cec.ini",
-        "compensation/EYX_linuxcnc_lincurve.hal", "compensation/EYX_beckhoff_crosscomp.lis",
+        "compensation/EYX_linuxcnc.hal", "compensation/EYX_beckhoff_crosscomp.lis",
+        "compensation/EYX.COM", "compensation/EYX.CMA", "compensation/accuracy.csv",
         "compensation/EYX_table.csv", "plots/straightness.png", "plots/straightness.svg",
         "plots/tilt.png", "plots/reference.png", "plots/residuals.png", "plots/lcurve.png",
         "plots/surface_w.png", "plots/motion_error.png", "plots/compensation.png"})
@@ -103,18 +106,23 @@ TEST_CASE("errsep-report evaluates a bow and a sine tilt exactly and writes ever
   // The tables read back and compensate the measured bow at the table nodes.
   const auto cec =
       errsep::test::parse_sinumerik_cec(slurp(dir / "compensation/EYX_sinumerik_cec.ini"));
-  CHECK(cec.input_axis == "(AX1)");
+  CHECK(cec.input_axis == "(X1)");  // --table-param
   CHECK(cec.output_axis == "(AX2)");
   CHECK(cec.step_mm == 10);
   for (double x = 0; x <= 300; x += 10) {
     const double bow = 4 * h * (x / 300) * (1 - x / 300);  // the end-point line is removed
     CHECK(cec.apply_mm(x) * 1e3 == Approx(-bow).margin(0.5e-3 + 1e-9));  // 1 nm resolution
   }
-  const auto hal =
-      errsep::test::parse_lincurve_hal(slurp(dir / "compensation/EYX_linuxcnc_lincurve.hal"));
-  CHECK(hal.input_pin == "axis.x.pos-cmd");
-  CHECK(hal.output_pin == "axis.y.eoffset-counts");
-  CHECK_THAT(out, Catch::Contains("lincurve: max interpolation error"));
+  // The LinuxCNC HAL file loads into the network model; its lincurves read X and the offsets
+  // feed Y.  Each table's interpolation error is printed (and in accuracy.csv).
+  const errsep::test::HalNetwork hal(slurp(dir / "compensation/EYX_linuxcnc.hal"));
+  for (const auto& [curve, points] : hal.lincurves())
+    CHECK(hal.source_of(curve + ".in") == "axis.x.pos-cmd");
+  CHECK(hal.connected("axis.y.eoffset-counts"));
+  CHECK_THAT(out, Catch::Contains("EYX linuxcnc_hal: EYX_linuxcnc.hal") &&
+                      Catch::Contains("interpolation error max"));
+  // The result records no machine coordinates: the tables are in scan coordinates, said so.
+  CHECK_THAT(out, Catch::Contains("does not record where the scan ran"));
 }
 
 TEST_CASE("errsep-report fails with a message and writes nothing for an empty directory") {

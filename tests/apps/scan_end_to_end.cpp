@@ -14,6 +14,7 @@
 #include "errsep/io/csv.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
+#include "support/controller_tables.hpp"
 #include "support/support.hpp"
 
 using namespace errsep;
@@ -23,26 +24,13 @@ using errsep::test::TempDir;
 
 namespace {
 
-std::string read_text(const std::filesystem::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-void replace_once(std::string& s, const std::string& from, const std::string& to) {
-  const auto pos = s.find(from);
-  REQUIRE(pos != std::string::npos);
-  s.replace(pos, from.size(), to);
-}
-
 // The embedded default config, made quicker: a shorter reference (N = 40: P = 33 slide positions,
 // 132 points), faster stages.  The zero-adjustment values are set to the form e = b·O + d·O³ that
 // the default curvature gauge assumes (a quadratic part of e is not identifiable from the data,
 // see core/four_sensor_system.hpp), the same values as core::zhao2019_example1.
 std::filesystem::path write_test_config(const TempDir& dir) {
-  std::string t = read_text(test::source_dir() / "config" / "simulator.toml");
-  replace_once(t, "N = 69", "N = 40");
+  std::string t = test::read_file(test::source_dir() / "config" / "simulator.toml");
+  test::replace_once(t, "N = 69", "N = 40");
   // The shipped config already uses them; the test fails if that changes.
   REQUIRE(t.find("e_um = [0.0, 0.49, 0.92, 0.07]") != std::string::npos);
   for (const std::string from : {"speed_mm_s = 200.0", "speed_mm_s = 100.0"}) {
@@ -117,6 +105,30 @@ TEST_CASE("scan on the device simulator, separated: S and gamma match the simula
       max_dS, worst_S, max_dg, worst_g);
   CHECK(worst_S <= 4.0);
   CHECK(worst_g <= 4.0);
+
+  // The demo's HEIDENHAIN table (io/cnc/heidenhain_com.hpp cites the TNC manuals), read back by
+  // an independent reader: column Y of EYX.COM at the machine positions of X, entered in column
+  // X of EYX.CMA; the values are -(S less its end-point line) in mm with 4 decimals.
+  std::string rep;
+  const int rrc = run_command(app_path("report").string() + " " + out.string() + " --config " +
+                                  cfg_path.string() + " --no-plots",
+                              &rep);
+  INFO(rep);
+  REQUIRE(rrc == 0);
+  const auto com = test::parse_heidenhain_com(test::read_file(out / "compensation" / "EYX.COM"));
+  const auto cma = test::parse_heidenhain_cma(test::read_file(out / "compensation" / "EYX.CMA"));
+  CHECK(com.axis == 'Y');
+  CHECK(cma.column == "X");
+  CHECK(cma.com_path == "TNC:\\table\\EYX.COM");
+  CHECK(cma.active);
+  REQUIRE(com.axispos_mm.size() == x.size());
+  const double start = cfg.scan.slide_start_mm;
+  for (std::size_t n = 0; n < x.size(); ++n) {
+    const double line =
+        S.front() + (S.back() - S.front()) * (x[n] - x.front()) / (x.back() - x.front());
+    CHECK(com.axispos_mm[n] == Approx(start + x[n]).margin(1e-4));
+    CHECK(com.value_mm[n] * 1e3 == Approx(-(S[n] - line)).margin(0.05 + 1e-9));
+  }
 }
 
 TEST_CASE("SIGINT during the scan: stages stopped, raw data kept and marked incomplete, exit 130") {

@@ -97,10 +97,15 @@ TEST_CASE("a simulated raw scan is separated: S within its stated uncertainty of
   INFO("largest |S - S_true| / u_S = " << worst);
   CHECK(worst < 4.0);  // 62 points: a 4u excursion has probability ~0.4 %
   CHECK(worst > 0.0);
-  // The header says units, the gauge and what the L-curve did.
+  // The header says units, the estimator, the prior, the rule and what it did.
   CHECK(m.meta("units").has_value());
+  CHECK(m.meta("estimator") == std::optional<std::string>("posterior"));
+  CHECK(m.meta("prior") == std::optional<std::string>("second_difference"));
+  CHECK(m.meta("lambda_rule") == std::optional<std::string>("reml"));
+  CHECK(m.meta("straightness_minimum_zone_U_um").has_value());
   const auto lc = io::read_csv(dir / "res" / "lcurve.csv");
-  CHECK(lc.meta("lambda_fallback").value() == "no_regularisation");
+  CHECK(lc.meta("lambda_fallback").value() == "none");
+  CHECK(lc.find_column("reml_criterion").has_value());
   CHECK_THAT(slurp(dir / "res" / "summary.txt"), Catch::Contains("no bow"));
 }
 

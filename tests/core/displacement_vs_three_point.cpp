@@ -149,8 +149,7 @@ TEST_CASE("displacement, three-point and four-sensor methods on the same slidewa
   // holds here is the sensor stage's (no quadratic part in e), not the default one (no bow in f).
   const CurvatureGauge gauge = CurvatureGauge::sensor_stage_without_curvature;
   {
-    FourSensorOptions o;
-    o.gauge = gauge;
+    FourSensorOptions o = options_for_gauge(gauge);
     o.rule = LambdaRule::least_squares;
     o.compute_uncertainty = false;
     const auto r = separate_four_sensor(cfg, simulate_four_sensor(cfg, fs_truth, {}).m_um, o);
@@ -180,8 +179,7 @@ TEST_CASE("displacement, three-point and four-sensor methods on the same slidewa
     FourSensorSimOptions fo;
     fo.sigma_um = kSigma;
     fo.seed = 100 + run;
-    FourSensorOptions o;  // L-curve λ, as the paper
-    o.gauge = gauge;
+    FourSensorOptions o = options_for_gauge(gauge);  // the paper's system, L-curve λ
     o.compute_uncertainty = false;
     const auto r4 = separate_four_sensor(cfg, simulate_four_sensor(cfg, fs_truth, fo).m_um, o);
     ms[2] += (r4.f_um - f_true).squaredNorm() / 25;

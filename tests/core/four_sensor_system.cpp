@@ -79,9 +79,8 @@ TEST_CASE("noise-free data are separated exactly for general spacings (unregular
     const auto sim = simulate_four_sensor(cfg, truth, {});
     for (auto g : {CurvatureGauge::sensor_stage_without_curvature,
                    CurvatureGauge::reference_without_curvature}) {
-      FourSensorOptions o;
+      FourSensorOptions o = options_for_gauge(g);
       o.rule = LambdaRule::least_squares;
-      o.gauge = g;
       o.compute_uncertainty = false;
       const auto r = separate_four_sensor(cfg, sim.m_um, o);
       Eigen::VectorXd dg = r.gamma_rad - sim.gamma_rad;
@@ -112,8 +111,7 @@ TEST_CASE("no L-curve corner with the weak curvature row: lambda from the discre
   so.sigma_um = 0.1;
   so.seed = 3;
   const auto sim = simulate_four_sensor(cfg, zhao2019_example1(cfg), so);
-  FourSensorOptions o;
-  o.gauge = CurvatureGauge::sensor_stage_without_curvature;
+  FourSensorOptions o = options_for_gauge(CurvatureGauge::sensor_stage_without_curvature);
   o.compute_uncertainty = false;
   // A λ range far above the corner: the curve only flattens there, no interior maximum.
   o.lcurve.lambda_min = 1e3;
@@ -127,8 +125,7 @@ TEST_CASE("no L-curve corner with the weak curvature row: lambda from the discre
   CHECK(r.lambda == Approx(rd.lambda).epsilon(1e-12));
   CHECK(r.brief_report().find("discrepancy principle used") != std::string::npos);
 
-  FourSensorOptions plain;
-  plain.gauge = CurvatureGauge::sensor_stage_without_curvature;
+  FourSensorOptions plain = options_for_gauge(CurvatureGauge::sensor_stage_without_curvature);
   const auto normal = separate_four_sensor(cfg, sim.m_um, plain);
   CHECK(normal.lambda_fallback == LambdaFallback::none);
   // Its curve has the vertical branch of the nearly null bow (over a decade).
@@ -143,7 +140,10 @@ TEST_CASE("no L-curve corner with the curvature fixed exactly: no regularisation
   so.sigma_um = 0.1;
   so.seed = 3;
   const auto sim = simulate_four_sensor(cfg, zhao2019_example1(cfg), so);
-  FourSensorOptions o;  // default: reference_without_curvature, L-curve
+  // The paper's system with the exact gauge, λ from the L-curve (the default before the posterior).
+  FourSensorOptions o;
+  o.estimator = Estimator::paper_system;
+  o.rule = LambdaRule::lcurve;
   o.compute_uncertainty = false;
   const auto r = separate_four_sensor(cfg, sim.m_um, o);
   INFO("branch " << r.lcurve.branch_decades << " decades, lambda " << r.lambda);
@@ -174,7 +174,9 @@ TEST_CASE(
   FourSensorSimOptions so;
   so.sigma_um = 0.1;
   const auto sim = simulate_four_sensor(cfg, zhao2019_example1(cfg), so);
-  FourSensorOptions o;
+  FourSensorOptions o;  // the paper's system, whose λ = 0 fit has the near-null bow
+  o.estimator = Estimator::paper_system;
+  o.rule = LambdaRule::lcurve;
   o.compute_uncertainty = false;
   o.lcurve.threads = 2;
   const auto r = separate_four_sensor(cfg, sim.m_um, o);

@@ -236,3 +236,85 @@ TEST_CASE("warnings for settings that are allowed but probably not meant") {
   REQUIRE(wex.size() == 1);
   CHECK(wex[0].find("bus 'rs485'") == 0);
 }
+
+TEST_CASE("[axes] and [compensation]: machine coordinates and each format's own parameters") {
+  // Defaults: X moves, Y read, towards +, reading grows towards +Y; every format.
+  const MachineConfig d = parse_machine_config(kMinimal, "t.toml");
+  CHECK(d.axes.input_axis == 'X');
+  CHECK(d.axes.output_axis == 'Y');
+  CHECK(d.axes.scan_direction == 1);
+  CHECK(d.axes.reading_sign == 1);
+  CHECK(d.compensation.tables.formats.size() == all_compensation_formats().size());
+  CHECK(d.compensation.profile.remove_line == errsep::core::ReferenceLine::end_points);
+
+  const std::string t = std::string(kMinimal) + R"(
+[scan]
+method = "displacement"
+slide_start_mm = 250.0
+slide_stage = "x"
+workpiece_sensor = "s"
+reference_sensor = "r"
+reference_stage = "p"
+[[sensor]]
+name = "r"
+bus = "b"
+register = { address = 8 }
+[[stage]]
+name = "p"
+role = "reference_piece"
+bus = "m"
+target_position = { address = 120 }
+actual_position = { address = 120 }
+status = { address = 124 }
+stop_coil = { address = 2 }
+[axes]
+input = "y"
+output = "Z"
+scan_direction = -1
+reading_sign = -1
+[compensation]
+formats = ["heidenhain_com", "sinumerik_cec"]
+remove_line = "none"
+[compensation.sinumerik_cec]
+input_axis = "Y1"
+output_axis = "Z1"
+max_points = 120
+[compensation.heidenhain_com]
+table_dir = "PLC:\\comp\\"
+)";
+  const MachineConfig c = parse_machine_config(t, "t.toml");
+  CHECK(c.axes.input_axis == 'Y');
+  CHECK(c.axes.output_axis == 'Z');
+  CHECK(c.axes.scan_direction == -1);
+  CHECK(c.axes.reading_sign == -1);
+  CHECK(c.axes.slide_start_mm == 250);
+  CHECK(c.axes.symbol() == "EZY");
+  REQUIRE(c.compensation.tables.formats.size() == 2);
+  CHECK(c.compensation.tables.formats[0] == CompensationFormat::heidenhain_com);
+  CHECK_FALSE(c.compensation.profile.remove_line.has_value());
+  const auto& sp = c.compensation.tables.parameters.at(CompensationFormat::sinumerik_cec);
+  CHECK(sp.at("input_axis") == "Y1");
+  CHECK(sp.at("max_points") == "120");
+  CHECK(c.compensation.tables.parameters.at(CompensationFormat::heidenhain_com).at("table_dir") ==
+        "PLC:\\comp\\");
+
+  // Mistakes name file, line and key; the format judges its own parameters.
+  const std::string base = std::string(kMinimal);
+  CHECK(error_of(base + "[axes]\ninput = \"X\"\noutput = \"X\"\n")
+            .find("axes.output: equals input") != std::string::npos);
+  CHECK(error_of(base + "[axes]\ninput = \"W\"\n").find("axes.input: 'W' is not X, Y or Z") !=
+        std::string::npos);
+  CHECK(error_of(base + "[axes]\nscan_direction = 0\n").find("axes.scan_direction: must be 1") !=
+        std::string::npos);
+  CHECK(error_of(base + "[compensation]\nformats = [\"fanuc\"]\n")
+            .find("compensation.formats: 'fanuc' is not one of sinumerik_cec") !=
+        std::string::npos);
+  const std::string m = error_of(
+      base + "[compensation]\n[compensation.linuxcnc_hal]\nscale_mm = 1e-6\npoints = 500\n");
+  CHECK(m.find("t.toml:30: compensation.linuxcnc_hal.points: 500 is out of range") == 0);
+  CHECK(error_of(base + "[compensation.beckhoff_crosscomp]\nmaster = 3\n")
+            .find("compensation.beckhoff_crosscomp.master: unknown parameter (known: axis,") !=
+        std::string::npos);
+  CHECK(error_of(base + "[compensation]\nstep = 5\n").find("compensation.step: unknown key") !=
+        std::string::npos);
+}

@@ -124,3 +124,120 @@ TEST_CASE("displacement raw scan round-trips with d") {
   CHECK_THROWS_WITH(read_raw_four_sensor_csv(dir / "d.csv"),
                     Catch::Contains("not a four-sensor raw scan"));
 }
+
+namespace {
+
+std::string where(const std::filesystem::path& file, std::size_t n) {
+  return file.string() + ":" + std::to_string(errsep::test::data_line(file, n)) + ": ";
+}
+
+}  // namespace
+
+TEST_CASE("impossible readings, positions and times are refused with file:line") {
+  TempDir dir;
+  const auto file = dir / "raw.csv";
+  auto s = sample_scan(true);
+  for (int i = 1; i <= 4; ++i) {
+    const std::string m = "m" + std::to_string(i);
+    s.metadata.emplace_back("range_min_" + m + "_um", "-2000");
+    s.metadata.emplace_back("range_max_" + m + "_um", "2000");
+  }
+  write_raw_four_sensor_csv(file, s);
+  REQUIRE_NOTHROW(read_raw_four_sensor_csv(file));
+  auto refused = [&](const RawFourSensorScan& bad, std::size_t row, const std::string& what) {
+    write_raw_four_sensor_csv(file, bad);
+    try {
+      (void)read_raw_four_sensor_csv(file);
+      FAIL("accepted: " << what);
+    } catch (const CsvError& e) {
+      CHECK_THAT(e.what(), Catch::StartsWith(where(file, row)) && Catch::Contains(what));
+    }
+  };
+  SECTION("a reading no sensor can give (-8.7e10 um, issue 21)") {
+    auto b = s;
+    b.m_um[1][5] = -8.7e10;
+    refused(b, 5, "column 'm2_um': -8.7e+10 um is outside the sensor's range -2000 to 2000 um");
+  }
+  SECTION("just outside the recorded range") {
+    auto b = s;
+    b.m_um[3][0] = 2000.001;
+    refused(b, 0, "column 'm4_um': 2000.001 um is outside the sensor's range");
+  }
+  SECTION("without a recorded range: the bound of any displacement sensor") {
+    auto b = sample_scan(true);
+    b.m_um[1][5] = -8.7e10;
+    refused(b, 5, "beyond any displacement sensor (the file records no range");
+  }
+  SECTION("inf, in a complete and in an incomplete scan") {
+    auto b = s;
+    b.m_um[2][3] = std::numeric_limits<double>::infinity();
+    refused(b, 3, "column 'm3_um': inf is not a finite reading");
+    b.complete = false;
+    write_raw_four_sensor_csv(file, b);
+    RawReadOptions inspect;
+    inspect.require_complete = false;
+    CHECK_THROWS_WITH(read_raw_four_sensor_csv(file, inspect),
+                      Catch::StartsWith(where(file, 3)) && Catch::Contains("not a finite"));
+  }
+  SECTION("nan in a scan marked complete") {
+    auto b = s;
+    b.m_um[0][7] = std::numeric_limits<double>::quiet_NaN();
+    refused(b, 7, "not measured, in a scan marked complete");
+  }
+  SECTION("a position out of order") {
+    auto b = s;
+    b.x_mm[4] = b.x_mm[2];
+    refused(b, 4, "column 'x_mm': 4 after 6");
+  }
+  SECTION("a time going backwards") {
+    auto b = s;
+    (*b.t_s)[2][6] = (*b.t_s)[2][5] - 0.01;
+    refused(b, 6, "column 't3_s'");
+    CHECK_THROWS_WITH(read_raw_four_sensor_csv(file), Catch::Contains("time goes backwards"));
+  }
+  SECTION("half a range in the metadata") {
+    auto b = sample_scan(true);
+    b.metadata.emplace_back("range_min_m1_um", "-2000");
+    write_raw_four_sensor_csv(file, b);
+    CHECK_THROWS_WITH(read_raw_four_sensor_csv(file),
+                      Catch::Contains("range_min_m1_um") && Catch::Contains("range_max_m1_um"));
+  }
+}
+
+TEST_CASE("impossible values of a displacement raw scan are refused with file:line") {
+  TempDir dir;
+  const auto file = dir / "d.csv";
+  RawDisplacementScan s;
+  s.x_mm = {0, 5, 10, 15};
+  s.s1_scan1_um = {1, 2, 3, 4};
+  s.s2_scan1_um = {4, 5, 6, 7};
+  s.s1_scan2_um = {1.1, 2.1, 3.1, 4.1};
+  s.s2_scan2_um = {4.5, 5.5, 6.5, 7.5};
+  s.t_scan1_s = std::vector<double>{0, 1, 2, 3};
+  s.t_scan2_s = std::vector<double>{4, 5, 6, 7};
+  s.d_mm = 5.0;
+  s.complete = true;
+  s.metadata = {{"range_min_s1_um", "-100"},
+                {"range_max_s1_um", "100"},
+                {"range_min_s2_um", "-100"},
+                {"range_max_s2_um", "100"}};
+  write_raw_displacement_csv(file, s);
+  REQUIRE_NOTHROW(read_raw_displacement_csv(file));
+  auto b = s;
+  b.s2_scan2_um[2] = 100.5;
+  write_raw_displacement_csv(file, b);
+  CHECK_THROWS_WITH(read_raw_displacement_csv(file),
+                    Catch::StartsWith(where(file, 2)) &&
+                        Catch::Contains("'s2_scan2_um': 100.5 um is outside the sensor's range"));
+  b = s;
+  (*b.t_scan2_s)[3] = 4.5;
+  write_raw_displacement_csv(file, b);
+  CHECK_THROWS_WITH(read_raw_displacement_csv(file),
+                    Catch::StartsWith(where(file, 3)) && Catch::Contains("time goes backwards"));
+  b = s;
+  b.x_mm[1] = -1;
+  write_raw_displacement_csv(file, b);
+  CHECK_THROWS_WITH(
+      read_raw_displacement_csv(file),
+      Catch::StartsWith(where(file, 1)) && Catch::Contains("positions must increase"));
+}

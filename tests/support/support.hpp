@@ -34,8 +34,18 @@ class TempDir {
   std::filesystem::path path_;
 };
 
+/// The 1-based line of data row `row` (0-based) of a CSV file written by errsep (metadata lines,
+/// then the header, then the rows), for "file:line" expectations; 0 when it has no header.
+std::size_t data_line(const std::filesystem::path& csv, std::size_t row);
+
 /// Runs a shell command, returns its exit status (-1 if it did not exit normally) and its
 /// combined stdout+stderr in `output`.
 int run_command(const std::string& cmd, std::string* output = nullptr);
+
+/// The whole content of a file ("" when it cannot be read).
+std::string read_file(const std::filesystem::path& p);
+/// Replaces the first `from` in `s` by `to`; throws std::runtime_error when there is none (a
+/// test that edits a shipped config must notice when the config changes).
+void replace_once(std::string& s, const std::string& from, const std::string& to);
 
 }  // namespace errsep::test

@@ -69,7 +69,8 @@ enum class DaemonState : std::uint8_t {
   fault = 3,
   stopping = 4
 };
-enum class TriggerSource : std::uint8_t { modbus, gpio, schedule, command };
+/// Values are part of the register map (status register 13): append only.
+enum class TriggerSource : std::uint8_t { modbus, gpio, schedule, command, mqtt };
 /// Reply to a trigger (status register 1): accepted or why not.
 enum class TriggerReply : std::uint8_t {
   none = 0,
@@ -192,6 +193,10 @@ struct DaemonOptions {
   /// more often than 10 times the last checkpoint's write time).
   std::chrono::milliseconds checkpoint_interval{1000};
   bool separate = true;  ///< compute and write the four-sensor result after a scan
+  /// Called on the main loop once a scan's files are on disk (each finished scan, and each
+  /// result recovered at start), with its scan id and store stem: e.g. queue it for the plant's
+  /// broker (service/plant_publisher.hpp).  Exceptions are logged, never stop the daemon.
+  std::function<void(std::uint64_t scan_id, const std::string& stem)> on_scan_committed;
 
   bool is_valid(std::string* why = nullptr) const;
 };
@@ -260,6 +265,7 @@ class Daemon {
                              const std::string& raw_file);
   /// At start: the result of every complete raw file that has none (a stop between the two).
   int recover_results();
+  void scan_committed(std::uint64_t scan_id, const std::string& stem);
   /// Metadata of the scan's raw/result files (scan id, trigger, times, outcome, points).
   std::vector<std::pair<std::string, std::string>> scan_metadata(const std::string& outcome,
                                                                  const std::string& reason) const;

@@ -23,12 +23,14 @@
 #include <functional>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "errsep/acq/displacement_sensor.hpp"
 #include "errsep/acq/sampler.hpp"
 #include "errsep/acq/stage.hpp"
 #include "errsep/core/four_sensor_config.hpp"
+#include "errsep/core/machine_axes.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 
@@ -39,8 +41,11 @@ const char* to_string(ScanKind k) noexcept;
 
 struct ScanOptions {
   ScanKind kind = ScanKind::four_sensor;
-  core::FourSensorConfig geometry;      ///< Δx, s2, s3, s4, N (four-sensor)
-  double slide_start_mm = 0.0;          ///< slide position of x_0; raw x_mm is relative to it
+  core::FourSensorConfig geometry;  ///< Δx, s2, s3, s4, N (four-sensor)
+  double slide_start_mm = 0.0;      ///< slide position of x_0; raw x_mm is relative to it
+  /// Machine axes (core/machine_axes.hpp): the slide goes to slide_start_mm +
+  /// axes.scan_direction * x; all of it is recorded in the raw file's metadata.
+  core::MachineAxes axes;
   double sensor_stage_origin_mm = 0.0;  ///< sensor-stage position of configuration 1
   int averages = 100;                   ///< K ok readings averaged per point
   int settle_ms = 50;                   ///< wait after in-position before averaging
@@ -54,11 +59,21 @@ struct ScanOptions {
   int point_retries = 2;              ///< re-reads of a point before the scan fails
   SamplerOptions sampler;             ///< rate, real-time set-up (per bus sampler)
   std::size_t ring_capacity = 65536;  ///< samples per bus ring
+  /// The measuring range of each column's sensor, written into the raw file's metadata so that a
+  /// reader can refuse a reading no sensor can give (io/plausibility.hpp); sensor_range_metadata.
+  std::vector<std::pair<std::string, std::string>> range_metadata;
 
   /// Time allowed to collect one window of K readings: 4·K periods + 1 s.
   std::chrono::milliseconds window_timeout() const;
   bool is_valid(std::string* why = nullptr) const;
 };
+
+/// The raw file's metadata lines of the measuring range of each column's sensor, from the machine
+/// config's [[sensor]] range_min_um / range_max_um: m1..m4 for a four-sensor scan (one sensor on
+/// the sensor stage: its range for all four), s1 (workpiece) and s2 (reference piece) for a
+/// displacement scan (io/plausibility.hpp).  Sensors the config does not name are left out.
+std::vector<std::pair<std::string, std::string>> sensor_range_metadata(const io::MachineConfig& cfg,
+                                                                       ScanKind kind);
 
 /// The scan options a machine config describes (method "both" is the caller's loop; this takes
 /// `kind`).  Throws std::invalid_argument when the config's [scan] cannot give that kind.

@@ -1,61 +1,98 @@
 #pragma once
-// Compensation tables from a measured straightness error (pure computation; the controller file
-// formats are written by errsep/io/controller_tables.hpp).
+// Compensation tables from a measured straightness error (pure computation; the controllers' file
+// formats are written by errsep/io/cnc/).
 //
-// Sign convention (documented once, used by every table):
-//   error      e(x) = actual - commanded position of the OUTPUT axis (the straightness direction)
-//                     while the INPUT axis (the moving axis) is at x.  The four-sensor result S(x)
-//                     is taken as this error: S > 0 means the carriage sits towards +direction.
-//                     If your S has the opposite sense, set CompensationOptions::error_sign = -1.
-//   compensation c(x) = -e(x), added by the controller to the output axis command, so that
-//                     actual = commanded + c(x) + e(x) = commanded.
-// The tables hold c in um here; writers convert to the controller's unit.
+// Sign convention (once, for every table):
+//   error        e(p) = actual - commanded position of the OUTPUT axis while the INPUT axis is at
+//                       machine position p (ISO 230-1 E<output><input>); from the separated S(x)
+//                       through the configured MachineAxes: e(p(x)) = reading_sign * S(x).
+//   compensation c(p) = -e(p), added by the controller to the output axis command, so that
+//                       actual = commanded + c + e = commanded.
+// Tables hold c in um at machine positions; writers convert to the controller's unit.
 //
-// A line is removed from e(x) first (end-point line by default): the slope of S relative to the
-// other axis is set by how the reference artefact was aligned, not by the machine, and would
-// otherwise be "compensated" as a squareness error that was never measured.
+// A line is removed from e first (the end-point line by default): the slope of S relative to the
+// other axis is set by how the artefact was aligned, not by the machine, and would otherwise be
+// "compensated" as a squareness error that was never measured.  With the end-point line removed,
+// c is 0 at both ends of the measured range, so a controller that holds the end values outside a
+// table applies nothing outside the measurement.
+//
+// A table represents the measurement only inside the measured range: its nodes lie in
+// [first, last] measured position (no extrapolated node), and its own interpolation error against
+// the measured profile (TableAccuracy) is reported with it.
 #include <cstddef>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "errsep/core/iso230.hpp"
+#include "errsep/core/machine_axes.hpp"
 
 namespace errsep::core {
 
 struct CompensationOptions {
   /// Line removed from the error before tabulating (nullopt: keep S as it is).
   std::optional<ReferenceLine> remove_line = ReferenceLine::end_points;
-  double error_sign = 1.0;  ///< +1: e = S; -1: e = -S (see the sign convention above)
-  double step_mm = 10.0;    ///< spacing of a uniform table
-  /// Largest number of points a uniform table may have (0: no limit).  Sinumerik: MD18342
-  /// $MN_MM_CEC_MAX_POINTS[t] (828D: 200 per table); Beckhoff: kw.crosscomp.max_points.
+};
+
+/// The compensation c = -e as a function of machine position, at the measured samples; linear in
+/// between (the measurement's own resolution), undefined outside [first_mm, last_mm].
+struct CompensationProfile {
+  MachineAxes axes;
+  std::vector<double> position_mm;  ///< machine positions of the input axis, increasing
+  std::vector<double> comp_um;      ///< c at those positions
+  std::vector<double> u_um;         ///< standard uncertainty of c (that of S), or empty
+  std::optional<ReferenceLine> removed_line;
+
+  double first_mm() const { return position_mm.front(); }
+  double last_mm() const { return position_mm.back(); }
+  /// c at machine position p: linear between samples, the end value held outside.
+  double at(double p_mm) const;
+};
+
+/// The profile of a separated straightness S(x) (x from the scan start, strictly increasing; u_S
+/// per point or empty).  Throws std::invalid_argument (bad axes, sizes, non-finite values).
+CompensationProfile compensation_profile(const std::vector<double>& x_mm,
+                                         const std::vector<double>& s_um,
+                                         const std::vector<double>& u_s_um, const MachineAxes& axes,
+                                         const CompensationOptions& opts = {});
+
+/// A table as a controller holds it: nodes at machine positions (increasing) and values, linear
+/// between nodes, the end values held outside (what the CEC, lincurve, cross-compensation and TNC
+/// tables do).
+struct CompensationTable {
+  std::vector<double> position_mm;
+  std::vector<double> comp_um;
+  double step_mm = 0;  ///< node spacing of a uniform table; 0 for free breakpoints
+  std::size_t points() const { return position_mm.size(); }
+  double at(double p_mm) const;
+};
+
+/// How well a table represents the measurement: |table - profile| over the measured range.  Both
+/// are piecewise linear, so the largest difference lies at a sample or at a node; both are
+/// evaluated.  RMS over the measured samples.  `extra_um` is added to the maximum for what is not
+/// piecewise linear in the controller (e.g. LinuxCNC's truncation to whole counts).
+struct TableAccuracy {
+  double max_um = 0;
+  double rms_um = 0;
+  double position_of_max_mm = 0;
+};
+TableAccuracy table_accuracy(const CompensationProfile& profile, const CompensationTable& table,
+                             double extra_um = 0.0);
+
+struct UniformTableOptions {
+  /// The controller's point limit (0 = none), e.g. Sinumerik MD18342 $MN_MM_CEC_MAX_POINTS.
   std::size_t max_points = 0;
+  /// 0: chosen from the data (the samples themselves when they are uniform and fit the limit,
+  /// else the spacing with the smallest interpolation error that fits); > 0: a step that must
+  /// divide the measured span (the last node is the last measured position).
+  double step_mm = 0;
   bool is_valid(std::string* why) const;
 };
 
-/// Table with uniformly spaced points: c(start_mm + i * step_mm) = comp_um[i].
-struct UniformCompensationTable {
-  double start_mm = 0;
-  double step_mm = 1;
-  std::vector<double> comp_um;
-  double end_mm() const { return start_mm + step_mm * static_cast<double>(comp_um.size() - 1); }
-  /// Largest |table interpolated linearly - (-error)| over the measured samples, um.
-  double max_interpolation_error_um = 0;
-};
-
-/// The error e_i = error_sign * S_i minus the chosen line, at the measured positions.
-std::vector<double> error_to_compensate(const std::vector<double>& x_mm,
-                                        const std::vector<double>& s_um,
-                                        const CompensationOptions& opts);
-
-/// Uniform table over the measured range: nodes start at x_mm.front() with step_mm; the last node
-/// is the first one at or beyond x_mm.back() (its value is the end value: controllers hold the
-/// end value outside a table anyway).  Values are -e linearly interpolated at the nodes.  Throws
-/// std::invalid_argument (bad options or profile, or more than max_points points).
-UniformCompensationTable make_uniform_table(const std::vector<double>& x_mm,
-                                            const std::vector<double>& s_um,
-                                            const CompensationOptions& opts);
+/// Uniform table over exactly the measured range.  Throws std::invalid_argument with an actionable
+/// message (a step that does not divide the span, more points than the limit).
+CompensationTable make_uniform_table(const CompensationProfile& profile,
+                                     const UniformTableOptions& opts = {});
 
 struct BreakpointOptions {
   std::size_t max_points = 16;  ///< LinuxCNC lincurve: at most 16 (x, y) points
@@ -65,31 +102,16 @@ struct BreakpointOptions {
   bool is_valid(std::string* why) const;
 };
 
-/// Piecewise-linear table with free breakpoints (LinuxCNC lincurve).
-struct BreakpointTable {
-  std::vector<double> x_mm;
-  std::vector<double> comp_um;
-  /// Largest |polyline - (-e)| over all samples.  Both are piecewise linear between samples and
-  /// breakpoints are samples, so this is the largest error over the whole measured range.
-  double max_interpolation_error_um = 0;
-  double rms_interpolation_error_um = 0;
-  std::size_t candidates = 0;  ///< number of candidate breakpoints considered
-};
+/// At most opts.max_points breakpoints among the samples (always the first and the last) with
+/// the smallest largest interpolation error over all samples; values equal the sample values.
+/// Method: bisection on the error bound eps; for a given eps the fewest-breakpoint polyline is a
+/// shortest path in the DAG of admissible segments, where a segment (i, j) is admissible when
+/// every sample between lies within eps of the chord; all segments leaving i are tested in one
+/// sweep by intersecting the cone of admissible slopes.  O(C * N) per bisection step.
+CompensationTable make_breakpoint_table(const CompensationProfile& profile,
+                                        const BreakpointOptions& opts = {});
 
-/// Chooses at most opts.max_points breakpoints among the samples (always the first and the last)
-/// so that the largest interpolation error over all samples is smallest, with the breakpoint
-/// values equal to the sample values.  Method: bisection on the error bound eps; for a given eps
-/// the fewest-breakpoint polyline is a shortest path in the DAG of admissible segments, where a
-/// segment (i, j) is admissible when every sample between lies within eps of the chord; all
-/// segments leaving i are tested in one sweep by intersecting the cone of admissible slopes.
-/// O(C * N) per bisection step (C candidates, N samples).
-BreakpointTable make_breakpoint_table(const std::vector<double>& x_mm,
-                                      const std::vector<double>& s_um,
-                                      const CompensationOptions& opts,
-                                      const BreakpointOptions& bopts = {});
-
-/// Linear interpolation of (xs, ys) at x with the end values held outside (what lincurve and the
-/// CEC/cross-compensation tables do).  xs strictly increasing.
+/// Linear interpolation of (xs, ys) at x with the end values held outside.  xs increasing.
 double interpolate_hold(const std::vector<double>& xs, const std::vector<double>& ys, double x);
 
 }  // namespace errsep::core

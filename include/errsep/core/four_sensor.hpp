@@ -10,6 +10,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "errsep/core/four_sensor_config.hpp"
 #include "errsep/core/four_sensor_posterior.hpp"
@@ -78,12 +79,16 @@ enum class MotionEstimator {
 };
 
 /// The λ search of LambdaRule::reml and gcv: a log grid (evaluated on `threads` threads), then a
-/// golden-section refinement around the best grid point.  λ is relative to the bound of σ_max(A).
+/// refinement around the best grid point: its two neighbours at half the spacing (evaluated at
+/// once on two threads), the best kept, the spacing halved.  λ is relative to the bound of
+/// σ_max(A).  The defaults (one decade between grid points, 6 halvings: λ to 1/64 decade) find the
+/// λ of a 201-point grid with 40 golden-section steps to within 0.01 decade on random profiles,
+/// with 11 + 12 criteria instead of 21 + 12, and 12 sequential ones on two threads instead of 23.
 struct LambdaSearchOptions {
-  int count = 21;              ///< grid points (>= 3)
+  int count = 11;              ///< grid points (>= 3)
   double decades_below = 6.0;  ///< range [σ_max·10^−below, σ_max·10^above]
   double decades_above = 4.0;
-  int refine_iterations = 10;  ///< golden-section steps in log λ
+  int refine_iterations = 6;  ///< halvings of the spacing in log λ
   int threads = 1;
   bool is_valid(std::string* why = nullptr) const;
 };
@@ -144,6 +149,8 @@ struct FourSensorResult {
   /// gauge, and after a collapse the level at which S is undetermined.
   std::string determination_note;
   LCurveResult lcurve;  ///< the whole curve (filled for rule lcurve)
+  /// Rules reml and gcv: the λ of the search grid and the rule's criterion there.
+  std::vector<double> lambda_grid, lambda_criterion;
   /// Rule lcurve found no corner (lcurve.has_corner false): what was done instead.
   LambdaFallback lambda_fallback = LambdaFallback::none;
   double residual_norm = 0;  ///< ‖A·X_λ − b‖

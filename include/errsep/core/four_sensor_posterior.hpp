@@ -101,6 +101,11 @@ class FourSensorCovariance {
                   const Eigen::VectorXd& c_f);
   /// The covariance matrix of S at the given positions (indices 0..P−1), one solve per index.
   Eigen::MatrixXd covariance_S(const std::vector<int>& positions);
+  /// Cov(S(x_n), Σ_m a(m, j)·S(x_m)) for every position n and each column j of `a_S` (P × q):
+  /// the covariance of the whole profile with q linear functionals of it (e.g. the two of a
+  /// least-squares line), one solve per column, O(P) more per column.  Throws
+  /// std::invalid_argument for a wrong number of rows.
+  Eigen::MatrixXd covariance_S_with(const Eigen::MatrixXd& a_S);
   /// One draw from the posterior (or, without a prior, the sampling distribution) of S and γ,
   /// as deviations from the estimate: dS (µm) and dγ (rad), P entries each.  One solve per draw:
   /// x_s − x̂ = M⁻¹(Aᵀσε₁ + λσLᵀε₂) has covariance σ²M⁻¹ (perturbation sampling), plus the
@@ -117,5 +122,27 @@ class FourSensorCovariance {
  private:
   std::unique_ptr<Parts> p_;
 };
+
+/// The uncertainty of a separation before measuring (issue 15: the scan plan).  Without a prior
+/// the separation is linear in the readings and its covariance σ²·(AᵀA)⁻¹ (plus the readings'
+/// own noise in S and γ) depends on the geometry and σ only, not on the data: this is the exact
+/// covariance of the unregularised separation (Penalty::none, LambdaRule::least_squares) that a
+/// scan with this configuration will state, with σ given instead of estimated.  The default
+/// estimator's posterior can only be tighter (a prior adds information), so this is what a scan
+/// reaches without relying on the reference being smooth.
+struct FourSensorPrediction {
+  FourSensorConfig config;
+  double sigma_um = 0.0;  ///< standard deviation of one reading as it enters (σ/√K for K averages)
+  Eigen::VectorXd x_mm;                 ///< P slide positions
+  Eigen::VectorXd u_S_um, u_gamma_rad;  ///< standard uncertainties (k = 1) at each position
+  Eigen::VectorXd u_f_um;               ///< of the reference f at its N samples
+  /// Covariances of linear functionals (straightness figures), from the kept factor.
+  std::shared_ptr<FourSensorCovariance> covariance;
+};
+
+/// The prediction above for readings of standard deviation `sigma_um` (> 0).  Throws
+/// std::invalid_argument for an invalid configuration, one without redundant readings
+/// (2P < N), or a bad σ.
+FourSensorPrediction predict_four_sensor_uncertainty(const FourSensorConfig& cfg, double sigma_um);
 
 }  // namespace errsep::core

@@ -30,7 +30,9 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace errsep::core {
@@ -43,6 +45,8 @@ enum class ReferenceLine {
 };
 /// "end_points", "least_squares", "minimum_zone".
 const char* to_string(ReferenceLine r);
+/// The inverse of to_string, or nullopt.
+std::optional<ReferenceLine> parse_reference_line(std::string_view s);
 /// Human label, e.g. "end-point line".
 const char* label(ReferenceLine r);
 

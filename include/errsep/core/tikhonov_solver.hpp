@@ -95,6 +95,10 @@ class TikhonovSolver {
   /// factorize(λ), then x = solve_normal(rhs), with rhs's forward substitution done in the same
   /// pass over the factor as the border's (one pass fewer per λ; what an L-curve sweep calls).
   SolverStatus factorize_and_solve(double lambda, const Eigen::VectorXd& rhs, Eigen::VectorXd& x);
+  /// factorize(λ), then q = vᵀ(AᵀA + λ²P)⁻¹v from the forward substitution alone, done in the
+  /// same pass over the factor as the border's (no back substitution): what a likelihood needs
+  /// (bᵀb − q is the penalised residual ‖b − Ax‖² + λ²xᵀPx for v = Aᵀb).
+  SolverStatus factorize_and_quadratic_form(double lambda, const Eigen::VectorXd& v, double& q);
   /// Solves (AᵀA + λ²I)·y = rhs with the current factor.
   Eigen::VectorXd solve_normal(const Eigen::VectorXd& rhs);
   /// vᵀ(AᵀA + λ²I)⁻¹v with the current factor (one triangular solve for the LDLᵀ factor).
@@ -125,7 +129,10 @@ class TikhonovSolver {
   void build(int border_columns, const Eigen::SparseMatrix<double>& penalty);
   bool build_banded(const Eigen::SparseMatrix<double>& At, const Eigen::SparseMatrix<double>& P);
   void compress_border();
-  SolverStatus factorize_impl(double lambda, const Eigen::VectorXd* rhs, Eigen::VectorXd* x);
+  SolverStatus factorize_impl(double lambda, const Eigen::VectorXd* rhs, Eigen::VectorXd* x,
+                              double* quad);
+  double quadratic_form_from_forward(const Eigen::VectorXd& v,
+                                     const Eigen::Ref<const Eigen::VectorXd>& z);
   void finish_solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& z, Eigen::VectorXd& out);
   void build_general(const Eigen::SparseMatrix<double>& At);
   std::shared_ptr<const Eigen::SparseMatrix<double>> A_;

@@ -14,6 +14,11 @@
 //    the nearest configuration) or the fixed offset of configuration i (four sensors);
 //  - the displacement method of Haramiishi 2024 section 2.1: the workpiece sensor reads
 //    w(x) + m(x), the reference sensor r(x + p) + m(x) with p the reference-piece stage position;
+//  - a compensation table (simulator.compensation_table, any errsep format): the simulated
+//    controller adds c(p) to the output axis at the slide's machine position p, so the scan's
+//    sensors read reading_sign * c(p) more (measure - compensate - verify);
+//  - machine coordinates: the truth S, gamma, f is laid over the scan, x = (slide position -
+//    scan.slide_start_mm) * axes.scan_direction;
 //  - Gaussian noise σ and a linear drift in time on every reading; sensors the scan does not use
 //    read 0 (+ noise + drift).
 // Fault injection (config [simulator.faults], the command line, or inject() at run time): stop
@@ -40,9 +45,10 @@ struct SimulatorStats {
 
 class ModbusDeviceSimulator {
  public:
-  /// Builds the simulated machine from cfg (cfg.simulator: truth, noise, faults, host, port).
-  /// Throws std::runtime_error when the config cannot be served (overlapping registers, a host
-  /// that is not loopback).
+  /// Builds the simulated machine from cfg (cfg.simulator: truth, noise, faults, host, port,
+  /// compensation table).  Throws std::runtime_error when the config cannot be served
+  /// (overlapping registers, a host that is not loopback, a table that cannot be read or
+  /// compensates other axes than the scan measures).
   explicit ModbusDeviceSimulator(const io::MachineConfig& cfg);
   ~ModbusDeviceSimulator();
   ModbusDeviceSimulator(const ModbusDeviceSimulator&) = delete;

@@ -4,7 +4,13 @@
 //
 // The child runs in its own process group, so a Ctrl-C in the terminal reaches the scan (which
 // must still stop the simulated stages over Modbus) and not the simulator; the scan stops the
-// simulator itself at the end (SIGTERM, then SIGKILL after a grace period).
+// simulator itself at the end (SIGTERM, then SIGKILL after a grace period).  However the program
+// dies (SIGKILL, the OOM killer, a crash), the simulator dies with it: the child sets
+// PR_SET_PDEATHSIG (SIGKILL) before exec, and exits at once when its parent died before that
+// (parent pid changed).  The kernel sends the signal when the *thread* that started the child
+// ends: construct a SimulatorProcess on a thread that lives as long as the program needs it (the
+// main thread).  Each program starts its own simulator on an ephemeral port that it reads from the
+// child's own stdout: it never talks to another program's simulator.
 #include <sys/types.h>
 
 #include <chrono>

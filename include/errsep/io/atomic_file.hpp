@@ -1,7 +1,9 @@
 #pragma once
 // Durable file replacement: write a temporary file in the target's directory, fsync it, rename it
 // over the target, fsync the directory.  A power cut leaves either the old file, the whole new
-// file, or (for a new name) no file -- never a half-written one.
+// file, or (for a new name) no file -- never a half-written one.  The temporary is named
+// ".<name>.tmp.<pid>.XXXXXX"; one left by a killed writer is removed by the next run that writes
+// into the folder (io/staged_directory.hpp: remove_stale_temporaries).
 #include <filesystem>
 #include <string_view>
 

@@ -39,8 +39,8 @@ struct CsvTable {
   std::vector<double> column(const std::string& name, const std::filesystem::path& file = {}) const;
   /// Value of a metadata key, or nullopt.
   std::optional<std::string> meta(const std::string& key) const;
-  /// A metadata value that must be a finite number, or nullopt when the key is absent; throws
-  /// CsvError(file, 0, "metadata 'key: value': not a number") otherwise.
+  /// Value of a metadata key as a finite number, or nullopt when the key is absent; throws
+  /// CsvError(file, 0, "metadata 'key: value': not a number") when it is not one.
   std::optional<double> meta_number(const std::string& key,
                                     const std::filesystem::path& file = {}) const;
   void set_meta(const std::string& key, const std::string& value);
@@ -54,6 +54,9 @@ struct CsvReadOptions {
 
 /// Reads a CSV file; throws CsvError naming file and line on any malformed content.
 CsvTable read_csv(const std::filesystem::path& file, const CsvReadOptions& opts = {});
+/// The same from text already in memory; `name` stands for the file in messages.
+CsvTable parse_csv(const std::string& text, const std::filesystem::path& name,
+                   const CsvReadOptions& opts = {});
 
 /// Formats a table as CSV text (metadata as "# key: value" lines, then header, then rows).
 std::string format_csv(const CsvTable& table, int significant_digits = 10);

@@ -25,6 +25,13 @@ struct ResultWriteInfo {
   std::vector<std::pair<std::string, std::string>> extra_metadata;
 };
 
+/// The machine axes a raw scan records (io/machine_axes_metadata.hpp) carried into a result:
+/// the axis letters and slide_start_mm, scan_direction, reading_sign as extra metadata.  Leaves
+/// `info` as it is when the raw scan does not record them.  Throws std::invalid_argument on a
+/// malformed value.
+void carry_machine_axes(const std::vector<std::pair<std::string, std::string>>& raw_metadata,
+                        ResultWriteInfo& info);
+
 /// Creates DIR if needed and writes the files above.  Throws std::runtime_error on I/O errors.
 void write_four_sensor_result(const std::filesystem::path& dir, const core::FourSensorResult& r,
                               const ResultWriteInfo& info);

@@ -17,7 +17,10 @@
 #include <string>
 #include <vector>
 
+#include "errsep/core/compensation.hpp"
 #include "errsep/core/four_sensor_config.hpp"
+#include "errsep/core/machine_axes.hpp"
+#include "errsep/io/cnc/compensation_export.hpp"
 #include "errsep/io/register_spec.hpp"
 
 namespace errsep::io {
@@ -135,6 +138,41 @@ struct RefineConfig {
   double alpha = 0.01;   ///< family-wise significance of one step (RefineOptions::alpha)
 };
 
+/// Publishing to the plant's MQTT broker ([mqtt], optional; service/plant_publisher.hpp).  The
+/// topic tree of one machine is <topic_prefix>/<machine>/{status, scan/<scan id>, alarm,
+/// cmd/scan, cmd/scan/reply}; every payload is JSON valid against schema/mqtt-messages.schema.json.
+struct MqttConfig {
+  std::string host = "127.0.0.1";
+  int port = 1883;
+  std::string machine;    ///< this machine's name in the topic tree (required)
+  std::string client_id;  ///< empty = "errsep-<machine>"
+  std::string topic_prefix = "errsep";
+  int qos = 1;  ///< 1 or 2: a queued message is removed only once acknowledged
+  int keepalive_s = 30;
+  std::string username;                               ///< empty = anonymous
+  std::filesystem::path password_file;                ///< the password, first line of this file
+  std::filesystem::path tls_ca_file;                  ///< set: TLS only (no plain-TCP fallback)
+  std::filesystem::path tls_cert_file, tls_key_file;  ///< client certificate (optional, a pair)
+  /// Store-and-forward queue; empty = "mqtt-queue" beside the results directory.
+  std::filesystem::path queue_dir;
+  bool commands = false;  ///< accept <prefix>/<machine>/cmd/scan (same refusals as the coil)
+  /// An alarm is published when a scan's minimum-zone straightness exceeds this (0 = none).
+  double straightness_tolerance_um = 0.0;
+
+  std::string effective_client_id() const {
+    return client_id.empty() ? "errsep-" + machine : client_id;
+  }
+  /// <topic_prefix>/<machine>
+  std::string topic_root() const { return topic_prefix + "/" + machine; }
+};
+
+/// The controller tables written from a four-sensor result ([compensation]): the line removed
+/// from the error first, the formats and each format's parameters ([compensation.<format>]).
+struct CompensationConfig {
+  core::CompensationOptions profile;
+  CompensationExportOptions tables;
+};
+
 /// One harmonic a·sin(2π·x/period + phase) of a simulated profile.
 struct Harmonic {
   double amplitude = 0.0;  ///< µm (for gamma: µrad)
@@ -142,10 +180,12 @@ struct Harmonic {
   double phase_rad = 0.0;
 };
 
-/// A simulated profile: offset + slope·x + Σ harmonics (x in mm).  Units: µm (gamma: µrad).
+/// A simulated profile: offset + slope·x + quadratic·x² + Σ harmonics (x in mm).  Units: µm
+/// (gamma: µrad).
 struct ProfileSpec {
   double offset = 0.0;
   double slope_per_mm = 0.0;
+  double quadratic_per_mm2 = 0.0;  ///< a bow: over a travel L its sagitta is quadratic·L²/4
   std::vector<Harmonic> harmonics;
   double eval(double x_mm) const noexcept;
 };
@@ -175,9 +215,13 @@ struct SimulatorConfig {
   ProfileSpec f_um;                        ///< reference surface f(x)
   std::array<double, 4> e_um{0, 0, 0, 0};  ///< zero-adjustment values e_1..e_4 (e_1 = 0)
   // displacement method (Haramiishi 2024, section 2.1)
-  ProfileSpec w_um;                ///< workpiece profile w(x)
-  ProfileSpec r_um;                ///< reference piece profile r(x)
-  ProfileSpec m_um;                ///< motion error m(x) of the table
+  ProfileSpec w_um;  ///< workpiece profile w(x)
+  ProfileSpec r_um;  ///< reference piece profile r(x)
+  ProfileSpec m_um;  ///< motion error m(x) of the table
+  /// A compensation table (any errsep format, io/cnc/compensation_format.hpp) the simulated
+  /// controller applies to the output axis as a function of the slide's machine position; empty =
+  /// none.  Set by errsep-devsim --compensation (errsep-scan --verify-with).
+  std::filesystem::path compensation_table;
   double noise_sigma_um = 0.0;     ///< Gaussian noise on every reading
   double drift_um_per_s = 0.0;     ///< linear sensor drift since the simulator started
   double stage_speed_mm_s = 50.0;  ///< default speed of every simulated stage
@@ -194,8 +238,13 @@ struct MachineConfig {
   std::optional<GpioConfig> gpio;
   SamplerConfig sampler;
   ScanConfig scan;
+  /// [axes]: the machine axes of the scan and the sign of its readings; slide_start_mm is
+  /// scan.slide_start_mm.
+  core::MachineAxes axes;
+  CompensationConfig compensation;
   RefineConfig refine;
   SimulatorConfig simulator;
+  std::optional<MqttConfig> mqtt;  ///< [mqtt]: publish to a broker (absent: do not)
 
   const BusConfig* find_bus(const std::string& name) const;
   const SensorConfig* find_sensor(const std::string& name) const;

@@ -11,6 +11,11 @@
 //   x_mm,m1_um,m2_um,m3_um,m4_um[,t1_s,t2_s,t3_s,t4_s]
 //
 // t_i_s: mean time of the K averaged readings of configuration i, seconds since scan start.
+// A scan also records each column's sensor range ("# range_min_m1_um: -2000", "# range_max_m1_um:
+// 2000", ...; io/plausibility.hpp): the readers refuse, with "file:line:", a reading outside it
+// (outside +-1e5 um when the file records none), inf anywhere, nan in a complete scan, positions
+// that do not increase and times that go backwards -- before anything is computed.  A raw scan
+// in a result folder (io/staged_directory.hpp) is read only when its folder is a whole set.
 //
 // Displacement-method scan (Haramiishi 2024, Eqs. 1-3): S1 reads the workpiece, S2 the
 // reference piece; scan 2 after the reference piece was displaced by d:

@@ -13,8 +13,9 @@
 //                               aligned differences (core/reference_comparison.hpp)
 //
 // Everything is read and checked before anything is written, the files are written into a
-// staging directory next to DIR and moved into place at the end: on an error DIR is left as it
-// was (no half-written result).
+// staging directory next to DIR and moved into place at the end as one result set of kind
+// "refine" (io/staged_directory.hpp): on an error or a kill DIR is left as it was (no
+// half-written result, no files of two runs); DIR may hold nothing but an earlier refine result.
 #include <Eigen/Core>
 #include <filesystem>
 #include <optional>
@@ -67,6 +68,8 @@ struct RefineRunResult {
   std::optional<ReferenceReport> reference;
   std::string text;                          ///< the readable report written to the text file
   std::vector<std::filesystem::path> files;  ///< written, in DIR
+  /// Temporaries of interrupted errsep runs removed from DIR's folder (io::describe_swept).
+  std::vector<std::filesystem::path> swept;
 };
 
 /// Compares a separation with a reference trace (what the app reports).

@@ -15,7 +15,7 @@
 //   result         the separated profiles
 // Every file is written with write_file_atomic (temp file, fsync, rename, directory fsync): a
 // power cut or SIGKILL leaves the whole file or none.  Stray temporary files of a killed writer
-// (".<name>.tmp.XXXXXX") are removed by clean_stale_temporaries() at start, and a checkpoint
+// (".<name>.tmp.<pid>.XXXXXX") are removed by clean_stale_temporaries() at start, and a checkpoint
 // whose complete raw file made it to disk (a kill between the two) by remove_superseded().
 //
 // The disk filling up is a DiskFullError (a std::runtime_error that says so and names the file),
@@ -95,7 +95,8 @@ class ResultsStore {
   /// One more than the highest scan id present (1 for an empty store), so ids never repeat
   /// across restarts.
   std::uint64_t next_scan_id() const;
-  /// Removes temporary files left by a killed writer.  Returns how many.
+  /// Removes temporary files left by a killed writer (io/staged_directory.hpp:
+  /// remove_stale_temporaries, with those of older versions that carry no pid).  Returns how many.
   int clean_stale_temporaries();
   /// Removes every raw-incomplete file (a checkpoint) of a scan whose complete raw file is
   /// present: the daemon was stopped between writing the one and removing the other.  Returns

@@ -17,14 +17,20 @@
 // At least one of them must be present.
 //
 // Outputs in DIR: evaluation.csv (one row, ISO 230-1 symbols in the column names),
-// evaluation.txt, plots/*.png|svg|gp|dat, report.html, compensation/* — each written atomically.
+// evaluation.txt, plots/*.png|svg|gp|dat, report.html, compensation/* (every CNC format of
+// io/cnc/, in machine coordinates, and accuracy.csv).  DIR is a result set
+// (io/staged_directory.hpp): it is refused when its manifest says it is not whole, raw scans in it
+// are read with the plausibility checks, and the outputs join the set, which is committed anew
+// whole (outputs of an earlier report are replaced, never mixed with these).
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "errsep/core/compensation.hpp"
 #include "errsep/core/iso230.hpp"
-#include "errsep/io/controller_tables.hpp"
+#include "errsep/core/machine_axes.hpp"
+#include "errsep/io/cnc/compensation_export.hpp"
 #include "errsep/io/plots.hpp"
 
 namespace errsep::io {
@@ -37,29 +43,35 @@ struct ScanReportOptions {
   /// Moving axis and straightness direction (X, Y or Z); 0 = from motion.csv metadata, else X / Y.
   char axis = 0;
   char direction = 0;
-  core::CompensationOptions compensation;  ///< step_mm etc. of the uniform tables
-  std::size_t lincurve_points = 16;
+  core::CompensationOptions compensation;   ///< the line removed before tabulating
+  CompensationExportOptions tables_export;  ///< CNC formats and their parameters
+  /// Machine axes for a result that does not record them (motion.csv metadata slide_start_mm,
+  /// scan_direction, reading_sign), e.g. from the machine config; nullopt = scan coordinates
+  /// (with a warning).  The input/output letters follow `axis`/`direction` or the metadata.
+  std::optional<core::MachineAxes> axes;
   bool tables = true;  ///< write compensation tables (four-sensor results only)
-  /// Sinumerik machine axis names; empty = AX1/AX2/AX3 for X/Y/Z.
-  std::string cec_input_axis, cec_output_axis;
-  int cec_table_index = 0;
-  /// Beckhoff logical axis numbers; 0 = 1/2/3 for X/Y/Z.
-  int beckhoff_axis_number = 0, beckhoff_master_axis_number = 0;
   bool plots = true;
   PlotOptions plot;
   std::filesystem::path grid_csv;  ///< empty = look for one in the directory
   /// Standard uncertainty of every w(x, y) node (from the displacement method's budget) when the
   /// grid CSV has no u_w_um column; 0 = not known.
   double u_w_um = 0;
+  /// The daemon's results store: adds the straightness trend over its scans (trend.csv and a
+  /// section of evaluation.txt; io/straightness_trend.hpp).  Empty = none.
+  std::filesystem::path trend_results_dir;
   bool is_valid(std::string* why) const;
 };
 
 struct ScanReportResult {
   std::vector<std::filesystem::path> written;
+  /// Temporaries of interrupted errsep runs removed beside and in DIR (io::describe_swept).
+  std::vector<std::filesystem::path> swept;
   std::string text;  ///< evaluation.txt
   std::vector<std::string> warnings;
   bool four_sensor = false, grid = false;
-  double lincurve_max_error_um = -1;  ///< -1 when no lincurve table was made
+  /// One line per compensation table (points, range, interpolation error against U); empty
+  /// when no table was made.
+  std::string compensation_summary;
 };
 
 /// Evaluates DIR and writes the outputs into it.  Throws CsvError / std::runtime_error /
