@@ -36,6 +36,15 @@ int main(int argc, char** argv) {
       ->delimiter(',');
   app.add_option("--size", size, "scale of the effects' drawn sizes")->capture_default_str();
   app.add_flag("--runs", per_run, "print every run");
+  errsep::core::RefineOptions refine;
+  app.add_option("--max-error-ratio", refine.decision.max_error_ratio,
+                 "apply a correction when the expected squared error with it is at most this "
+                 "fraction of the one without it (step_decision.hpp)")
+      ->capture_default_str();
+  app.add_option("--max-quantity-increase", refine.decision.max_quantity_increase,
+                 "... and no quantity's expected squared error grows by more than this fraction "
+                 "of its noise")
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
   try {
@@ -53,11 +62,12 @@ int main(int argc, char** argv) {
     base.size = size;
     std::string why;
     if (!base.is_valid(&why)) throw std::invalid_argument(why);
+    if (!refine.is_valid(&why)) throw std::invalid_argument(why);
     std::cout << errsep::core::sweep_header() << "\n";
     const auto t0 = std::chrono::steady_clock::now();
     for (const auto e : list)
       for (const double s : sigmas) {
-        const auto cell = errsep::core::run_sweep_cell(e, s, seeds, seed0, {}, base);
+        const auto cell = errsep::core::run_sweep_cell(e, s, seeds, seed0, refine, base);
         std::cout << errsep::core::sweep_row(cell) << std::endl;
         if (per_run)
           for (const auto& r : cell.runs) {
