@@ -27,7 +27,9 @@ int main(int argc, char** argv) {
   std::vector<std::string> effects;
   double size = 1.0;
   bool per_run = false;
-  app.add_option("--seeds", seeds, "runs per cell")->check(CLI::PositiveNumber)->capture_default_str();
+  app.add_option("--seeds", seeds, "runs per cell")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   app.add_option("--seed0", seed0, "first seed")->capture_default_str();
   app.add_option("--sigma", sigmas, "noise levels, um")->delimiter(',')->capture_default_str();
   app.add_option("--effects", effects,
@@ -72,12 +74,13 @@ int main(int argc, char** argv) {
         if (per_run)
           for (const auto& r : cell.runs) {
             char buf[600];
-            std::snprintf(buf, sizeof buf,
-                          "    seed %3llu S %.3f -> %.3f (clean %.3f, u %.3f) g %.1f -> %.1f | %s | "
-                          "%s",
-                          static_cast<unsigned long long>(r.seed), r.S_before_um, r.S_after_um,
-                          r.S_clean_um, r.u_S_after_um, r.gamma_before_urad, r.gamma_after_urad,
-                          r.model.c_str(), r.description.c_str());
+            std::snprintf(
+                buf, sizeof buf,
+                "    seed %3llu S %.3f -> %.3f (clean %.3f, u %.3f) g %.1f -> %.1f | %s | "
+                "%s",
+                static_cast<unsigned long long>(r.seed), r.S_before_um, r.S_after_um, r.S_clean_um,
+                r.u_S_after_um, r.gamma_before_urad, r.gamma_after_urad, r.model.c_str(),
+                r.description.c_str());
             std::cout << buf << "\n";
           }
       }

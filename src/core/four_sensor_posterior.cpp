@@ -239,9 +239,9 @@ void FourSensorCovariance::add_low_rank(const Eigen::MatrixXd& G_S, const Eigen:
   const Eigen::Index k = K.rows();
   if (K.cols() != k || G_S.rows() != P || G_gamma.rows() != P || G_f.rows() != N ||
       G_S.cols() != k || G_gamma.cols() != k || G_f.cols() != k)
-    throw std::invalid_argument("FourSensorCovariance::add_low_rank: G_S, G_gamma need P = " +
-                                std::to_string(P) + " rows, G_f N = " + std::to_string(N) +
-                                ", all k columns for a k x k K");
+    throw std::invalid_argument(
+        "FourSensorCovariance::add_low_rank: G_S, G_gamma need P = " + std::to_string(P) +
+        " rows, G_f N = " + std::to_string(N) + ", all k columns for a k x k K");
   if (k == 0) return;
   // R with R·Rᵀ = K from the eigendecomposition (K may be singular).
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (K + K.transpose()));

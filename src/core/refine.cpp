@@ -695,8 +695,8 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
     }
     rep.undetermined.push_back(static_cast<int>(k0));
     rep.undetermined_S_um.push_back(und);
-    std::string v = describe_decision(M.effects[e]->name(), M.effects[e]->parameter_names(), pe,
-                                      cur.u[e], d);
+    std::string v =
+        describe_decision(M.effects[e]->name(), M.effects[e]->parameter_names(), pe, cur.u[e], d);
     if (k0 > 0 && und > 0.1 * d.quantity("S")->rms_u_base) {
       char buf[300];
       std::snprintf(buf, sizeof buf,

@@ -139,9 +139,8 @@ std::string sweep_row(const SweepCell& c) {
       buf, sizeof buf,
       "%-12s %5.2f %4zu | %5.2f %5.2f %5.2f %5.2f %5.2f | %6.3f %6.3f %6.3f %6.3f %6.3f | %6.1f "
       "%6.1f %6.1f %6.1f | %5.2f %5.2f %5.2f | %5.3f %5.3f",
-      to_string(c.effect), c.sigma_um, c.runs.size(), c.fraction([](const SweepRun& r) {
-        return r.added;
-      }),
+      to_string(c.effect), c.sigma_um, c.runs.size(),
+      c.fraction([](const SweepRun& r) { return r.added; }),
       c.fraction([](const SweepRun& r) { return r.identified; }),
       c.fraction([](const SweepRun& r) { return r.applied; }),
       c.fraction([](const SweepRun& r) { return r.not_white; }),

@@ -33,8 +33,8 @@ StepDecision decide_step(const Eigen::VectorXd& p, const Eigen::MatrixXd& cov,
   if (!opts.is_valid(&why)) throw std::invalid_argument("step decision options: " + why);
   const Eigen::Index k = p.size();
   if (cov.rows() != k || cov.cols() != k)
-    throw std::invalid_argument("decide_step: covariance must be k x k for k = " +
-                                std::to_string(k) + " parameters");
+    throw std::invalid_argument(
+        "decide_step: covariance must be k x k for k = " + std::to_string(k) + " parameters");
   StepDecision d;
   bool any_too_bad = false;
   std::string worst;

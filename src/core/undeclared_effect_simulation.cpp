@@ -243,8 +243,8 @@ UndeclaredCase simulate_undeclared(UndeclaredEffect effect, const UndeclaredCase
         const double x = n * cfg.dx_mm;
         c.m_um(n, i) += h * std::exp(-0.5 * std::pow((x - x0) / w, 2));
       }
-      std::snprintf(buf, sizeof buf, "bump on traverse %d: %.3g um, %.3g mm wide at %.4g mm",
-                    i + 1, h, w, x0);
+      std::snprintf(buf, sizeof buf, "bump on traverse %d: %.3g um, %.3g mm wide at %.4g mm", i + 1,
+                    h, w, x0);
       c.description = buf;
       break;
     }

@@ -111,8 +111,8 @@ std::string format_refine_text(const core::RefineResult& r) {
   if (!r.effects.empty()) {
     out += "\nthe refined result (final parameters):\n";
     for (std::size_t e = 0; e < r.verdicts.size(); ++e)
-      out += std::string("  ") + (r.applied[e] ? "APPLIED: " : "NOT APPLIED: ") + r.verdicts[e] +
-             "\n";
+      out +=
+          std::string("  ") + (r.applied[e] ? "APPLIED: " : "NOT APPLIED: ") + r.verdicts[e] + "\n";
     out +=
         "  (u_S, u_gamma, u_f of the refined result carry the applied parameters' covariance, the "
         "fitted size of the effects not applied and the part this plan cannot determine; the "

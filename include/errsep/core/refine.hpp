@@ -178,7 +178,7 @@ struct RefineResult {
   /// effect was added.
   FourSensorResult after;
   Eigen::MatrixXd m_corrected_um;  ///< the readings `after` separates (applied effects only)
-  Eigen::MatrixXd t_s;  ///< reading times used
+  Eigen::MatrixXd t_s;             ///< reading times used
   double alpha_per_candidate = 0;
   double alpha_residual = 0.01;  ///< level of the whiteness test (RefineOptions::residual.alpha)
   /// True when the final residual passes the whiteness test.  False means the model is still

@@ -17,12 +17,12 @@ namespace errsep::core {
 
 struct SweepRun {
   std::uint64_t seed = 0;
-  std::string description;  ///< of the injected effect
-  std::string model;        ///< RefineResult::model_name
+  std::string description;                                 ///< of the injected effect
+  std::string model;                                       ///< RefineResult::model_name
   double S_clean_um = 0, S_before_um = 0, S_after_um = 0;  ///< RMS errors (profile_errors)
   double gamma_clean_urad = 0, gamma_before_urad = 0, gamma_after_urad = 0;
   double u_S_after_um = 0, u_gamma_after_urad = 0;  ///< RMS over the points of the refined u
-  bool added = false;       ///< an effect was added to the model
+  bool added = false;                               ///< an effect was added to the model
   bool identified = false;  ///< the library effect that describes the injected one was added
   bool applied = false;     ///< some correction was applied to the result
   bool not_white = false;   ///< the final model was reported incomplete (residual not white …)

@@ -9,7 +9,8 @@
 // separation's own.
 //
 // The sizes are of the order of what a real set-up shows and, at σ = 0.2 µm, at least double the
-// clean error of S (checked by tests/core/refine_undeclared.cpp and printed by errsep-refine-sweep):
+// clean error of S (checked by tests/core/refine_undeclared.cpp and printed by
+// errsep-refine-sweep):
 //   pe1          two of the three spacings off by 0.4–0.9 mm (Zhao 2019 section 3's PE1, larger)
 //   gain         one configuration (2, 3 or 4) reading 3–6 % high or low
 //   drift        linear in time, 0.01–0.03 µm/s: one configuration, or all four at their own rates
@@ -71,9 +72,9 @@ struct UndeclaredCaseOptions {
 
 struct UndeclaredCase {
   FourSensorConfig cfg;
-  Eigen::MatrixXd m_um;        ///< P × 4 readings with the effect and the noise
-  Eigen::MatrixXd m_clean_um;  ///< the same truth and noise without the effect
-  Eigen::MatrixXd t_s;         ///< P × 4 reading times
+  Eigen::MatrixXd m_um;                   ///< P × 4 readings with the effect and the noise
+  Eigen::MatrixXd m_clean_um;             ///< the same truth and noise without the effect
+  Eigen::MatrixXd t_s;                    ///< P × 4 reading times
   Eigen::VectorXd f_um, S_um, gamma_rad;  ///< the truth (f in the separation's gauge)
   std::string description;                ///< the effect and its drawn parameters
 };
