@@ -163,6 +163,8 @@ struct FourSensorCovariance::Parts {
   Eigen::SparseMatrix<double> L;  // the prior's operator (empty without a prior)
   double lambda = 0.0;
   Eigen::Matrix4d span_projector;  // onto span{1, O}: the noise S and γ take directly
+  // add_low_rank: G_S·R, G_γ·R, G_f·R with R·Rᵀ = K (columns of the square root of K).
+  Eigen::MatrixXd lr_S, lr_g, lr_f;
 
   // Coefficients on the unknowns (and n·h of the full vector) of the functional
   // Σ a_n S_n + Σ b_n γ_n + Σ c_i f_i, and its direct noise part Σ‖v_n‖².
@@ -220,7 +222,40 @@ double FourSensorCovariance::variance(const Eigen::VectorXd& a_S, const Eigen::V
   double nh = 0.0, noise = 0.0;
   p_->functional(a_S, b_gamma, c_f, h, nh, noise);
   p_->to_gauge(h, nh);
-  return p_->sigma2 * (noise + p_->solver->inverse_quadratic_form(h));
+  double extra = 0.0;
+  if (p_->lr_S.cols() > 0) {
+    Eigen::VectorXd t = Eigen::VectorXd::Zero(p_->lr_S.cols());
+    if (a_S.size()) t += p_->lr_S.transpose() * a_S;
+    if (b_gamma.size()) t += p_->lr_g.transpose() * b_gamma;
+    if (c_f.size()) t += p_->lr_f.transpose() * c_f;
+    extra = t.squaredNorm();
+  }
+  return p_->sigma2 * (noise + p_->solver->inverse_quadratic_form(h)) + extra;
+}
+
+void FourSensorCovariance::add_low_rank(const Eigen::MatrixXd& G_S, const Eigen::MatrixXd& G_gamma,
+                                        const Eigen::MatrixXd& G_f, const Eigen::MatrixXd& K) {
+  const int P = p_->cfg.positions(), N = p_->cfg.N;
+  const Eigen::Index k = K.rows();
+  if (K.cols() != k || G_S.rows() != P || G_gamma.rows() != P || G_f.rows() != N ||
+      G_S.cols() != k || G_gamma.cols() != k || G_f.cols() != k)
+    throw std::invalid_argument(
+        "FourSensorCovariance::add_low_rank: G_S, G_gamma need P = " + std::to_string(P) +
+        " rows, G_f N = " + std::to_string(N) + ", all k columns for a k x k K");
+  if (k == 0) return;
+  // R with R·Rᵀ = K from the eigendecomposition (K may be singular).
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (K + K.transpose()));
+  const Eigen::MatrixXd R =
+      es.eigenvectors() * es.eigenvalues().cwiseMax(0.0).cwiseSqrt().asDiagonal();
+  auto append = [](Eigen::MatrixXd& to, const Eigen::MatrixXd& cols) {
+    Eigen::MatrixXd out(cols.rows(), to.cols() + cols.cols());
+    if (to.cols() > 0) out.leftCols(to.cols()) = to;
+    out.rightCols(cols.cols()) = cols;
+    to = std::move(out);
+  };
+  append(p_->lr_S, G_S * R);
+  append(p_->lr_g, G_gamma * R);
+  append(p_->lr_f, G_f * R);
 }
 
 void FourSensorCovariance::sample(std::uint64_t seed, Eigen::VectorXd& dS_um,
@@ -264,6 +299,13 @@ void FourSensorCovariance::sample(std::uint64_t seed, Eigen::VectorXd& dS_um,
     dS_um(n) = p.w_S.dot(r);
     dgamma_rad(n) = 1e-3 * p.w_g.dot(r);
   }
+  if (p.lr_S.cols() > 0) {  // the added low-rank part: G·R·z, z standard normal
+    Eigen::VectorXd z(p.lr_S.cols());
+    for (Eigen::Index i = 0; i < z.size(); ++i)
+      z(i) = nd(rng);
+    dS_um += p.lr_S * z;
+    dgamma_rad += p.lr_g * z;
+  }
 }
 
 Eigen::MatrixXd FourSensorCovariance::covariance_S(const std::vector<int>& positions) {
@@ -285,7 +327,14 @@ Eigen::MatrixXd FourSensorCovariance::covariance_S(const std::vector<int>& posit
   }
   Eigen::MatrixXd V = H.transpose() * MH;
   V.diagonal().array() += p_->w_S.squaredNorm();  // the readings' own noise, independent per n
-  return p_->sigma2 * V;
+  V *= p_->sigma2;
+  if (p_->lr_S.cols() > 0) {
+    Eigen::MatrixXd G(q, p_->lr_S.cols());
+    for (Eigen::Index j = 0; j < q; ++j)
+      G.row(j) = p_->lr_S.row(positions[static_cast<std::size_t>(j)]);
+    V += G * G.transpose();
+  }
+  return V;
 }
 
 Eigen::MatrixXd FourSensorCovariance::covariance_S_with(const Eigen::MatrixXd& a_S) {

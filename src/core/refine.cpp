@@ -25,19 +25,32 @@ bool RefineOptions::is_valid(std::string* why) const {
     return fail("identifiability_tol must be in (0, 1)");
   if (!(speed_mm_per_s > 0)) return fail("speed_mm_per_s must be > 0");
   if (!solve.is_valid(why)) return false;
+  if (!decision.is_valid(why)) return false;
   return residual.is_valid(why);
+}
+
+Eigen::MatrixXd remove_polynomial(const Eigen::MatrixXd& D, int degree) {
+  const Eigen::Index n = D.rows();
+  const Eigen::Index m = std::min<Eigen::Index>(degree + 1, n);
+  if (m <= 0 || D.cols() == 0) return D;
+  Eigen::MatrixXd B(n, m);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const double t = n > 1 ? 2.0 * static_cast<double>(i) / static_cast<double>(n - 1) - 1.0 : 0.0;
+    double v = 1.0;
+    for (Eigen::Index d = 0; d < m; ++d, v *= t)
+      B(i, d) = v;
+  }
+  const Eigen::HouseholderQR<Eigen::MatrixXd> qr(B);
+  const Eigen::MatrixXd Q = qr.householderQ() * Eigen::MatrixXd::Identity(n, m);
+  return D - Q * (Q.transpose() * D);
 }
 
 namespace {
 
-double rms_after_line(const Eigen::VectorXd& d) {
+double rms_after_polynomial(const Eigen::VectorXd& d, int degree) {
   const Eigen::Index n = d.size();
-  if (n < 3) return 0.0;
-  Eigen::MatrixXd A(n, 2);
-  A.col(0).setOnes();
-  A.col(1) = Eigen::VectorXd::LinSpaced(n, 0.0, 1.0);
-  const Eigen::VectorXd c = A.colPivHouseholderQr().solve(d);
-  return std::sqrt((d - A * c).squaredNorm() / static_cast<double>(n));
+  if (n <= degree + 1) return 0.0;
+  return std::sqrt(remove_polynomial(d, degree).squaredNorm() / static_cast<double>(n));
 }
 
 double p_value_F(double F, int k, int dof) {
@@ -527,16 +540,204 @@ std::vector<Scored> score_candidates(const FourSensorConfig& cfg, const Solved& 
   return out;
 }
 
+// The combinations of effect block [c0, c0 + k) alone that the data determine in the joint model
+// (k × d, orthonormal): ℓ (zero outside the block) in the span of the joint determined
+// combinations `Dj` (K × kept), i.e. orthogonal to the block rows of their complement.
+Eigen::MatrixXd block_determined_directions(const Eigen::MatrixXd& Dj, Eigen::Index c0,
+                                            Eigen::Index k) {
+  const Eigen::Index K = Dj.rows(), kept = Dj.cols();
+  Eigen::MatrixXd comp = Eigen::MatrixXd::Identity(K, K);
+  if (kept > 0) {
+    Eigen::HouseholderQR<Eigen::MatrixXd> dq(Dj);
+    comp = Eigen::MatrixXd(dq.householderQ()).rightCols(K - kept);
+  }
+  if (comp.cols() == 0) return Eigen::MatrixXd::Identity(k, k);
+  Eigen::JacobiSVD<Eigen::MatrixXd> cs(comp.middleRows(c0, k), Eigen::ComputeFullU);
+  Eigen::Index rank_c = 0;
+  for (Eigen::Index j = 0; j < cs.singularValues().size(); ++j)
+    if (cs.singularValues()(j) > 1e-8) ++rank_c;
+  return cs.matrixU().rightCols(k - rank_c);
+}
+
+// The separation as a linear map of the readings: the caller's estimator at the λ and prior the
+// separation `sep` ended with (for a fixed λ the estimate is linear in the readings).
+FourSensorOptions linear_options(const FourSensorResult& sep, const FourSensorOptions& base) {
+  FourSensorOptions o = base;
+  o.compute_uncertainty = false;
+  o.iterated_refinements = base.iterated_refinements;
+  if (sep.estimator == Estimator::posterior && sep.penalty == Penalty::none) {
+    o.rule = LambdaRule::least_squares;
+    o.penalty = Penalty::none;
+  } else if (sep.rule == LambdaRule::least_squares) {
+    o.rule = LambdaRule::least_squares;
+  } else {
+    o.rule = LambdaRule::fixed;
+    o.fixed_lambda = sep.lambda;
+    if (sep.estimator == Estimator::posterior) o.penalty = sep.penalty;
+  }
+  return o;
+}
+
+// The reported result for a model: which effects are applied (step_decision.hpp), the separation
+// of the readings corrected for them in the gauge of `before`, and the uncertainty they carry.
+struct Reported {
+  FourSensorResult sep;
+  Eigen::MatrixXd m_c;  // the readings `sep` separates
+  std::vector<StepDecision> decisions;
+  std::vector<bool> applied;
+  std::vector<int> undetermined;
+  std::vector<double> undetermined_S_um;
+  std::vector<std::string> verdicts;
+};
+
+// The covariance of the model's parameters from the linearisation about zero (the base model of
+// the raw readings, every effect absent), with the noise level s2 of the current fit.  For a
+// non-linear effect (PE1, PE2, the periodic error: the reference sampled at shifted points) the
+// least-squares surface can have minima far from the truth when the effect is weakly determined
+// (PE1 on a smooth reference at σ = 0.1 µm: dD4 fitted at 7.9 ± 1.3 mm for a true 0.58 mm, whose
+// linear uncertainty about zero is 6.4 mm); the curvature at such a minimum then understates the
+// uncertainty, the one about zero does not.
+struct LinearAtZero {
+  Eigen::VectorXd p;  // the linear least-squares estimate of all parameters about zero
+  Eigen::MatrixXd covariance;
+};
+LinearAtZero linear_at_zero(const ShiftedBase& sb, const Model& M, const EffectContext& base_ctx,
+                            const RefineOptions& opts, double s2) {
+  Model M0 = M;
+  for (auto& p : M0.p)
+    p.setZero();
+  const ShiftedBase::Fit f0 = sb.fit(base_ctx.m_um, {});
+  const Eigen::MatrixXd Jr = ShiftedBase::reduce(f0, model_jacobian(M0, base_ctx));
+  const ProjectedFit pf = projected_fit(f0.Q, Jr, f0.r, opts.identifiability_tol);
+  return {pf.dp, s2 * pf.cov_unit};
+}
+
+Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw, const Model& M,
+                      const Solved& cur, const FourSensorResult& before, const RefineOptions& opts,
+                      const ShiftedBase& sb, const EffectContext& base_ctx) {
+  Reported rep;
+  rep.sep = before;
+  rep.m_c = m_raw;
+  const int P = cfg.positions(), N = cfg.N, K = M.total();
+  if (M.effects.empty() || K == 0) return rep;
+  // Sensitivities of S (µm), γ (µrad), f (µm) to every parameter: the separation at before's λ
+  // of the readings' change −∂c/∂p (the correction is subtracted), with the gauge directions
+  // removed: a step keeps before's constant, line and bow of S and constant and line of γ.
+  const Eigen::MatrixXd J = model_jacobian(M, cur.ctx);
+  const FourSensorOptions lin = linear_options(before, opts.solve);
+  Eigen::MatrixXd D_S(P, K), D_g(P, K), D_f(N, K);
+  for (int j = 0; j < K; ++j) {
+    Eigen::MatrixXd c(P, 4);
+    for (int n = 0; n < P; ++n)
+      for (int i = 0; i < 4; ++i)
+        c(n, i) = -J(4 * n + i, j);
+    const FourSensorResult s = separate_four_sensor(cfg, c, lin);
+    D_S.col(j) = s.S_um;
+    D_g.col(j) = 1e6 * s.gamma_rad;
+    D_f.col(j) = s.f_um;
+  }
+  D_S = remove_polynomial(D_S, 2);
+  D_g = remove_polynomial(D_g, 1);
+  const Eigen::MatrixXd C = cur.s2 * cur.last.cov_unit;
+  const LinearAtZero lin0 = linear_at_zero(sb, M, base_ctx, opts, cur.s2);
+  const Eigen::VectorXd p = concat(M);
+  auto or_ones = [](const Eigen::VectorXd& u, Eigen::Index n) {
+    return u.size() == n ? u : Eigen::VectorXd::Ones(n);
+  };
+  const Eigen::VectorXd uS = or_ones(before.u_S_um, P);
+  const Eigen::VectorXd ug = or_ones(1e6 * before.u_gamma_rad, P);
+  const Eigen::VectorXd uf = or_ones(before.u_f_um, N);
+  // What the model carries into the result: applied parameters their covariance, the others
+  // their fitted size, and the part of each effect no combination of this plan determines a
+  // scale from the determined part (each undetermined direction as large as the determined ones
+  // on average): the data say nothing about it, and a result that ignored it would claim more
+  // than the scan can show.
+  Eigen::MatrixXd carried = Eigen::MatrixXd::Zero(K, K);
+  Model applied;
+  Eigen::Index c0 = 0;
+  for (std::size_t e = 0; e < M.effects.size(); ++e) {
+    const Eigen::Index k = M.p[e].size();
+    const std::vector<QuantityImpact> q = {{"S", "um", D_S.middleCols(c0, k), uS},
+                                           {"gamma", "urad", D_g.middleCols(c0, k), ug},
+                                           {"f", "um", D_f.middleCols(c0, k), uf}};
+    const Eigen::VectorXd pe = p.segment(c0, k);
+    const Eigen::MatrixXd Ce = C.block(c0, c0, k, k);
+    StepDecision d = decide_step(pe, Ce, q, opts.decision);
+    if (d.apply) {
+      // The same decision with the uncertainty of the linearisation about zero: a correction is
+      // applied only when both say so (see covariance_at_zero).
+      const StepDecision d0 =
+          decide_step(lin0.p.segment(c0, k), lin0.covariance.block(c0, c0, k, k), q, opts.decision);
+      if (!d0.apply) {
+        d.apply = false;
+        d.reason = "not determined well enough about zero, where the fit is linear: " + d0.reason;
+      }
+    }
+    if (d.apply) {
+      carried.block(c0, c0, k, k) = Ce;
+      applied.effects.push_back(M.effects[e]);
+      applied.p.push_back(M.p[e]);
+    } else {
+      carried.block(c0, c0, k, k) = pe * pe.transpose();
+    }
+    const Eigen::MatrixXd W = block_determined_directions(cur.last.determined, c0, k);
+    const Eigen::Index k0 = k - W.cols();
+    double und = 0.0;
+    if (k0 > 0) {
+      Eigen::MatrixXd Z = Eigen::MatrixXd::Identity(k, k);
+      if (W.cols() > 0) {
+        Eigen::HouseholderQR<Eigen::MatrixXd> wq(W);
+        Z = Eigen::MatrixXd(wq.householderQ()).rightCols(k0);
+      }
+      const double s2 = pe.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(1, W.cols()));
+      carried.block(c0, c0, k, k) += s2 * Z * Z.transpose();
+      und = std::sqrt(s2 * (D_S.middleCols(c0, k) * Z).squaredNorm() / P);
+    }
+    rep.undetermined.push_back(static_cast<int>(k0));
+    rep.undetermined_S_um.push_back(und);
+    std::string v =
+        describe_decision(M.effects[e]->name(), M.effects[e]->parameter_names(), pe, cur.u[e], d);
+    if (k0 > 0 && und > 0.1 * d.quantity("S")->rms_u_base) {
+      char buf[300];
+      std::snprintf(buf, sizeof buf,
+                    "; not identifiable from this plan: %d of %d parameter combinations are not "
+                    "determined by this scan and could change S by %.3g um rms (added to u_S: "
+                    "a closing pass or reversed traverses determine them)",
+                    static_cast<int>(k0), static_cast<int>(k), und);
+      v += buf;
+    }
+    rep.verdicts.push_back(std::move(v));
+    rep.applied.push_back(d.apply);
+    rep.decisions.push_back(std::move(d));
+    c0 += k;
+  }
+  // The separation of the readings corrected for the applied effects (a fresh one even when
+  // none is applied: its covariance object is extended below and `before`'s must stay as it is).
+  if (!applied.effects.empty()) rep.m_c = corrected(applied, cur.ctx);
+  FourSensorResult after = separate_four_sensor(cfg, rep.m_c, opts.solve);
+  after.S_um = before.S_um + remove_polynomial(after.S_um - before.S_um, 2);
+  after.gamma_rad = before.gamma_rad + remove_polynomial(after.gamma_rad - before.gamma_rad, 1);
+  auto widen = [&](Eigen::VectorXd& u, const Eigen::MatrixXd& D, double scale) {
+    if (u.size() != D.rows()) return;
+    const Eigen::VectorXd var = (D * carried).cwiseProduct(D).rowwise().sum();
+    u = (u.array().square() + (scale * scale) * var.array().max(0.0)).sqrt();
+  };
+  widen(after.u_S_um, D_S, 1.0);
+  widen(after.u_gamma_rad, D_g, 1e-6);
+  widen(after.u_f_um, D_f, 1.0);
+  if (after.covariance) after.covariance->add_low_rank(D_S, 1e-6 * D_g, D_f, carried);
+  rep.sep = std::move(after);
+  return rep;
+}
+
 }  // namespace
 
 ProfileErrors profile_errors(const FourSensorResult& r, const RefineTruth& truth) {
   ProfileErrors e;
-  if (truth.S_um.size() == r.S_um.size()) e.S_um = rms_after_line(r.S_um - truth.S_um);
-  if (truth.gamma_rad.size() == r.gamma_rad.size()) {
-    const Eigen::VectorXd d = r.gamma_rad - truth.gamma_rad;
-    e.gamma_urad = 1e6 * std::sqrt((d.array() - d.mean()).square().mean());
-  }
-  if (truth.f_um.size() == r.f_um.size()) e.f_um = rms_after_line(r.f_um - truth.f_um);
+  if (truth.S_um.size() == r.S_um.size()) e.S_um = rms_after_polynomial(r.S_um - truth.S_um, 2);
+  if (truth.gamma_rad.size() == r.gamma_rad.size())
+    e.gamma_urad = 1e6 * rms_after_polynomial(r.gamma_rad - truth.gamma_rad, 1);
+  if (truth.f_um.size() == r.f_um.size()) e.f_um = rms_after_polynomial(r.f_um - truth.f_um, 2);
   return e;
 }
 
@@ -637,7 +838,9 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
   Solved cur = solve_model(sb, M, raw, opts);
   const EffectContext base_ctx = cur.ctx;  // the base model fitted to the raw readings
   res.before = separate_four_sensor(cfg, m_um, opts.solve);
-  FourSensorResult current_sep = res.before;
+  Reported current;
+  current.sep = res.before;
+  current.m_c = m_um;
   auto analyse = [&](const Solved& s) {
     return analyse_residual(s.space, s.m_c, t_s, opts.residual);
   };
@@ -675,7 +878,7 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
     Model M;
     Solved cur;
     std::size_t steps = 0;
-    FourSensorResult sep;
+    Reported reported;
     ResidualAnalysis residual;
     std::string model_name;
   };
@@ -691,7 +894,7 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
     if (!reason.empty()) return reason + " at a third of the estimate (beyond 3x the range)";
     return reason;
   };
-  Snapshot plausible{M, cur, res.steps.size(), current_sep, res.residual, res.model_name};
+  Snapshot plausible{M, cur, res.steps.size(), current, res.residual, res.model_name};
   std::vector<std::string> excluded;  // rejected as implausible: not scored again
   for (std::size_t rollbacks = 0;; ++rollbacks) {
     res.stop_reason = "no candidate significant";
@@ -760,28 +963,11 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
       st.description = M.effects.back()->description(st.parameters);
       st.u_parameters = cur.u.back();
       {
-        // The added effect's block of the joint linearisation.
+        // The added effect's block of the joint linearisation, and the combinations ℓᵀp of its
+        // parameters alone that the data determine.
         const Eigen::Index k = st.parameters.size(), c0 = M.total() - k;
         st.covariance = cur.s2 * cur.last.cov_unit.block(c0, c0, k, k);
-        // The combinations ℓᵀp of this effect's parameters alone that the data determine: ℓ
-        // (zero outside the block) in the span of the joint determined combinations, i.e.
-        // orthogonal to the block rows of their complement.
-        const Eigen::MatrixXd& Dj = cur.last.determined;
-        const Eigen::Index K = M.total(), kept = Dj.cols();
-        Eigen::MatrixXd comp = Eigen::MatrixXd::Identity(K, K);
-        if (kept > 0) {
-          Eigen::HouseholderQR<Eigen::MatrixXd> dq(Dj);
-          comp = Eigen::MatrixXd(dq.householderQ()).rightCols(K - kept);
-        }
-        if (comp.cols() == 0) {
-          st.identifiable_directions = Eigen::MatrixXd::Identity(k, k);
-        } else {
-          Eigen::JacobiSVD<Eigen::MatrixXd> cs(comp.middleRows(c0, k), Eigen::ComputeFullU);
-          Eigen::Index rank_c = 0;
-          for (Eigen::Index j = 0; j < cs.singularValues().size(); ++j)
-            if (cs.singularValues()(j) > 1e-8) ++rank_c;
-          st.identifiable_directions = cs.matrixU().rightCols(k - rank_c);
-        }
+        st.identifiable_directions = block_determined_directions(cur.last.determined, c0, k);
         st.identifiable = static_cast<int>(st.identifiable_directions.cols());
       }
       st.rss_after_um2 = cur.rss;
@@ -791,12 +977,19 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
       st.sigma_after_um = ra.sigma_um;
       st.whiteness_after = ra.whiteness;
       st.dominant_period_mm = ra.dominant_period_mm;
-      const FourSensorResult sep = separate_four_sensor(cfg, cur.m_c, opts.solve);
+      // What the user gets: the effects whose correction makes S, γ, f better applied, the
+      // others carried in the uncertainty (step_decision.hpp), the gauge of the raw separation.
+      Reported rep = report_model(cfg, m_um, M, cur, res.before, opts, sb, base_ctx);
+      st.applied = rep.applied.back();
+      st.decision = rep.decisions.back();
+      st.undetermined = rep.undetermined.back();
+      st.undetermined_S_um = rep.undetermined_S_um.back();
+      st.verdict = rep.verdicts.back();
       if (truth) {
-        st.error_before = profile_errors(current_sep, *truth);
-        st.error_after = profile_errors(sep, *truth);
+        st.error_before = profile_errors(current.sep, *truth);
+        st.error_after = profile_errors(rep.sep, *truth);
       }
-      current_sep = sep;
+      current = std::move(rep);
       res.residual = ra;
       res.model_name += "+" + st.effect;
       res.steps.push_back(std::move(st));
@@ -804,7 +997,7 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
       for (std::size_t e = 0; e < M.effects.size(); ++e)
         all_plausible = all_plausible && implausibility_of(M, cur, e).empty();
       if (all_plausible)
-        plausible = Snapshot{M, cur, res.steps.size(), current_sep, res.residual, res.model_name};
+        plausible = Snapshot{M, cur, res.steps.size(), current, res.residual, res.model_name};
     }
     // The verdict on the joint model's parameters.
     std::vector<std::size_t> bad;
@@ -849,7 +1042,7 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
     M = plausible.M;
     cur = plausible.cur;
     res.steps.resize(plausible.steps);
-    current_sep = plausible.sep;
+    current = plausible.reported;
     res.residual = plausible.residual;
     res.model_name = plausible.model_name;
     if (rollbacks + 1 >= library.size()) {
@@ -862,8 +1055,13 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
   res.u_parameters = cur.u;
   res.covariance = cur.s2 * cur.last.cov_unit;
   res.determined = cur.last.determined;
-  res.m_corrected_um = cur.m_c;
-  res.after = M.effects.empty() ? res.before : current_sep;
+  if (!M.effects.empty() && current.decisions.size() != M.effects.size())
+    current = report_model(cfg, m_um, M, cur, res.before, opts, sb, base_ctx);
+  res.decisions = current.decisions;
+  res.applied = current.applied;
+  res.verdicts = current.verdicts;
+  res.m_corrected_um = current.m_c;
+  res.after = M.effects.empty() ? res.before : current.sep;
   return res;
 }
 

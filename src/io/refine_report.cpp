@@ -50,10 +50,12 @@ CsvTable refine_csv(const core::RefineResult& r) {
                "gamma_err_before_urad",
                "gamma_err_after_urad",
                "f_err_before_um",
-               "f_err_after_um"};
+               "f_err_after_um",
+               "applied"};
   const double nan = std::numeric_limits<double>::quiet_NaN();
   for (const auto& s : r.steps) {
     t.set_meta("step" + std::to_string(s.index) + "_effect", s.effect);
+    if (s.index > 0) t.set_meta("step" + std::to_string(s.index) + "_verdict", s.verdict);
     const Eigen::Index k = std::max<Eigen::Index>(1, s.parameters.size());
     for (Eigen::Index j = 0; j < k; ++j) {
       const bool has = j < s.parameters.size();
@@ -66,7 +68,8 @@ CsvTable refine_csv(const core::RefineResult& r) {
                         has ? s.parameters(j) : nan, has ? s.u_parameters(j) : nan, s.F, s.p_value,
                         s.rms_before_um, s.rms_after_um, s.whiteness_after.p_value,
                         eb ? eb->S_um : nan, ea ? ea->S_um : nan, eb ? eb->gamma_urad : nan,
-                        ea ? ea->gamma_urad : nan, eb ? eb->f_um : nan, ea ? ea->f_um : nan});
+                        ea ? ea->gamma_urad : nan, eb ? eb->f_um : nan, ea ? ea->f_um : nan,
+                        s.index > 0 ? (s.applied ? 1.0 : 0.0) : nan});
     }
   }
   return t;
@@ -94,6 +97,7 @@ std::string format_refine_text(const core::RefineResult& r) {
       std::snprintf(buf, sizeof buf, "    determined parameter combinations: %d of %zd\n",
                     s.identifiable, static_cast<std::ptrdiff_t>(s.parameters.size()));
       out += buf;
+      out += "  " + std::string(s.applied ? "APPLIED: " : "NOT APPLIED: ") + s.verdict + "\n";
     }
     if (s.error_before && s.error_after) {
       std::snprintf(buf, sizeof buf,
@@ -103,6 +107,17 @@ std::string format_refine_text(const core::RefineResult& r) {
                     s.error_after->gamma_urad, s.error_before->f_um, s.error_after->f_um);
       out += buf;
     }
+  }
+  if (!r.effects.empty()) {
+    out += "\nthe refined result (final parameters):\n";
+    for (std::size_t e = 0; e < r.verdicts.size(); ++e)
+      out +=
+          std::string("  ") + (r.applied[e] ? "APPLIED: " : "NOT APPLIED: ") + r.verdicts[e] + "\n";
+    out +=
+        "  (u_S, u_gamma, u_f of the refined result carry the applied parameters' covariance, the "
+        "fitted size of the effects not applied and the part this plan cannot determine; the "
+        "constant, line and bow of S and the constant and line of gamma are those of the raw "
+        "readings' separation: a step does not move what one scan cannot see)\n";
   }
   // Why an error "before" can be smaller than the noise floor: see refine_csv.
   out += "\nseparations: raw readings lambda = " + lambda_summary(r.before) +

@@ -167,8 +167,24 @@ inline void check_parameters(const core::RefineStep& s, const Eigen::VectorXd& p
   CHECK(beyond <= allowed_beyond_2u(z.size()));
 }
 
+// The error of what the user gets never grows by more than its stated uncertainty (issue 16): a
+// step is applied only when it is expected to help, and otherwise its fitted size widens u.
+inline void check_not_worse_beyond_u(const core::ProfileErrors& before,
+                                     const core::ProfileErrors& after,
+                                     const core::FourSensorResult& refined) {
+  auto rms = [](const Eigen::VectorXd& v) {
+    return v.size() ? std::sqrt(v.squaredNorm() / static_cast<double>(v.size())) : 0.0;
+  };
+  CHECK(after.S_um <= before.S_um + rms(refined.u_S_um));
+  CHECK(after.gamma_urad <= before.gamma_urad + 1e6 * rms(refined.u_gamma_rad));
+  CHECK(after.f_um <= before.f_um + rms(refined.u_f_um));
+}
+
+// `S_halved` false where the error of S (after removing its constant, line and bow: what one scan
+// cannot see) is known not to halve: the caller says why and what it measured; the step must then
+// still not make S worse beyond its stated u.
 inline void check_identified(const core::RefineResult& r, const std::string& effect,
-                             const Eigen::VectorXd& p_true) {
+                             const Eigen::VectorXd& p_true, bool S_halved = true) {
   REQUIRE(r.steps.size() >= 2);
   const core::RefineStep& s = r.steps[1];
   CHECK(s.effect == effect);
@@ -176,7 +192,8 @@ inline void check_identified(const core::RefineResult& r, const std::string& eff
   check_parameters(s, p_true);
   REQUIRE(s.error_before);
   REQUIRE(s.error_after);
-  CHECK(s.error_after->S_um < 0.5 * s.error_before->S_um);
+  check_not_worse_beyond_u(*s.error_before, *s.error_after, r.after);
+  if (S_halved) CHECK(s.error_after->S_um < 0.5 * s.error_before->S_um);
   CHECK(s.error_after->gamma_urad < 0.5 * s.error_before->gamma_urad);
   CHECK(s.error_after->f_um < 0.5 * s.error_before->f_um);
   CHECK(s.rms_after_um < s.rms_before_um);
@@ -198,11 +215,13 @@ inline core::ProfileErrors errors_against(const core::FourSensorResult& r,
 // seeds were already counted at another σ: the errors are linear in the noise, so the z repeat),
 // and over the seeds the RMS of the error the effect causes in S, γ and f must at least halve.
 // `opts` are the refinement's options (its separations before and after and the clean one use
-// opts.solve).
+// opts.solve).  In every seed the error against the truth must not grow beyond the refined result's
+// stated u; `halved` false where the halving is known not to hold (the caller says what it
+// measured).
 template <class MakeCase, class Truth>
 void check_realistic(const char* title, const std::string& effect, double sigma, int seeds,
                      int example2_k, MakeCase make_case, Truth p_true, bool count_z = true,
-                     const core::RefineOptions& opts = {}) {
+                     const core::RefineOptions& opts = {}, bool halved = true) {
   std::printf("%s, sigma %.2f um\n", title, sigma);
   std::vector<double> zs;
   double b2[3] = {0, 0, 0}, a2[3] = {0, 0, 0};
@@ -239,6 +258,7 @@ void check_realistic(const char* title, const std::string& effect, double sigma,
     for (std::size_t j = 0; j < z.size(); ++j)
       std::printf(" %.2f (%.2f)", z[j], zd[j]);
     std::printf("\n");
+    check_not_worse_beyond_u(tb, ta, r.after);
     b2[0] += eb.S_um * eb.S_um, a2[0] += ea.S_um * ea.S_um;
     b2[1] += eb.gamma_urad * eb.gamma_urad, a2[1] += ea.gamma_urad * ea.gamma_urad;
     b2[2] += eb.f_um * eb.f_um, a2[2] += ea.f_um * ea.f_um;
@@ -250,9 +270,11 @@ void check_realistic(const char* title, const std::string& effect, double sigma,
       seeds, std::sqrt(b2[0] / seeds), std::sqrt(a2[0] / seeds), std::sqrt(b2[1] / seeds),
       std::sqrt(a2[1] / seeds), std::sqrt(b2[2] / seeds), std::sqrt(a2[2] / seeds),
       static_cast<std::size_t>(beyond), zs.size(), allowed_beyond_2u(zs.size()));
-  CHECK(a2[0] < 0.25 * b2[0]);
-  CHECK(a2[1] < 0.25 * b2[1]);
-  CHECK(a2[2] < 0.25 * b2[2]);
+  if (halved) {
+    CHECK(a2[0] < 0.25 * b2[0]);
+    CHECK(a2[1] < 0.25 * b2[1]);
+    CHECK(a2[2] < 0.25 * b2[2]);
+  }
   if (count_z) CHECK(beyond <= allowed_beyond_2u(zs.size()));
 }
 

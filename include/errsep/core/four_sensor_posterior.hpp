@@ -111,6 +111,13 @@ class FourSensorCovariance {
   /// x_s − x̂ = M⁻¹(Aᵀσε₁ + λσLᵀε₂) has covariance σ²M⁻¹ (perturbation sampling), plus the
   /// readings' own noise in span{1, O} that S and γ take directly.
   void sample(std::uint64_t seed, Eigen::VectorXd& dS_um, Eigen::VectorXd& dgamma_rad);
+  /// Adds G·K·Gᵀ to the covariance of (S, γ, f), G = [G_S; G_γ; G_f] (P × k in µm, P × k in rad,
+  /// N × k in µm per unit of k parameters), K (k × k) symmetric positive semi-definite: what a
+  /// refinement's fitted effect parameters carry into the separation of the corrected readings
+  /// (refine.hpp).  Every later variance, covariance_S and sample includes it.  Throws
+  /// std::invalid_argument for inconsistent sizes.
+  void add_low_rank(const Eigen::MatrixXd& G_S, const Eigen::MatrixXd& G_gamma,
+                    const Eigen::MatrixXd& G_f, const Eigen::MatrixXd& K);
 
  private:
   std::unique_ptr<Parts> p_;

@@ -38,6 +38,7 @@
 #include "errsep/core/four_sensor.hpp"
 #include "errsep/core/model_effect.hpp"
 #include "errsep/core/residual_analysis.hpp"
+#include "errsep/core/step_decision.hpp"
 
 namespace errsep::core {
 
@@ -53,6 +54,9 @@ struct RefineOptions {
   /// (a barely determined direction would carry its large uncertainty into S, γ and f).
   double direction_threshold = 0.0;
   double speed_mm_per_s = 10.0;  ///< for scan-order times when none were recorded
+  /// Whether a significant effect's correction is applied (step_decision.hpp): on the expected
+  /// error of S, γ and f, not on the F-test alone.
+  StepDecisionOptions decision;
   bool is_valid(std::string* why = nullptr) const;
 };
 
@@ -63,9 +67,15 @@ struct RefineTruth {
   Eigen::VectorXd gamma_rad;  ///< P
 };
 
-/// RMS errors against the truth after the alignment the paper uses: the best-fit line of the
-/// difference removed for S and f (the 2-norm of the difference made least by rotating), its mean
-/// for γ (γ is known up to the constant e_4/(D2+D3+D4)).
+/// RMS errors against the truth after removing what one scan cannot see (issue 16): the best-fit
+/// constant, line and bow of the difference for S and f (the bow of f trades with the bow of S, a
+/// line of γ and a quadratic of e: the gauge "f has no bow" fixes it), constant and line for γ
+/// (its constant is e_4/(D2+D3+D4), its line comes with the bow).
+/// D minus its least-squares polynomial of degree `degree` in the sample index, column by column:
+/// what remains of a profile (or of a profile's change) once the gauge directions are removed
+/// (degree 2 for S and f: constant, line, bow; 1 for γ).
+Eigen::MatrixXd remove_polynomial(const Eigen::MatrixXd& D, int degree);
+
 struct ProfileErrors {
   double S_um = 0;
   double gamma_urad = 0;
@@ -112,6 +122,19 @@ struct RefineStep {
   double dominant_period_mm = 0;  ///< of the residual after the step
   std::optional<ProfileErrors> error_before, error_after;
   std::vector<CandidateScore> candidates;  ///< the scores that chose this step (empty for base)
+  /// Whether the added effect's correction is applied to the reported separation
+  /// (step_decision.hpp); when not, the effect stays in the model of the residual and its fitted
+  /// size goes into u_S, u_γ, u_f instead.
+  bool applied = false;
+  StepDecision decision;
+  /// Parameter combinations of the added effect that this scan's plan cannot determine (k minus
+  /// the determined ones), and the RMS change of S they would cause if each were as large as the
+  /// determined ones are on average: 0 when they do not reach S (after the gauge).
+  int undetermined = 0;
+  double undetermined_S_um = 0;
+  /// One line for the report: decision, figures, and "not identifiable from this plan" when
+  /// undetermined_S_um matters.
+  std::string verdict;
 };
 
 /// A significant candidate that was not added because its fitted parameters are physically
@@ -140,11 +163,22 @@ struct RefineResult {
   /// Covariance of all added effects' parameters (effect-major, as `parameters` concatenated)
   /// and the orthonormal combinations of them the data determine, from the final joint fit.
   Eigen::MatrixXd covariance, determined;
+  /// Per added effect (final): the decision on its final parameters, whether it is applied, the
+  /// report line.
+  std::vector<StepDecision> decisions;
+  std::vector<bool> applied;
+  std::vector<std::string> verdicts;
   ResidualAnalysis residual;  ///< of the final model
   FourSensorResult before;    ///< separation of the raw readings (caller's options)
-  FourSensorResult after;     ///< separation of the corrected readings
-  Eigen::MatrixXd m_corrected_um;
-  Eigen::MatrixXd t_s;  ///< reading times used
+  /// The refined result: the separation of the readings corrected for the applied effects, with
+  /// the gauge of `before` (constant, line and bow of S, constant and line of γ are those of the
+  /// raw readings' separation: a step never moves what the data cannot see), and u_S, u_γ, u_f
+  /// (and the covariance) carrying the applied parameters' covariance, the fitted size of the
+  /// effects left out, and the part of each effect this plan cannot determine.  `before` when no
+  /// effect was added.
+  FourSensorResult after;
+  Eigen::MatrixXd m_corrected_um;  ///< the readings `after` separates (applied effects only)
+  Eigen::MatrixXd t_s;             ///< reading times used
   double alpha_per_candidate = 0;
   double alpha_residual = 0.01;  ///< level of the whiteness test (RefineOptions::residual.alpha)
   /// True when the final residual passes the whiteness test.  False means the model is still

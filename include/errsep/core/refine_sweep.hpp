@@ -1,0 +1,68 @@
+#pragma once
+// The refinement (refine.hpp) run over generated cases with undeclared effects
+// (undeclared_effect_simulation.hpp) and judged against the truth: what errsep-refine-sweep
+// prints as a table and tests/core/refine_undeclared.cpp asserts on a smaller sweep (issue 16).
+//
+// Errors are those of profile_errors: S and f after removing their best-fit constant, line and
+// bow, γ after its constant and line (what one scan cannot see).  Coverage: the fraction of
+// points with |S − S_true| <= 2·u_S, pointwise as reported, and for the shape (the error and
+// the covariance both with the constant, line and bow removed, u from the result's covariance).
+#include <string>
+#include <vector>
+
+#include "errsep/core/refine.hpp"
+#include "errsep/core/undeclared_effect_simulation.hpp"
+
+namespace errsep::core {
+
+struct SweepRun {
+  std::uint64_t seed = 0;
+  std::string description;                                 ///< of the injected effect
+  std::string model;                                       ///< RefineResult::model_name
+  double S_clean_um = 0, S_before_um = 0, S_after_um = 0;  ///< RMS errors (profile_errors)
+  double gamma_clean_urad = 0, gamma_before_urad = 0, gamma_after_urad = 0;
+  double u_S_after_um = 0, u_gamma_after_urad = 0;  ///< RMS over the points of the refined u
+  bool added = false;                               ///< an effect was added to the model
+  bool identified = false;  ///< the library effect that describes the injected one was added
+  bool applied = false;     ///< some correction was applied to the result
+  bool not_white = false;   ///< the final model was reported incomplete (residual not white …)
+  bool not_identifiable_reported = false;  ///< a verdict says "not identifiable from this plan"
+  /// Largest change a step made to the constant, line and bow of S (µm, RMS of the change).
+  double gauge_change_um = 0;
+  int points = 0, covered = 0, covered_shape = 0;  ///< within 2u (pointwise; shape)
+  bool worse_S() const { return S_after_um > S_before_um * (1 + 1e-9); }
+  bool worse_gamma() const { return gamma_after_urad > gamma_before_urad * (1 + 1e-9); }
+  /// The error grew by more than its stated uncertainty (RMS of u over the points).
+  bool worse_beyond_u() const {
+    return S_after_um > S_before_um + u_S_after_um ||
+           gamma_after_urad > gamma_before_urad + u_gamma_after_urad;
+  }
+  bool halved() const {
+    return S_after_um <= 0.5 * S_before_um && gamma_after_urad <= 0.5 * gamma_before_urad;
+  }
+};
+
+/// Simulates one case and runs the refinement on it.
+SweepRun evaluate_refine_run(UndeclaredEffect effect, const UndeclaredCaseOptions& cases,
+                             const RefineOptions& refine = {});
+
+struct SweepCell {
+  UndeclaredEffect effect = UndeclaredEffect::none;
+  double sigma_um = 0;
+  std::vector<SweepRun> runs;
+  double fraction(bool (*pred)(const SweepRun&)) const;
+  double median(double (*get)(const SweepRun&)) const;
+  double worst(double (*get)(const SweepRun&)) const;
+  double coverage() const;        ///< pointwise, pooled over the runs
+  double coverage_shape() const;  ///< shape, pooled
+};
+
+/// `seeds` runs from seed0 on.
+SweepCell run_sweep_cell(UndeclaredEffect effect, double sigma_um, int seeds, std::uint64_t seed0,
+                         const RefineOptions& refine = {}, const UndeclaredCaseOptions& base = {});
+
+/// The table's header and one row per cell (fixed-width text).
+std::string sweep_header();
+std::string sweep_row(const SweepCell& c);
+
+}  // namespace errsep::core

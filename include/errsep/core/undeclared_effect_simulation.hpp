@@ -1,0 +1,85 @@
+#pragma once
+// Simulated four-sensor scans with one effect the model does not declare (issue 16): the cases a
+// refinement must be tested on, generated rather than designed.  Each case draws random smooth
+// profiles (random_smooth_truth: several harmonics of S, γ and f with random periods,
+// amplitudes and phases per seed), independent noise σ on every sensor reading (the paper's
+// model), and one undeclared effect whose parameters (which configuration, size, sign, period,
+// time constant, place) are drawn from the seed too.  The same seed without the effect gives the
+// clean scan with the same truth and noise, so the error the effect causes can be told from the
+// separation's own.
+//
+// The sizes are of the order of what a real set-up shows and, at σ = 0.2 µm, at least double the
+// clean error of S (checked by tests/core/refine_undeclared.cpp and printed by
+// errsep-refine-sweep):
+//   pe1          two of the three spacings off by 0.4–0.9 mm (Zhao 2019 section 3's PE1, larger)
+//   gain         one configuration (2, 3 or 4) reading 3–6 % high or low
+//   drift        linear in time, 0.01–0.03 µm/s: one configuration, or all four at their own rates
+//   pe2          slide positioning error, Legendre P1..P3 of 0.3–0.8 mm each (Eq. 20's kind)
+//   periodic     lead-screw-like positioning error, 0.3–0.7 mm, period 15–40 mm
+//   thermal      first-order warm-up, 2–5 µm, τ 20–80 s: one configuration, or all four
+//   traverse     S not repeating on one traverse: P2 and P3 of 1–2 µm each
+//   nonlinearity (not in the library) the sensor reads r + κ·(r − r̄)², 2–4 % of the readings'
+//                range at its ends (r̄ the mid-range reading)
+//   bump         (not in the library) dust or a knock on one traverse: a Gaussian 1.5–3 µm high,
+//                5–15 mm wide, somewhere on the travel
+#include <Eigen/Core>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "errsep/core/four_sensor_config.hpp"
+#include "errsep/core/four_sensor_simulation.hpp"
+
+namespace errsep::core {
+
+enum class UndeclaredEffect {
+  none,
+  pe1,
+  gain,
+  drift_one,
+  drift_all,
+  pe2,
+  periodic,
+  thermal_one,
+  thermal_all,
+  traverse,
+  nonlinearity,
+  bump,
+};
+const char* to_string(UndeclaredEffect e);
+std::optional<UndeclaredEffect> undeclared_effect_from_string(std::string_view s);
+/// Every kind, none first.
+std::vector<UndeclaredEffect> all_undeclared_effects();
+/// The name of the library effect (model_effect.hpp) that describes it; empty for none and for
+/// the effects the library lacks (nonlinearity, bump).
+std::string library_effect_name(UndeclaredEffect e);
+
+struct UndeclaredCaseOptions {
+  FourSensorConfig cfg;  ///< Zhao 2019 Example 1 geometry by default (N = 69, s = 1, 1, 5)
+  double sigma_um = 0.1;
+  std::uint64_t seed = 1;
+  double speed_mm_per_s = 10.0;  ///< scan-order reading times (scan_order_times_s)
+  double size = 1.0;             ///< scales the effect's drawn size
+  /// The random profiles.  By default a wavy reference (f: 2–5 µm per harmonic, 3–12 periods
+  /// over its length, as Zhao 2019 Example 2's Eq. 24), which is what makes the positioning
+  /// effects (PE1, PE2, periodic: seen through the slope of f) both matter and show.
+  RandomTruthOptions truth = wavy_reference();
+  static RandomTruthOptions wavy_reference();
+  bool is_valid(std::string* why = nullptr) const;
+};
+
+struct UndeclaredCase {
+  FourSensorConfig cfg;
+  Eigen::MatrixXd m_um;                   ///< P × 4 readings with the effect and the noise
+  Eigen::MatrixXd m_clean_um;             ///< the same truth and noise without the effect
+  Eigen::MatrixXd t_s;                    ///< P × 4 reading times
+  Eigen::VectorXd f_um, S_um, gamma_rad;  ///< the truth (f in the separation's gauge)
+  std::string description;                ///< the effect and its drawn parameters
+};
+
+/// Draws the case.  Throws std::invalid_argument for invalid options.
+UndeclaredCase simulate_undeclared(UndeclaredEffect effect, const UndeclaredCaseOptions& opts);
+
+}  // namespace errsep::core
