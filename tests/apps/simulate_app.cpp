@@ -50,6 +50,17 @@ TEST_CASE("errsep-simulate writes a truth CSV that errsep-refine --truth reads")
   }
   for (Eigen::Index j = 0; j < cfg.N; ++j)
     CHECK(truth.f_um(j) == Approx(t.f_um(j * cfg.dx_mm)).margin(1e-9));
+
+  // And errsep-refine takes it as it is written.
+  std::string refine_out;
+  CHECK(test::run_command(test::app_path("refine").string() + " " +
+                              (tmp / "sim" / "raw.csv").string() + " --truth " +
+                              (tmp / "sim" / "truth.csv").string() + " --out " +
+                              (tmp / "refined").string() + " 2>&1",
+                          &refine_out) == 0);
+  INFO(refine_out);
+  CHECK_THAT(test::read_file(tmp / "refined" / "refine_report.txt"),
+             Catch::Contains("error vs truth"));
 }
 
 TEST_CASE("PE1 is a miss on the geometry's own spacings, at any dx") {
