@@ -132,19 +132,6 @@ void ModbusTcpServer::run(const std::atomic<bool>& stop) {
   const auto max_conns = static_cast<std::size_t>(opts_.max_connections);
   std::vector<pollfd> pfds;
   while (!stop.load(std::memory_order_relaxed)) {
-    // Time-outs first, so a slot freed here is free for this round's accepts.
-    auto now = clk::now();
-    for (std::size_t i = m.conns.size(); i-- > 0;) {
-      const Connection& c = m.conns[i];
-      if (c.have > 0 && now - c.frame_start > frame_limit) {
-        m.frame_timeouts.fetch_add(1);
-        m.close_at(i);
-      } else if (c.have == 0 && now - c.last_request > idle_limit) {
-        m.idle_timeouts.fetch_add(1);
-        m.close_at(i);
-      }
-    }
-
     pfds.clear();
     pfds.push_back({m.listen_fd, POLLIN, 0});
     for (const auto& c : m.conns)
@@ -154,8 +141,7 @@ void ModbusTcpServer::run(const std::atomic<bool>& stop) {
       if (errno == EINTR) continue;
       throw std::runtime_error(what_ + ": poll: " + std::strerror(errno));
     }
-    if (n == 0) continue;
-    now = clk::now();
+    const auto now = clk::now();
 
     // Serve the clients polled (indices of pfds match conns before any change this round:
     // walk by fd, since a handler may close every connection).
@@ -212,6 +198,21 @@ void ModbusTcpServer::run(const std::atomic<bool>& stop) {
         break;
       }
       if (closed) m.close_at(idx);
+    }
+
+    // Time-outs, only of connections with nothing waiting to be read: bytes that have come are
+    // served first, so a server thread that was not scheduled for a while closes no client
+    // whose request was already there.
+    for (std::size_t i = m.conns.size(); i-- > 0;) {
+      const Connection& c = m.conns[i];
+      if (std::find(ready.begin(), ready.end(), c.fd) != ready.end()) continue;
+      if (c.have > 0 && now - c.frame_start > frame_limit) {
+        m.frame_timeouts.fetch_add(1);
+        m.close_at(i);
+      } else if (c.have == 0 && now - c.last_request > idle_limit) {
+        m.idle_timeouts.fetch_add(1);
+        m.close_at(i);
+      }
     }
 
     if (pfds[0].revents & POLLIN) {
