@@ -21,6 +21,7 @@
 #include "errsep/drivers/device_factory.hpp"
 #include "errsep/drivers/simulator_process.hpp"
 #include "errsep/io/csv.hpp"
+#include "errsep/io/default_config.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/version.hpp"
 
@@ -100,7 +101,7 @@ int main(int argc, char** argv) {
       "sampling loop against the device simulator (Modbus TCP on loopback)"};
   app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
   double seconds = 60.0, ring_seconds = 2.0, rate_hz = 0.0;
-  std::string config_path = "config/simulator.toml", devsim, out = "out/bench-sampling.csv";
+  std::string config_path, devsim, out = "out/bench-sampling.csv";
   bool realtime = false, skip_loop = false, sim_realtime = false;
   int cpu = -1, priority = 80;
   app.add_option("--seconds", seconds, "duration of the loop against the simulator")
@@ -108,8 +109,9 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.1, 86400.0));
   app.add_option("--ring-seconds", ring_seconds, "duration of the ring-alone measurement")
       ->capture_default_str();
-  app.add_option("-c,--config", config_path, "machine config whose [simulator] is started")
-      ->capture_default_str();
+  app.add_option("-c,--config", config_path,
+                 "machine config whose [simulator] is started (default: config/simulator.toml "
+                 "of this errsep, from any directory)");
   app.add_option("--rate-hz", rate_hz, "sampling rate (default: [sampler] rate_hz)");
   app.add_option("--devsim", devsim, "errsep-devsim executable (default: next to this program)");
   app.add_option("--out", out, "CSV of every sample of the loop")->capture_default_str();
@@ -127,6 +129,7 @@ int main(int argc, char** argv) {
     bench_ring(ring_seconds, 4096);
     if (skip_loop) return 0;
 
+    if (config_path.empty()) config_path = io::default_config_file().string();
     io::MachineConfig cfg = io::load_machine_config(config_path);
     const fs::path exe = devsim.empty() ? drivers::default_devsim_path() : fs::path(devsim);
     if (exe.empty()) throw std::runtime_error("errsep-devsim not found; give --devsim");

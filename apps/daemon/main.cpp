@@ -56,6 +56,14 @@ int main(int argc, char** argv) {
   app.add_option("--modbus-port", reg.port, "port of the register map (0 = ephemeral)")
       ->capture_default_str()
       ->check(CLI::Range(0, 65535));
+  app.add_option("--modbus-max-connections", reg.max_connections,
+                 "register map clients at once; beyond it the oldest idle one is closed")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 4096));
+  app.add_option("--modbus-idle-timeout-ms", reg.idle_timeout_ms,
+                 "close a register map client after this long without a request")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
   app.add_flag("--no-register-map", no_register_map, "do not serve the Modbus register map");
   app.add_option("--device-port", device_port,
                  "use this port for every TCP bus whose port is 0 (the port errsep-devsim printed)")

@@ -35,6 +35,7 @@
 #include "errsep/drivers/scan_devices.hpp"
 #include "errsep/drivers/simulator_process.hpp"
 #include "errsep/io/cnc/compensation_format.hpp"
+#include "errsep/io/default_config.hpp"
 #include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/mqtt_messages.hpp"
@@ -178,14 +179,16 @@ int main(int argc, char** argv) {
       "(the embedded default starts the device simulator itself), write the raw CSV, then "
       "separate it."};
   app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
-  std::string config_path = "config/simulator.toml", out_dir, method, devsim;
+  std::string config_path, out_dir, method, devsim;
   std::string gauge = "reference";
   int averages = 0, settle_ms = -1;
   bool no_separate = false, refine = false;
   std::string refine_reference, verify_table, before_dir;
   double mqtt_wait_s = 10;
   bool no_mqtt = false;
-  app.add_option("-c,--config", config_path, "machine config (TOML)")->capture_default_str();
+  app.add_option("-c,--config", config_path,
+                 "machine config (TOML); default: config/simulator.toml of this errsep (its "
+                 "source tree, or share/errsep/config/ when installed), from any directory");
   app.add_option("-o,--out", out_dir, "output directory (default: [scan] output_dir)");
   app.add_option("--method", method, "four_sensor, displacement or both (default: [scan] method)")
       ->check(CLI::IsMember({"four_sensor", "displacement", "both"}));
@@ -239,6 +242,7 @@ int main(int argc, char** argv) {
 
   int exit_code = 0;
   try {
+    if (config_path.empty()) config_path = io::default_config_file().string();
     io::MachineConfig cfg = io::load_machine_config(config_path);
     if (averages > 0) cfg.scan.averages = averages;
     if (settle_ms >= 0) cfg.scan.settle_ms = settle_ms;

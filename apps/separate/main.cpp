@@ -18,8 +18,8 @@ int main(int argc, char** argv) {
       "errsep-separate: separate the reference profile f(x), straightness S(x) and tilt "
       "gamma(x) from a four-sensor raw scan (Zhao et al. 2019).\n"
       "Input CSV: columns x_mm,m1_um,m2_um,m3_um,m4_um (one row per slide position x_n, "
-      "one column per sensor configuration), optional '# dx_mm: 5', '# s2: 1', '# s3: 1', "
-      "'# s4: 5' metadata lines."};
+      "one column per sensor configuration), and the geometry: metadata lines '# dx_mm: 5', "
+      "'# s2: 1', '# s3: 1', '# s4: 5', '# N: 69' or --s2 --s3 --s4 (--dx-mm)."};
   app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
   std::string input, out_dir = "out/separate", rule = "reml", gauge = "reference",
                      prior = "second_difference", estimator = "posterior";
@@ -30,9 +30,9 @@ int main(int argc, char** argv) {
   app.add_option("raw_csv", input, "raw four-sensor scan CSV")->required();
   app.add_option("--out", out_dir, "result directory")->capture_default_str();
   app.add_option("--dx-mm", dx, "sampling interval, mm (default: from metadata or x_mm)");
-  app.add_option("--s2", s2, "spacing s2 in samples (default: from metadata)");
-  app.add_option("--s3", s3, "spacing s3 in samples (default: from metadata)");
-  app.add_option("--s4", s4, "spacing s4 in samples (default: from metadata)");
+  app.add_option("--s2", s2, "spacing s2 in samples (default: from metadata; required without)");
+  app.add_option("--s3", s3, "spacing s3 in samples (default: from metadata; required without)");
+  app.add_option("--s4", s4, "spacing s4 in samples (default: from metadata; required without)");
   app.add_option("--estimator", estimator,
                  "posterior (a prior on f, posterior covariance; default) or paper_system (the "
                  "paper's augmented system, for comparison)")
@@ -76,6 +76,21 @@ int main(int argc, char** argv) {
     if (!opts.is_valid(&why)) throw std::invalid_argument("options: " + why);
 
     const auto scan = errsep::io::read_raw_four_sensor_csv(input);
+    if (!scan.geometry) {
+      // The spacings are a property of the scan, not of errsep: without them in the file or
+      // on the command line the separation would solve the wrong system (Zhao 2019 Eq. 2).
+      std::string missing;
+      for (const auto& [name, value] : {std::pair{"--s2", s2}, {"--s3", s3}, {"--s4", s4}})
+        if (value <= 0) missing += (missing.empty() ? "" : ", ") + std::string(name);
+      if (!missing.empty())
+        throw errsep::io::CsvError(
+            input, 0,
+            "no sensor spacings: the file has no geometry metadata ('# dx_mm:', '# s2:', "
+            "'# s3:', '# s4:', '# N:' lines) and " +
+                missing +
+                " not given; give the spacings of this scan in samples (errsep does not assume "
+                "them)");
+    }
     errsep::core::FourSensorConfig cfg;
     if (scan.geometry) cfg = *scan.geometry;
     if (s2 > 0) cfg.s2 = s2;

@@ -9,6 +9,7 @@
 #include "errsep/io/csv.hpp"
 #include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
+#include "errsep/io/reference_csv.hpp"
 #include "errsep/io/staged_directory.hpp"
 #include "errsep/version.hpp"
 
@@ -37,7 +38,9 @@ int main(int argc, char** argv) {
                  "paper's section-3 figures come out; the g are written to DIR/combined.csv)")
       ->check(CLI::IsMember({"sensors", "combined"}))
       ->capture_default_str();
-  app.add_flag("--pe1", pe1, "sensor positioning error PE1 (D = 5.012, 4.985, 25.02 mm)");
+  app.add_flag("--pe1", pe1,
+               "sensor positioning error PE1: the sensor misses each spacing by +12, -15, +20 um "
+               "(D = 5.012, 4.985, 25.02 mm at the default geometry)");
   app.add_flag("--pe2", pe2, "slideway positioning error PE2 (Eq. 20)");
   app.add_option("--dx-mm", cfg.dx_mm, "sampling interval, mm")->capture_default_str();
   app.add_option("--N", cfg.N, "number of reference points")->capture_default_str();
@@ -56,7 +59,7 @@ int main(int argc, char** argv) {
     so.seed = seed;
     const bool combined = noise_on == "combined";
     if (combined) so.noise_model = errsep::core::NoiseModel::combined_outputs;
-    if (pe1) so.actual_spacing_mm = errsep::core::zhao2019_pe1_spacing_mm();
+    if (pe1) so.actual_spacing_mm = errsep::core::zhao2019_pe1_spacing_mm(cfg);
     if (pe2) so.positioning_error_um = errsep::core::zhao2019_pe2_um(cfg.travel_mm());
     const auto sim = errsep::core::simulate_four_sensor(cfg, truth, so);
 
@@ -79,6 +82,11 @@ int main(int argc, char** argv) {
                     {"seed", std::to_string(seed)},
                     {"noise_on", noise_on}};
     errsep::io::write_raw_four_sensor_csv(work / "raw.csv", raw);
+    // The truth on the reference grid, as errsep-refine --truth reads it.
+    errsep::io::write_truth_csv(work / "truth.csv", {sim.f_um, sim.S_um, sim.gamma_rad}, cfg,
+                                raw.x_mm.front(),
+                                {{"source", "errsep-simulate example " + std::to_string(example)},
+                                 {"run_id", stage.run_id()}});
 
     if (combined) {
       errsep::io::CsvTable g;
@@ -107,7 +115,8 @@ int main(int argc, char** argv) {
               << "truth comparison: max|dS| = " << dS.cwiseAbs().maxCoeff()
               << " um, max|dgamma| (constant removed) = "
               << dg.cwiseAbs().maxCoeff() * errsep::core::kDegPerRad << " deg\n"
-              << "written: " << out_dir << "/raw.csv, " << (combined ? "combined.csv, " : "")
+              << "written: " << out_dir << "/raw.csv, truth.csv, "
+              << (combined ? "combined.csv, " : "")
               << "motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt\n";
     return 0;
   } catch (const std::exception& e) {

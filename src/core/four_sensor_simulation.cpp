@@ -98,8 +98,11 @@ SlidewayTruth zhao2019_example2(const FourSensorConfig& cfg, int k) {
   return t;
 }
 
-std::array<double, 3> zhao2019_pe1_spacing_mm() {
-  return {5.012, 4.985, 25.02};
+std::array<double, 3> zhao2019_pe1_spacing_mm(const FourSensorConfig& cfg) {
+  // Section 3: Δx = 5 mm, s = (1, 1, 5) nominal 5, 5, 25 mm; actual 5.012, 4.985, 25.02 mm.
+  constexpr std::array<double, 3> miss_mm = {0.012, -0.015, 0.020};
+  return {cfg.s2 * cfg.dx_mm + miss_mm[0], cfg.s3 * cfg.dx_mm + miss_mm[1],
+          cfg.s4 * cfg.dx_mm + miss_mm[2]};
 }
 
 ProfileFn zhao2019_pe2_um(double L) {

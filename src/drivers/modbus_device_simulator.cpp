@@ -1,10 +1,6 @@
 #include "errsep/drivers/modbus_device_simulator.hpp"
 
 #include <modbus.h>
-#include <netinet/in.h>
-#include <sys/select.h>
-#include <sys/socket.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -91,10 +87,8 @@ struct ModbusDeviceSimulator::Impl {
   std::mt19937_64 rng;
   std::normal_distribution<double> normal{0.0, 1.0};
 
-  modbus_t* ctx = nullptr;
   modbus_mapping_t* map = nullptr;
-  int listen_fd = -1;
-  std::vector<int> clients;
+  std::unique_ptr<ModbusTcpServer> server;
 
   std::mutex mu;  // guards faults, fault counters and stage faults against inject()
   io::SimulatorFaults faults;
@@ -104,11 +98,9 @@ struct ModbusDeviceSimulator::Impl {
   bool hang_done = false, drop_done = false;
   int exceptions_left = -1;  // -1: exception fault not yet triggered
 
-  std::atomic<std::uint64_t> requests{0}, replies{0}, exceptions_sent{0}, ignored{0}, drops{0},
-      accepted{0};
-  std::atomic<int> nclients{0};
+  std::atomic<std::uint64_t> requests{0}, replies{0}, exceptions_sent{0}, ignored{0}, drops{0};
 
-  explicit Impl(const io::MachineConfig& c) : cfg(c), rng(c.simulator.seed) {
+  Impl(const io::MachineConfig& c, ModbusTcpServerOptions so) : cfg(c), rng(c.simulator.seed) {
     const auto& sim = cfg.simulator;
     if (sim.host != "127.0.0.1" && sim.host != "::1")
       throw std::runtime_error("simulator: host '" + sim.host +
@@ -174,14 +166,16 @@ struct ModbusDeviceSimulator::Impl {
     check_overlaps();
     build_mapping();
     update(now_s());
+    so.host = sim.host;
+    so.port = sim.port;
+    server = std::make_unique<ModbusTcpServer>(
+        "simulator", so,
+        [this](_modbus* ctx, const std::uint8_t* q, int length) { return handle(ctx, q, length); });
   }
 
   ~Impl() {
-    for (int fd : clients)
-      ::close(fd);
-    if (listen_fd >= 0) ::close(listen_fd);
+    server.reset();  // its sockets and context first
     if (map) modbus_mapping_free(map);
-    if (ctx) modbus_free(ctx);
   }
 
   // Refuses configs where two things would share a register (one address space for all units).
@@ -358,21 +352,9 @@ struct ModbusDeviceSimulator::Impl {
     }
   }
 
-  void drop_all() {
-    drops.fetch_add(1);  // before the close: a client that sees the drop also sees the count
-    for (int fd : clients)
-      ::close(fd);
-    clients.clear();
-    nclients.store(0);
-  }
-
-  // One request from one client.  Returns false when that client was closed.
-  bool handle(int fd) {
-    std::uint8_t q[MODBUS_TCP_MAX_ADU_LENGTH];
-    modbus_set_socket(ctx, fd);
-    const int rc = modbus_receive(ctx, q);
-    if (rc == 0) return true;  // not for us
-    if (rc < 0) return false;  // closed by the client, or garbage
+  // One request from one client (the server's thread).
+  ModbusConnectionAction handle(modbus_t* ctx, const std::uint8_t* q, int rc) {
+    using Action = ModbusConnectionAction;
     const std::uint64_t n = requests.fetch_add(1) + 1;
     const double t = now_s();
     std::lock_guard<std::mutex> lock(mu);
@@ -380,7 +362,7 @@ struct ModbusDeviceSimulator::Impl {
     // Stop answering: the request is read (so no stale answer is sent later) and dropped.
     if (hang_forever || t < hang_until_s) {
       ignored.fetch_add(1);
-      return true;
+      return Action::keep;
     }
     if (!hang_done && faults.hang_after_requests > 0 &&
         k >= static_cast<std::uint64_t>(faults.hang_after_requests)) {
@@ -388,13 +370,13 @@ struct ModbusDeviceSimulator::Impl {
       hang_forever = faults.hang_ms == 0;
       hang_until_s = t + faults.hang_ms / 1000.0;
       ignored.fetch_add(1);
-      return true;
+      return Action::keep;
     }
     if (!drop_done && faults.drop_after_requests > 0 &&
         k >= static_cast<std::uint64_t>(faults.drop_after_requests)) {
       drop_done = true;
-      drop_all();
-      return false;
+      drops.fetch_add(1);  // before the close: a client that sees the drop also sees the count
+      return Action::close_all;
     }
     if (faults.exception_after_requests > 0 && exceptions_left != 0 &&
         k >= static_cast<std::uint64_t>(faults.exception_after_requests)) {
@@ -402,18 +384,19 @@ struct ModbusDeviceSimulator::Impl {
       --exceptions_left;
       modbus_reply_exception(ctx, q, static_cast<unsigned>(faults.exception_code));
       exceptions_sent.fetch_add(1);
-      return true;
+      return Action::keep;
     }
     update(t);
-    if (modbus_reply(ctx, q, rc, map) == -1) return false;
+    if (modbus_reply(ctx, q, rc, map) == -1) return Action::close;
     replies.fetch_add(1);
     after_write(q, modbus_get_header_length(ctx), t);
-    return true;
+    return Action::keep;
   }
 };
 
-ModbusDeviceSimulator::ModbusDeviceSimulator(const io::MachineConfig& cfg)
-    : impl_(std::make_unique<Impl>(cfg)) {}
+ModbusDeviceSimulator::ModbusDeviceSimulator(const io::MachineConfig& cfg,
+                                             ModbusTcpServerOptions server)
+    : impl_(std::make_unique<Impl>(cfg, std::move(server))) {}
 
 ModbusDeviceSimulator::~ModbusDeviceSimulator() = default;
 
@@ -422,76 +405,12 @@ const std::string& ModbusDeviceSimulator::host() const noexcept {
 }
 
 int ModbusDeviceSimulator::listen() {
-  Impl& m = *impl_;
-  const std::string& host = m.cfg.simulator.host;
-  const std::string service = std::to_string(m.cfg.simulator.port);
-  m.ctx = modbus_new_tcp_pi(host.c_str(), service.c_str());
-  if (!m.ctx)
-    throw std::runtime_error("simulator: cannot create a Modbus TCP context for " + host + ":" +
-                             service + ": " + modbus_strerror(errno));
-  m.listen_fd = modbus_tcp_pi_listen(m.ctx, 16);
-  if (m.listen_fd < 0)
-    throw std::runtime_error("simulator: cannot listen on " + host + " port " + service + ": " +
-                             modbus_strerror(errno));
-  sockaddr_storage addr{};
-  socklen_t len = sizeof addr;
-  if (getsockname(m.listen_fd, reinterpret_cast<sockaddr*>(&addr), &len) != 0)
-    throw std::runtime_error(std::string("simulator: getsockname: ") + std::strerror(errno));
-  port_ = addr.ss_family == AF_INET6 ? ntohs(reinterpret_cast<sockaddr_in6*>(&addr)->sin6_port)
-                                     : ntohs(reinterpret_cast<sockaddr_in*>(&addr)->sin_port);
+  port_ = impl_->server->listen();
   return port_;
 }
 
 void ModbusDeviceSimulator::run() {
-  Impl& m = *impl_;
-  if (m.listen_fd < 0) throw std::runtime_error("simulator: run() before listen()");
-  while (!stop_.load(std::memory_order_relaxed)) {
-    fd_set rd;
-    FD_ZERO(&rd);
-    FD_SET(m.listen_fd, &rd);
-    int maxfd = m.listen_fd;
-    for (int fd : m.clients) {
-      FD_SET(fd, &rd);
-      maxfd = std::max(maxfd, fd);
-    }
-    timeval tv{0, 10000};  // wake up to notice request_stop()
-    const int n = select(maxfd + 1, &rd, nullptr, nullptr, &tv);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      throw std::runtime_error(std::string("simulator: select: ") + std::strerror(errno));
-    }
-    if (n == 0) continue;
-    if (FD_ISSET(m.listen_fd, &rd)) {
-      const int fd = ::accept(m.listen_fd, nullptr, nullptr);
-      if (fd >= 0) {
-        if (fd >= FD_SETSIZE || m.clients.size() >= 64) {
-          ::close(fd);
-        } else {
-          m.clients.push_back(fd);
-          m.accepted.fetch_add(1);
-          m.nclients.store(static_cast<int>(m.clients.size()));
-        }
-      }
-    }
-    // Copy: handle() may drop every client.
-    const std::vector<int> ready = m.clients;
-    for (int fd : ready) {
-      if (!FD_ISSET(fd, &rd)) continue;
-      if (std::find(m.clients.begin(), m.clients.end(), fd) == m.clients.end()) continue;
-      if (!m.handle(fd)) {
-        const auto it = std::find(m.clients.begin(), m.clients.end(), fd);
-        if (it != m.clients.end()) {
-          ::close(fd);
-          m.clients.erase(it);
-          m.nclients.store(static_cast<int>(m.clients.size()));
-        }
-      }
-    }
-  }
-  for (int fd : m.clients)
-    ::close(fd);
-  m.clients.clear();
-  m.nclients.store(0);
+  impl_->server->run(stop_);
 }
 
 void ModbusDeviceSimulator::inject(const io::SimulatorFaults& faults) {
@@ -526,8 +445,12 @@ SimulatorStats ModbusDeviceSimulator::stats() const noexcept {
   s.exceptions_sent = m.exceptions_sent.load();
   s.ignored = m.ignored.load();
   s.drops = m.drops.load();
-  s.accepted = m.accepted.load();
-  s.clients = m.nclients.load();
+  const ModbusTcpServerStats t = m.server->stats();
+  s.accepted = t.accepted;
+  s.clients = t.connections;
+  s.evictions = t.evictions;
+  s.idle_timeouts = t.idle_timeouts;
+  s.frame_timeouts = t.frame_timeouts;
   return s;
 }
 

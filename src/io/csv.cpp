@@ -4,6 +4,7 @@
 #include <cmath>
 #include <fstream>
 #include <iomanip>
+#include <limits>
 #include <sstream>
 
 #include "errsep/io/atomic_file.hpp"
@@ -149,6 +150,10 @@ CsvTable read_stream(std::istream& in, const std::filesystem::path& file,
       double v = 0;
       const char* b = c.data();
       const char* e = c.data() + c.size();
+      if (c.empty() && opts.allow_empty) {
+        row[i] = std::numeric_limits<double>::quiet_NaN();
+        continue;
+      }
       if (!c.empty() && *b == '+') ++b;
       const auto [ptr, ec] = std::from_chars(b, e, v);
       if (c.empty() || ec != std::errc() || ptr != e)
@@ -183,7 +188,7 @@ CsvTable parse_csv(const std::string& text, const std::filesystem::path& name,
   return read_stream(in, name, opts);
 }
 
-std::string format_csv(const CsvTable& table, int significant_digits) {
+std::string format_csv(const CsvTable& table, int significant_digits, NonFiniteCell non_finite) {
   std::ostringstream os;
   os << std::setprecision(significant_digits);
   for (const auto& [k, v] : table.metadata) {
@@ -195,8 +200,10 @@ std::string format_csv(const CsvTable& table, int significant_digits) {
     os << (i ? "," : "") << table.columns[i];
   os << '\n';
   for (const auto& r : table.rows) {
-    for (std::size_t i = 0; i < r.size(); ++i)
-      os << (i ? "," : "") << r[i];
+    for (std::size_t i = 0; i < r.size(); ++i) {
+      if (i) os << ',';
+      if (std::isfinite(r[i]) || non_finite == NonFiniteCell::text) os << r[i];
+    }
     os << '\n';
   }
   return os.str();

@@ -1,6 +1,8 @@
 #include "errsep/io/reference_csv.hpp"
 
 #include <cmath>
+#include <limits>
+#include <stdexcept>
 #include <string>
 
 #include "errsep/io/csv.hpp"
@@ -67,6 +69,27 @@ core::RefineTruth read_truth_csv(const std::filesystem::path& file,
     }
   }
   return truth;
+}
+
+void write_truth_csv(const std::filesystem::path& file, const core::RefineTruth& truth,
+                     const core::FourSensorConfig& cfg, double x0_mm,
+                     const std::vector<std::pair<std::string, std::string>>& metadata) {
+  const Eigen::Index N = cfg.N, P = cfg.positions();
+  if (truth.f_um.size() != N || truth.S_um.size() != P || truth.gamma_rad.size() != P)
+    throw std::invalid_argument(
+        "truth of " + file.string() + ": " + std::to_string(truth.f_um.size()) + " f, " +
+        std::to_string(truth.S_um.size()) + " S and " + std::to_string(truth.gamma_rad.size()) +
+        " gamma values for N = " + std::to_string(N) + ", P = " + std::to_string(P));
+  CsvTable t;
+  t.metadata = metadata;
+  t.set_meta("units", "x in mm, f and S in um, gamma in urad; S and gamma nan beyond the " +
+                          std::to_string(P) + " slide positions");
+  t.columns = {"x_mm", "f_um", "S_um", "gamma_urad"};
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (Eigen::Index j = 0; j < N; ++j)
+    t.rows.push_back({x0_mm + static_cast<double>(j) * cfg.dx_mm, truth.f_um(j),
+                      j < P ? truth.S_um(j) : nan, j < P ? 1e6 * truth.gamma_rad(j) : nan});
+  write_csv(file, t, 15);
 }
 
 }  // namespace errsep::io

@@ -5,6 +5,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <map>
 #include <optional>
 #include <sstream>
@@ -257,7 +258,9 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
   auto add_eval = [&](const Row& r) {
     rows.push_back(r);
     eval_csv.add_column(r.csv_name + "_" + r.unit, {r.value});
-    eval_csv.add_column(r.csv_name + "_U_" + r.unit, {r.expanded > 0 ? r.expanded : 0.0});
+    // Unknown U is an empty field: 0 would read as a perfectly known value.
+    eval_csv.add_column(r.csv_name + "_U_" + r.unit,
+                        {r.expanded > 0 ? r.expanded : std::numeric_limits<double>::quiet_NaN()});
   };
   // Figures are drawn after every input has been read and evaluated, so a bad input file stops
   // the run before anything is written.
@@ -342,7 +345,20 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
           "bias of max - min from noise removed (Monte Carlo)");
     const double travel = md.x.back() - md.x.front();
     const double local = opts.local_length_mm > 0 ? opts.local_length_mm : travel / 4;
-    if (local <= travel + 1e-9 * std::max(1.0, travel)) {
+    // A window must hold two samples: on a short scan (2-4 points) the default travel / 4 is
+    // shorter than the sample step; that leaves the local figure out, not the whole report.
+    double min_step = travel;
+    for (std::size_t i = 1; i < md.x.size(); ++i)
+      min_step = std::min(min_step, md.x[i] - md.x[i - 1]);
+    const double eps = 1e-9 * std::max(1.0, travel);
+    const std::string which = opts.local_length_mm > 0 ? "" : " (the default, travel / 4)";
+    if (local + eps < min_step) {
+      res.warnings.push_back("local length " + sig(local) + " mm" + which +
+                             " is shorter than the sample step " + sig(min_step) + " mm of " +
+                             std::to_string(md.x.size()) +
+                             " points: local straightness not evaluated (give --local-length "
+                             "of at least one step).");
+    } else if (local <= travel + eps) {
       const auto r = core::evaluate_local_straightness(md.x, md.s, md.u_s, local,
                                                        opts.local_reference, opts.evaluation);
       add_eval({es, "local straightness over " + sig(local) + " mm",
@@ -350,7 +366,7 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
                 r.uncertainty.expanded});
       eval_csv.add_column("local_length_mm", {local});
     } else {
-      res.warnings.push_back("local length " + sig(local) + " mm exceeds the travel " +
+      res.warnings.push_back("local length " + sig(local) + " mm" + which + " exceeds the travel " +
                              sig(travel) + " mm: local straightness not evaluated.");
     }
     if (!md.gamma_urad.empty()) {
@@ -746,7 +762,7 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     if (trend.any_significant())
       res.warnings.push_back("straightness changed beyond the combined U (see trend.csv)");
   }
-  outputs.emplace_back(out / "evaluation.csv", format_csv(eval_csv, 12));
+  outputs.emplace_back(out / "evaluation.csv", format_csv(eval_csv, 12, NonFiniteCell::empty));
   outputs.emplace_back(out / "evaluation.txt", res.text);
   outputs.emplace_back(out / "report.html", render_html_report(html));
   for (const auto& [path, content] : outputs) {

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <iostream>
 #include <sstream>
@@ -71,7 +72,9 @@ TEST_CASE("errsep-report evaluates a bow and a sine tilt exactly and writes ever
 
   // The numbers: a pure bow has straightness h about every reference line (closed form), the
   // sine tilt has an angular deviation of 2 a (its extremes are samples).
-  const auto ev = errsep::io::read_csv(dir / "evaluation.csv");
+  // The surface has no u_w_um: its flatness U is unknown, an empty field, not 0.
+  const auto ev = errsep::io::read_csv(dir / "evaluation.csv", {.allow_empty = true});
+  CHECK(std::isnan(ev.column("flatness_least_squares_U_um")[0]));
   for (const char* c : {"EYX_end_points_um", "EYX_least_squares_um", "EYX_minimum_zone_um"})
     CHECK(ev.column(c)[0] == Approx(h).epsilon(1e-9));
   CHECK(ev.column("ECX_urad")[0] == Approx(2 * a_deg * errsep::core::kUradPerDeg).epsilon(1e-9));
@@ -123,6 +126,45 @@ TEST_CASE("errsep-report evaluates a bow and a sine tilt exactly and writes ever
                       Catch::Contains("interpolation error max"));
   // The result records no machine coordinates: the tables are in scan coordinates, said so.
   CHECK_THAT(out, Catch::Contains("does not record where the scan ran"));
+
+  // Each figure's .gp script runs from where it is written, after the folder has been moved (as
+  // a user restyling a figure would run it): it names its data and outputs relative to itself.
+  const fs::path moved = tmp / "moved";
+  fs::rename(dir, moved);
+  int scripts = 0;
+  for (const auto& e : fs::directory_iterator(moved / "plots")) {
+    if (e.path().extension() != ".gp") continue;
+    ++scripts;
+    const fs::path png = fs::path(e.path()).replace_extension(".png");
+    fs::remove(png);
+    std::string gp_out;
+    CHECK(run_command("cd " + quote(moved / "plots") + " && gnuplot " + quote(e.path().filename()) +
+                          " 2>&1",
+                      &gp_out) == 0);
+    INFO(e.path() << ": " << gp_out);
+    CHECK(fs::exists(png));
+  }
+  CHECK(scripts >= 10);
+}
+
+TEST_CASE("a scan of 2 to 4 points is reported without its local straightness") {
+  for (const int points : {2, 3, 4}) {
+    TempDir tmp;
+    const fs::path dir = tmp / "short";
+    errsep::test::ResultDirSpec spec;
+    spec.travel_mm = 5.0 * (points - 1);
+    spec.reference_mm = spec.travel_mm + 35;
+    spec.S_um = [](double x) { return 0.1 * x; };
+    errsep::test::write_four_sensor_result(dir, spec);
+    std::string out;
+    const int rc = run_command(quote(app_path("report")) + " " + quote(dir) + " 2>&1", &out);
+    INFO(points << " points: " << out);
+    CHECK(rc == 0);
+    CHECK_THAT(out, Catch::Contains("is shorter than the sample step 5 mm") &&
+                        Catch::Contains("local straightness not evaluated"));
+    CHECK(fs::exists(dir / "evaluation.csv"));
+    CHECK(fs::exists(dir / "report.html"));
+  }
 }
 
 TEST_CASE("errsep-report fails with a message and writes nothing for an empty directory") {
@@ -164,9 +206,14 @@ TEST_CASE("errsep-report evaluates a one-axis displacement result (x_mm, m_um, w
   std::string out;
   REQUIRE(run_command(quote(app_path("report")) + " " + quote(dir), &out) == 0);
   INFO(out);
-  const auto ev = errsep::io::read_csv(dir / "evaluation.csv");
-  for (const char* c : {"EZX_end_points_um", "EZX_least_squares_um", "EZX_minimum_zone_um"})
+  // No u_m_um / u_w_um: every U is unknown, an empty field (0 would claim an exact value).
+  const auto ev = errsep::io::read_csv(dir / "evaluation.csv", {.allow_empty = true});
+  for (const char* c : {"EZX_end_points_um", "EZX_least_squares_um", "EZX_minimum_zone_um"}) {
     CHECK(ev.column(c)[0] == Approx(3.0).epsilon(1e-9));
+    CHECK(std::isnan(ev.column(std::string(c).replace(std::strlen(c) - 3, 3, "_U_um"))[0]));
+  }
+  CHECK_THROWS_WITH(errsep::io::read_csv(dir / "evaluation.csv"),
+                    Catch::Contains("column 'EZX_end_points_U_um': '' is not a number"));
   CHECK(ev.column("w_minimum_zone_um")[0] == Approx(0).margin(1e-9));
   CHECK(fs::exists(dir / "plots/displacement_profiles.png"));
   CHECK_THAT(slurp(dir / "report.html"), Catch::Contains("/data/scans/one-axis.csv"));

@@ -150,6 +150,14 @@ TEST_CASE("malformed raw scans: file, line and problem, exit 1, nothing written"
     CHECK(separate("--dx-mm 5 --s2 1 --s3 1 --s4 5") == 1);
     check_error(out, raw_file.string(), "N = 12");
   }
+  SECTION("no geometry metadata and no spacings: refused, not assumed") {
+    fresh(false);
+    CHECK(separate() == 1);
+    check_error(out, raw_file.string() + ":", "no sensor spacings");
+    CHECK_THAT(out, Catch::Contains("--s2, --s3, --s4"));
+    CHECK(separate("--s2 1 --s3 1") == 1);
+    check_error(out, raw_file.string() + ":", "--s4 not given");
+  }
   SECTION("spacings with a common factor (A rank-deficient beyond the known null space)") {
     fresh(false);
     CHECK(separate("--dx-mm 5 --s2 2 --s3 2 --s4 4") == 1);
@@ -173,6 +181,17 @@ TEST_CASE("malformed raw scans: file, line and problem, exit 1, nothing written"
   CHECK_FALSE(std::filesystem::exists(res_dir));
   for (const auto& e : std::filesystem::directory_iterator(dir.path()))
     CHECK(e.path().filename().string().find("partial") == std::string::npos);
+}
+
+TEST_CASE("a raw scan without geometry metadata is separated with the spacings given") {
+  TempDir dir;
+  io::write_raw_four_sensor_csv(dir / "raw.csv", raw_of(simulate(), false));
+  std::string out;
+  CHECK(run((dir / "raw.csv").string() + " --out " + (dir / "res").string() +
+                " --s2 1 --s3 1 --s4 5 2>&1",
+            &out) == 0);
+  INFO(out);
+  CHECK(std::filesystem::exists(dir / "res" / "motion.csv"));
 }
 
 TEST_CASE("an error leaves an earlier result alone") {

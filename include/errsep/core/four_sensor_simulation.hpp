@@ -84,8 +84,12 @@ struct RandomTruthOptions {
 SlidewayTruth random_smooth_truth(const FourSensorConfig& cfg, std::uint64_t seed,
                                   const RandomTruthOptions& o = {});
 
-/// PE1 of section 3: D2, D3, D4 = 5.012, 4.985, 25.02 mm.
-std::array<double, 3> zhao2019_pe1_spacing_mm();
+/// PE1 of section 3, the positioning error of the sensor: D2, D3, D4 = 5.012, 4.985, 25.02 mm
+/// where the nominal spacings are 5, 5, 25 mm, i.e. the sensor stage misses each position by
+/// +12, -15, +20 µm.  For another geometry the same misses are added to its nominal spacings
+/// s_i·Δx: a positioning error is a length, not a fraction of the spacing (the default geometry
+/// gives the paper's figures).
+std::array<double, 3> zhao2019_pe1_spacing_mm(const FourSensorConfig& cfg = {});
 /// PE2 of Eq. (20) in µm, for travel L in mm.
 ProfileFn zhao2019_pe2_um(double travel_mm);
 

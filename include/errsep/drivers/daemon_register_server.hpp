@@ -31,19 +31,19 @@
 //                       (key straightness_minimum_zone_U_um)
 // Version 1 had registers 0..12, with 8,9 = max - min of S(x) (no reference line removed).
 #include <atomic>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <thread>
 
 #include "errsep/acq/daemon.hpp"
+#include "errsep/drivers/modbus_tcp_server.hpp"
 
 namespace errsep::drivers {
 
-struct RegisterServerOptions {
-  std::string host = "127.0.0.1";  ///< address to bind (loopback by default)
-  int port = 1502;                 ///< 0 = ephemeral (see port() after listen())
-  bool is_valid(std::string* why = nullptr) const;
-};
+/// Address, connection cap and time-outs of the register map's server (loopback, port 1502 by
+/// default).
+using RegisterServerOptions = ModbusTcpServerOptions;
 
 inline constexpr int kRegisterMapVersion = 2;
 inline constexpr int kInputRegisterCount = 18;
@@ -61,15 +61,15 @@ class DaemonRegisterServer {
   /// Serves on its own thread until stop().
   void start();
   void stop() noexcept;
-  int port() const noexcept { return port_; }
+  int port() const noexcept;
+  /// Connections, evictions and time-outs of the server.  Thread-safe.
+  ModbusTcpServerStats stats() const noexcept;
 
  private:
-  void loop();
+  ModbusConnectionAction handle(_modbus* ctx, const std::uint8_t* q, int length);
   struct Impl;
   std::unique_ptr<Impl> impl_;
   acq::Daemon& daemon_;
-  RegisterServerOptions opts_;
-  int port_ = 0;
   std::atomic<bool> stop_{false};
   std::thread thread_;
 };

@@ -23,12 +23,15 @@
 //    read 0 (+ noise + drift).
 // Fault injection (config [simulator.faults], the command line, or inject() at run time): stop
 // answering, drop every connection, answer with a Modbus exception, an out-of-range reading.
-// Several clients are served at once (select() over the listening and client sockets).
+// Several clients are served at once by the shared Modbus TCP server loop
+// (drivers/modbus_tcp_server.hpp): idle and half-open connections time out, the oldest idle one
+// is evicted at the connection cap.
 #include <atomic>
 #include <cstdint>
 #include <memory>
 #include <string>
 
+#include "errsep/drivers/modbus_tcp_server.hpp"
 #include "errsep/io/machine_config.hpp"
 
 namespace errsep::drivers {
@@ -40,6 +43,9 @@ struct SimulatorStats {
   std::uint64_t ignored = 0;          ///< requests left unanswered (hang)
   std::uint64_t drops = 0;            ///< times all connections were dropped
   std::uint64_t accepted = 0;         ///< client connections accepted
+  std::uint64_t evictions = 0;        ///< idle connections closed to admit a new one at the cap
+  std::uint64_t idle_timeouts = 0;    ///< connections closed for idleness
+  std::uint64_t frame_timeouts = 0;   ///< connections closed with a partial request (half-open)
   int clients = 0;                    ///< clients connected now
 };
 
@@ -49,7 +55,9 @@ class ModbusDeviceSimulator {
   /// compensation table).  Throws std::runtime_error when the config cannot be served
   /// (overlapping registers, a host that is not loopback, a table that cannot be read or
   /// compensates other axes than the scan measures).
-  explicit ModbusDeviceSimulator(const io::MachineConfig& cfg);
+  /// `server`: connection cap and time-outs of its Modbus TCP server (its host and port are
+  /// taken from cfg.simulator).
+  explicit ModbusDeviceSimulator(const io::MachineConfig& cfg, ModbusTcpServerOptions server = {});
   ~ModbusDeviceSimulator();
   ModbusDeviceSimulator(const ModbusDeviceSimulator&) = delete;
   ModbusDeviceSimulator& operator=(const ModbusDeviceSimulator&) = delete;

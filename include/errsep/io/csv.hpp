@@ -50,6 +50,7 @@ struct CsvTable {
 struct CsvReadOptions {
   bool allow_non_finite = false;  ///< NaN/Inf in a cell is an error unless this is set
   std::size_t min_rows = 1;       ///< fewer data rows is an error
+  bool allow_empty = false;       ///< an empty cell (unknown) reads as NaN instead of an error
 };
 
 /// Reads a CSV file; throws CsvError naming file and line on any malformed content.
@@ -58,8 +59,15 @@ CsvTable read_csv(const std::filesystem::path& file, const CsvReadOptions& opts 
 CsvTable parse_csv(const std::string& text, const std::filesystem::path& name,
                    const CsvReadOptions& opts = {});
 
+/// How format_csv writes a cell that is not a finite number.
+enum class NonFiniteCell {
+  text,  ///< "nan", "inf" (a value that is not a number)
+  empty  ///< an empty field: the value is unknown (read back with allow_empty)
+};
+
 /// Formats a table as CSV text (metadata as "# key: value" lines, then header, then rows).
-std::string format_csv(const CsvTable& table, int significant_digits = 10);
+std::string format_csv(const CsvTable& table, int significant_digits = 10,
+                       NonFiniteCell non_finite = NonFiniteCell::text);
 
 /// Writes atomically (see write_file_atomic).  Throws std::runtime_error on I/O failure.
 void write_csv(const std::filesystem::path& file, const CsvTable& table,

@@ -9,6 +9,8 @@
 //   x_mm,f_um,S_um,gamma_urad     (S_um and gamma_urad "nan" beyond row P)
 #include <filesystem>
 #include <optional>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "errsep/core/four_sensor_config.hpp"
@@ -30,5 +32,12 @@ ReferenceTrace read_reference_csv(const std::filesystem::path& file);
 /// needed.
 core::RefineTruth read_truth_csv(const std::filesystem::path& file,
                                  const core::FourSensorConfig& cfg, double x0_mm);
+
+/// Writes `truth` in the form read_truth_csv reads (N rows from x0_mm on the Δx grid; S and γ
+/// "nan" beyond the P slide positions), atomically.  Throws std::invalid_argument when the sizes
+/// do not match cfg, std::runtime_error on I/O failure.
+void write_truth_csv(const std::filesystem::path& file, const core::RefineTruth& truth,
+                     const core::FourSensorConfig& cfg, double x0_mm,
+                     const std::vector<std::pair<std::string, std::string>>& metadata = {});
 
 }  // namespace errsep::io

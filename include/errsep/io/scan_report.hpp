@@ -16,7 +16,8 @@
 //                  x_mm, m_um, w_um [, r_um, u_m_um, u_w_um] (m: table motion error, EZX default)
 // At least one of them must be present.
 //
-// Outputs in DIR: evaluation.csv (one row, ISO 230-1 symbols in the column names),
+// Outputs in DIR: evaluation.csv (one row, ISO 230-1 symbols in the column names; an expanded
+// uncertainty that is not known is an empty field, read back with CsvReadOptions::allow_empty),
 // evaluation.txt, plots/*.png|svg|gp|dat, report.html, compensation/* (every CNC format of
 // io/cnc/, in machine coordinates, and accuracy.csv).  DIR is a result set
 // (io/staged_directory.hpp): it is refused when its manifest says it is not whole, raw scans in it
