@@ -1,6 +1,7 @@
 // CHOLMOD is used directly here rather than through Eigen's CholmodSupport: selected inversion
 // needs the factor's pattern and D, which Eigen's wrapper does not expose.  This file and
-// tikhonov_solver.cpp are the only ones that include <cholmod.h> (see the header for why two).
+// tikhonov_solver.cpp (with their private cholmod_views.hpp) are the only ones that include
+// <cholmod.h> (see the header for why two).
 #include "errsep/core/sparse_least_squares.hpp"
 
 #include <cholmod.h>
@@ -11,22 +12,13 @@
 #include <stdexcept>
 #include <vector>
 
+#include "cholmod_views.hpp"
+
 namespace errsep::core {
 namespace {
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
-cholmod_dense dense_view(const double* v, Eigen::Index rows, Eigen::Index cols) {
-  cholmod_dense d{};
-  d.nrow = d.d = static_cast<size_t>(rows);
-  d.ncol = static_cast<size_t>(cols);
-  d.nzmax = d.nrow * d.ncol;
-  d.x = const_cast<double*>(v);
-  d.xtype = CHOLMOD_REAL;
-  d.dtype = CHOLMOD_DOUBLE;
-  return d;
 }
 
 }  // namespace
@@ -69,20 +61,9 @@ SparseLeastSquares::SparseLeastSquares(const Eigen::SparseMatrix<double>& at,
   cm.supernodal = CHOLMOD_SIMPLICIAL;  // LDLᵀ: selected inversion reads D and L column by column
   cm.final_ll = 0;
   cm.print = 0;
-  cm.error_handler = nullptr;  // status checked after every call
+  cm.error_handler = nullptr;   // status checked after every call
+  impl_->F = detail::view(at);  // unsymmetric: CHOLMOD factors F·Fᵀ = AᵀA
   auto& F = impl_->F;
-  F.nrow = static_cast<size_t>(at.rows());
-  F.ncol = static_cast<size_t>(at.cols());
-  F.nzmax = static_cast<size_t>(at.nonZeros());
-  F.p = const_cast<int*>(at.outerIndexPtr());
-  F.i = const_cast<int*>(at.innerIndexPtr());
-  F.x = const_cast<double*>(at.valuePtr());
-  F.stype = 0;  // unsymmetric: CHOLMOD factors F·Fᵀ = AᵀA
-  F.itype = CHOLMOD_INT;
-  F.xtype = CHOLMOD_REAL;
-  F.dtype = CHOLMOD_DOUBLE;
-  F.sorted = 1;
-  F.packed = 1;
 
   auto t0 = std::chrono::steady_clock::now();
   impl_->L = cholmod_analyze(&F, &cm);
@@ -126,7 +107,7 @@ Eigen::MatrixXd SparseLeastSquares::solve_normal(const Eigen::MatrixXd& rhs) con
                                 std::to_string(rhs.rows()) + " rows, expected " +
                                 std::to_string(stats_.unknowns));
   auto& cm = impl_->cm;
-  cholmod_dense b = dense_view(rhs.data(), rhs.rows(), rhs.cols());
+  cholmod_dense b = detail::view(rhs.data(), rhs.rows(), rhs.cols());
   cholmod_dense* x = cholmod_solve(CHOLMOD_A, impl_->L, &b, &cm);
   if (!x || cm.status < CHOLMOD_OK) {
     if (x) cholmod_free_dense(&x, &cm);

@@ -14,7 +14,10 @@
 #include <stdexcept>
 #include <vector>
 
+#include "cholmod_views.hpp"
+
 namespace errsep::core {
+using detail::view;
 namespace {
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -34,35 +37,6 @@ void start_common(cholmod_common& cm) {
   cm.error_handler = nullptr;  // status is checked after every call
 }
 
-// Views an Eigen column-major sparse matrix as an unsymmetric cholmod_sparse (no copy).
-cholmod_sparse view(const Eigen::SparseMatrix<double>& M) {
-  cholmod_sparse s{};
-  s.nrow = static_cast<size_t>(M.rows());
-  s.ncol = static_cast<size_t>(M.cols());
-  s.nzmax = static_cast<size_t>(M.nonZeros());
-  s.p = const_cast<int*>(M.outerIndexPtr());
-  s.i = const_cast<int*>(M.innerIndexPtr());
-  s.x = const_cast<double*>(M.valuePtr());
-  s.stype = 0;
-  s.itype = CHOLMOD_INT;
-  s.xtype = CHOLMOD_REAL;
-  s.dtype = CHOLMOD_DOUBLE;
-  s.sorted = 1;
-  s.packed = 1;
-  return s;
-}
-
-// Views a column-major rows × cols array as a cholmod_dense (no copy).
-cholmod_dense view(const double* v, Eigen::Index rows, Eigen::Index cols) {
-  cholmod_dense d{};
-  d.nrow = d.d = static_cast<size_t>(rows);
-  d.ncol = static_cast<size_t>(cols);
-  d.nzmax = d.nrow * d.ncol;
-  d.x = const_cast<double*>(v);
-  d.xtype = CHOLMOD_REAL;
-  d.dtype = CHOLMOD_DOUBLE;
-  return d;
-}
 }  // namespace
 
 const char* to_string(SolverStatus s) {
@@ -457,10 +431,18 @@ std::unique_ptr<TikhonovSolver> TikhonovSolver::worker() const {
   w->sigma_max_bound_ = sigma_max_bound_;
   w->border_ = border_;
   w->impl_ = std::make_unique<Impl>();
-  w->impl_->L = cholmod_copy_factor(impl_->L, &w->impl_->cm);
-  if (!w->impl_->L) throw std::runtime_error("CHOLMOD could not copy the factor for a worker");
+  // Its own symbolic analysis of the shared band (as fast as copying this solver's factor at
+  // N = 10⁶, 0.1 s) and its values from the shared AᵀA: nothing is read that this solver's
+  // factorisations write, so a worker can be made on its own thread while this one factorises.
+  w->impl_->L = cholmod_analyze(&normal_->band, &w->impl_->cm);
+  if (!w->impl_->L || w->impl_->cm.status < CHOLMOD_OK)
+    throw std::runtime_error("CHOLMOD symbolic analysis failed for a worker (status " +
+                             std::to_string(w->impl_->cm.status) + ")");
+  if (w->impl_->L->ordering != CHOLMOD_NATURAL || w->impl_->L->is_super)
+    throw std::runtime_error("CHOLMOD did not keep the natural-order simplicial factor");
   if (has_penalty()) {
-    w->impl_->work_x = impl_->work_x;
+    const auto* a = static_cast<const double*>(normal_->band.x);
+    w->impl_->work_x.assign(a, a + normal_->pen_x.size());
     w->impl_->work = normal_->band;
     w->impl_->work.x = w->impl_->work_x.data();
   }

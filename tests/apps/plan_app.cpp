@@ -4,7 +4,7 @@
 // (core::random_smooth_truth, a new one per seed), independent noise on every reading (σ/√K: the
 // mean of K samples), the default estimator of separate_four_sensor, the ISO 230-1 minimum-zone
 // straightness with its bias correction (core::estimate_straightness, as
-// tests/core/four_sensor_coverage.cpp takes it; support/four_sensor_straightness.hpp): the fraction
+// tests/core/four_sensor_coverage.cpp takes it; core/four_sensor_evaluation.hpp): the fraction
 // of runs whose straightness lies within the predicted U of the truth's, and the fraction of points
 // within 2·u_S (predicted), are each 90–99 %.  Also: the [scan] fragment is accepted by the machine
 // config, --spacings predicts one configuration (the comparison's own figure), and bad options fail
@@ -23,11 +23,11 @@
 #include <vector>
 
 #include "errsep/core/four_sensor.hpp"
+#include "errsep/core/four_sensor_evaluation.hpp"
 #include "errsep/core/four_sensor_simulation.hpp"
 #include "errsep/core/iso230.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/machine_config.hpp"
-#include "support/four_sensor_straightness.hpp"
 #include "support/support.hpp"
 
 using namespace errsep;
@@ -81,7 +81,7 @@ Runs simulate(const core::FourSensorConfig& cfg, double sigma, int runs, double 
     r.cover_stated += (err <= 2.0 * res.u_S_um.array()).cast<double>().mean();
     const std::vector<double> x(res.x_mm.data(), res.x_mm.data() + res.x_mm.size());
     const std::vector<double> st(sim.S_um.data(), sim.S_um.data() + sim.S_um.size());
-    const auto est = test::four_sensor_straightness(res, core::ReferenceLine::minimum_zone);
+    const auto est = core::four_sensor_straightness(res, core::ReferenceLine::minimum_zone);
     const auto tru = core::evaluate_straightness(x, st, {}, core::ReferenceLine::minimum_zone);
     const double e = std::abs(est.straightness_um - tru.straightness_um);
     r.straight_err.push_back(e);

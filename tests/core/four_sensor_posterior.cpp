@@ -11,29 +11,10 @@
 
 #include "errsep/core/four_sensor.hpp"
 #include "errsep/core/four_sensor_simulation.hpp"
+#include "support/random_banded.hpp"
 
 using namespace errsep::core;
-
-namespace {
-
-// A random sparse A: band rows over m unknowns plus a dense border of k columns.
-Eigen::SparseMatrix<double> random_banded(int rows, int m, int k, int width, std::uint32_t seed) {
-  std::srand(seed);
-  auto rnd = [] { return 2.0 * std::rand() / RAND_MAX - 1.0; };
-  std::vector<Eigen::Triplet<double>> t;
-  for (int r = 0; r < rows; ++r) {
-    const int c0 = (r * (m - width)) / std::max(1, rows - 1);
-    for (int c = c0; c < c0 + width; ++c)
-      t.emplace_back(r, c, rnd());
-    for (int c = 0; c < k; ++c)
-      if (r % 3 == c % 3) t.emplace_back(r, m + c, rnd());
-  }
-  Eigen::SparseMatrix<double> A(rows, m + k);
-  A.setFromTriplets(t.begin(), t.end());
-  return A;
-}
-
-}  // namespace
+using errsep::test::random_banded;
 
 TEST_CASE("general-form solver: penalty on band and border equals the dense solve",
           "[tikhonov][penalty]") {

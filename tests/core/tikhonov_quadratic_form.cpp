@@ -8,28 +8,10 @@
 #include <cstdlib>
 
 #include "errsep/core/tikhonov_solver.hpp"
+#include "support/random_banded.hpp"
 
 using namespace errsep::core;
-
-namespace {
-
-Eigen::SparseMatrix<double> random_banded(int rows, int m, int k, int width, unsigned seed) {
-  std::srand(seed);
-  auto rnd = [] { return 2.0 * std::rand() / RAND_MAX - 1.0; };
-  std::vector<Eigen::Triplet<double>> t;
-  for (int r = 0; r < rows; ++r) {
-    const int c0 = (r * (m - width)) / std::max(1, rows - 1);
-    for (int c = c0; c < c0 + width; ++c)
-      t.emplace_back(r, c, rnd());
-    for (int c = 0; c < k; ++c)
-      if (r % 3 == c % 3) t.emplace_back(r, m + c, rnd());
-  }
-  Eigen::SparseMatrix<double> A(rows, m + k);
-  A.setFromTriplets(t.begin(), t.end());
-  return A;
-}
-
-}  // namespace
+using errsep::test::random_banded;
 
 TEST_CASE("factorize_and_quadratic_form equals the dense v^T M^-1 v", "[tikhonov]") {
   const int m = 50, rows = 90;
