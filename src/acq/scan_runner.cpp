@@ -61,6 +61,7 @@ class Runner {
   const ScanHooks& hooks_;
   WindowAverager averager_;
   std::int64_t t0_ns_ = 0;
+  double slowest_rate_hz_ = 0.0;  ///< of the buses' samplers: sets the window time-out
   ScanResult res_;
 };
 
@@ -128,7 +129,7 @@ WindowAverager::Window Runner::measure(const std::vector<std::size_t>& channels,
   for (int attempt = 0;; ++attempt) {
     check_abort();
     averager_.open(monotonic_ns(), k);
-    auto w = averager_.wait(opts_.window_timeout(),
+    auto w = averager_.wait(opts_.window_timeout(slowest_rate_hz_),
                             static_cast<std::uint64_t>(opts_.max_errors_per_point), hooks_.abort);
     check_abort();
     bool ok = true;
@@ -149,7 +150,8 @@ WindowAverager::Window Runner::measure(const std::vector<std::size_t>& channels,
     if (w.n_errors[worst] > 0)
       os << " (last: " << to_string(w.last_error) << ")";
     else
-      os << " (no readings arrived within " << opts_.window_timeout().count() << " ms)";
+      os << " (no readings arrived within " << opts_.window_timeout(slowest_rate_hz_).count()
+         << " ms)";
     if (attempt >= opts_.point_retries) {
       os << ", after " << opts_.point_retries << " retries";
       throw ScanStop{ScanRunOutcome::failed, os.str()};
@@ -301,6 +303,7 @@ ScanResult Runner::run() {
     SamplerOptions so = opts_.sampler;
     if (b < dev_.bus_rate_hz.size() && dev_.bus_rate_hz[b] > 0.0) so.rate_hz = dev_.bus_rate_hz[b];
     bus_rate_hz.push_back(so.rate_hz);
+    slowest_rate_hz_ = slowest_rate_hz_ > 0.0 ? std::min(slowest_rate_hz_, so.rate_hz) : so.rate_hz;
     samplers.push_back(std::make_unique<Sampler>(sensors, *rings.back(), so, std::move(channels)));
   }
   RingConsumer consumer(ring_ptrs, [this](const Sample& s) { averager_.add(s); });
@@ -422,9 +425,10 @@ const char* to_string(ScanRunOutcome o) noexcept {
   return "unknown";
 }
 
-std::chrono::milliseconds ScanOptions::window_timeout() const {
-  return std::chrono::milliseconds(
-      static_cast<long>(std::ceil(4.0 * averages * 1000.0 / sampler.rate_hz)) + 1000);
+std::chrono::milliseconds ScanOptions::window_timeout(double rate_hz) const {
+  const double rate = rate_hz > 0.0 ? rate_hz : sampler.rate_hz;
+  return std::chrono::milliseconds(static_cast<long>(std::ceil(4.0 * averages * 1000.0 / rate)) +
+                                   1000);
 }
 
 bool ScanOptions::is_valid(std::string* why) const {

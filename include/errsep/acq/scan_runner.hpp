@@ -63,8 +63,9 @@ struct ScanOptions {
   /// reader can refuse a reading no sensor can give (io/plausibility.hpp); sensor_range_metadata.
   std::vector<std::pair<std::string, std::string>> range_metadata;
 
-  /// Time allowed to collect one window of K readings: 4·K periods + 1 s.
-  std::chrono::milliseconds window_timeout() const;
+  /// Time allowed to collect one window of K readings: 4·K periods + 1 s, periods of `rate_hz`
+  /// (the slowest bus of the scan; 0 = sampler.rate_hz).
+  std::chrono::milliseconds window_timeout(double rate_hz = 0.0) const;
   bool is_valid(std::string* why = nullptr) const;
 };
 
