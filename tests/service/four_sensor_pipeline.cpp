@@ -88,7 +88,7 @@ TEST_CASE("write_result_set: a separation that fails keeps the raw scan alone an
   CHECK(io::check_result_set(tmp / "scan").whole());
 }
 
-TEST_CASE("pipeline settings from the machine config; bad settings refused") {
+TEST_CASE("pipeline settings from the machine config, and bad settings refused") {
   io::MachineConfig cfg;
   cfg.refine.enabled = true;
   cfg.refine.alpha = 0.05;
