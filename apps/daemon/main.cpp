@@ -10,7 +10,9 @@
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
+#include <filesystem>
 #include <iostream>
+#include <memory>
 
 #include "errsep/acq/daemon.hpp"
 #include "errsep/acq/sd_notify.hpp"
@@ -18,6 +20,7 @@
 #include "errsep/drivers/daemon_register_server.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/unit_dropin.hpp"
+#include "errsep/service/four_sensor_pipeline.hpp"
 #include "errsep/service/plant_publisher.hpp"
 #include "errsep/version.hpp"
 
@@ -121,14 +124,29 @@ int main(int argc, char** argv) {
     opts.checkpoint_interval = std::chrono::milliseconds(checkpoint_ms);
     opts.separate = !no_separate;
 
+    // The result of each scan: the same folder as errsep-scan's, from the same pipeline, with the
+    // settings ([refine]) of the config the backend was last built from.
+    auto pipeline = std::make_shared<errsep::service::FourSensorPipelineOptions>();
+    opts.write_result_set = [pipeline](const errsep::io::RawFourSensorScan& raw,
+                                       const std::filesystem::path& dir) {
+      const auto r = errsep::service::FourSensorPipeline(*pipeline).write_result_set(
+          raw, dir, std::string("errsep-daemon ") + errsep::kVersion);
+      if (!r.separation) throw std::runtime_error(r.error);
+      for (const auto& w : r.warnings)
+        std::cerr << "<4>" << dir.filename().string() << ": " << w << "\n";
+      return *r.separation;
+    };
+
     // Reads the file again on every call: SIGHUP picks up an edited config.
-    auto factory = [config_path, device_port]() -> std::unique_ptr<errsep::acq::ScanBackend> {
+    auto factory = [config_path, device_port,
+                    pipeline]() -> std::unique_ptr<errsep::acq::ScanBackend> {
       errsep::io::MachineConfig cfg = errsep::io::load_machine_config(config_path);
       if (device_port > 0) errsep::io::apply_simulator_port(cfg, device_port);
       for (const auto& b : cfg.buses)
         if (b.kind == errsep::io::BusKind::tcp && b.port == 0)
           throw std::runtime_error(config_path + ": bus '" + b.name +
                                    "' has port 0: give --device-port (the simulator's port)");
+      *pipeline = errsep::service::pipeline_options(cfg, "reference");  // errsep-scan's gauge
       return std::make_unique<errsep::drivers::DeviceScanBackend>(std::move(cfg));
     };
     // A bad config is an error at start (exit non-zero, message names file:line); later, on

@@ -36,14 +36,13 @@
 #include "errsep/drivers/simulator_process.hpp"
 #include "errsep/io/cnc/compensation_format.hpp"
 #include "errsep/io/default_config.hpp"
-#include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/mqtt_messages.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
-#include "errsep/io/refine_run.hpp"
 #include "errsep/io/results_store.hpp"
 #include "errsep/io/staged_directory.hpp"
 #include "errsep/io/verification_report.hpp"
+#include "errsep/service/four_sensor_pipeline.hpp"
 #include "errsep/service/plant_publisher.hpp"
 #include "errsep/version.hpp"
 
@@ -77,37 +76,6 @@ struct ProgressPrinter {
     std::fflush(stderr);
   }
 };
-
-/// The separation's options for a gauge name (core::options_for_gauge).
-core::FourSensorOptions separation_options(const std::string& gauge) {
-  const auto g = core::curvature_gauge_from_string(gauge);
-  if (!g) throw std::invalid_argument("--gauge: unknown gauge '" + gauge + "'");
-  return core::options_for_gauge(*g);
-}
-
-/// Separation of a complete four-sensor raw scan, with the defaults of errsep-separate, written
-/// into `out`; `raw_file` and `run_id` go into the results' metadata.
-core::FourSensorResult separate_four_sensor(const io::RawFourSensorScan& raw,
-                                            const fs::path& raw_file, const fs::path& out,
-                                            const std::string& gauge, const std::string& run_id) {
-  const auto& g = *raw.geometry;
-  const auto P = static_cast<Eigen::Index>(raw.positions());
-  Eigen::MatrixXd m(P, 4);
-  for (Eigen::Index j = 0; j < 4; ++j)
-    for (Eigen::Index n = 0; n < P; ++n)
-      m(n, j) = raw.m_um[static_cast<std::size_t>(j)][static_cast<std::size_t>(n)];
-  const auto res = core::separate_four_sensor(g, m, separation_options(gauge));
-  io::ResultWriteInfo info{raw_file.string(), "X", "Y", {{"run_id", run_id}}};
-  io::carry_machine_axes(raw.metadata, info);  // machine coordinates, from the config
-  io::write_four_sensor_result(out, res, info);
-  std::cout << "separation: " << res.brief_report() << "\n";
-  if (res.lambda_fallback == core::LambdaFallback::discrepancy)
-    std::cerr << "warning: the L-curve has no corner inside the lambda range; lambda was chosen "
-                 "by the discrepancy principle instead\n";
-  else if (res.lambda_fallback == core::LambdaFallback::collapse_least_squares)
-    std::cerr << "warning: " << res.determination_note << "\n";
-  return res;
-}
 
 /// [mqtt]: the scan's summary (and alarms) into the disk queue beside OUT, then up to `wait_s`
 /// to deliver it; what is left stays queued for the next run (or the daemon sharing the queue).
@@ -342,8 +310,18 @@ int main(int argc, char** argv) {
       if (no_separate) continue;
       try {
         if (res.four_sensor) {
-          const auto sep =
-              separate_four_sensor(*res.four_sensor, raw_file, work, gauge, stage.run_id());
+          // The four-sensor pipeline (service/four_sensor_pipeline.hpp), as errsep-daemon and
+          // errsep-separate run it: separation, optional refine, the result files.
+          auto po = service::pipeline_options(cfg, gauge);
+          if (refine || !refine_reference.empty()) po.refine = true;
+          if (!refine_reference.empty()) po.refine_reference = refine_reference;
+          const auto run = service::FourSensorPipeline(po).separate(
+              *res.four_sensor, work, work / raw_name, raw_file.string(), stage.run_id());
+          const core::FourSensorResult& sep = *run.separation;
+          std::cout << "separation: " << sep.brief_report() << "\n";
+          if (run.refine) std::cout << run.refine->brief_report() << "\n";
+          for (const auto& w : run.warnings)
+            std::cerr << "warning: " << w << "\n";
           io::ScanSummary s;
           // A scan id unique per machine: the start time and this process.
           s.scan_id = io::ResultsStore::stem(started, 0).substr(0, 16) + "_scan-app-" +
@@ -362,28 +340,16 @@ int main(int argc, char** argv) {
           written.push_back(
               "results: " + out.string() +
               "/ (motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt)");
-          if (refine || !refine_reference.empty() || cfg.refine.enabled) {
-            io::RefineRunOptions ro;  // the defaults of errsep-refine, the scan's gauge
-            ro.refine.solve = separation_options(gauge);
-            ro.refine.alpha = cfg.refine.alpha;  // [refine] alpha (default 0.01, as errsep-refine)
-            if (!refine_reference.empty()) ro.reference_csv = refine_reference;
-            ro.source = raw_file.string();
-            // A set of its own inside the scan's (errsep-refine may replace it later).
-            const auto run = io::run_refine(work / raw_name, work / "refine", ro);
-            std::cout << run.result.brief_report() << "\n";
+          if (run.refine) {
             written.push_back("refine: " + (out / "refine").string() +
                               "/ (refine_report.txt, refine_steps.csv, refined motion.csv, "
                               "reference.csv, ...)");
-            if (!run.result.model_complete())
-              std::cerr << "warning: the refined model is incomplete (residual not white or "
-                           "implausible effects rejected): see "
-                        << (out / "refine" / "refine_report.txt").string() << "\n";
             io::ScanSummary::Refine rf;
-            rf.model_complete = run.result.model_complete();
-            rf.verdict = run.result.brief_report();
-            rf.model = run.result.model_name;
-            for (std::size_t k = 1; k < run.result.steps.size(); ++k)
-              rf.steps.push_back(run.result.steps[k].effect);
+            rf.model_complete = run.refine->model_complete();
+            rf.verdict = run.refine->brief_report();
+            rf.model = run.refine->model_name;
+            for (std::size_t k = 1; k < run.refine->steps.size(); ++k)
+              rf.steps.push_back(run.refine->steps[k].effect);
             summary->refine = rf;
             summary->files.push_back("refine/refine_report.txt");
           }

@@ -8,9 +8,9 @@
 
 #include "errsep/core/four_sensor.hpp"
 #include "errsep/io/csv.hpp"
-#include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/staged_directory.hpp"
+#include "errsep/service/four_sensor_pipeline.hpp"
 #include "errsep/version.hpp"
 
 int main(int argc, char** argv) {
@@ -119,41 +119,34 @@ int main(int argc, char** argv) {
                                  "spacings s = (" + std::to_string(cfg.s2) + ", " +
                                      std::to_string(cfg.s3) + ", " + std::to_string(cfg.s4) +
                                      ") with " + std::to_string(P) + " rows: " + why);
-    Eigen::MatrixXd m(P, 4);
-    for (int j = 0; j < 4; ++j)
-      for (int n = 0; n < P; ++n)
-        m(n, j) = scan.m_um[static_cast<size_t>(j)][static_cast<size_t>(n)];
-    errsep::core::FourSensorResult res;
-    try {
-      res = errsep::core::separate_four_sensor(cfg, m, opts);
-    } catch (const std::exception& err) {  // name the file the data came from
-      throw std::runtime_error(input + ": " + err.what());
-    }
     // All result files appear together or not at all, as one result set replacing an earlier
-    // one whole (io/staged_directory.hpp).
+    // one whole (io/staged_directory.hpp); the files are the four-sensor pipeline's
+    // (service/four_sensor_pipeline.hpp), as errsep-scan and errsep-daemon write them.
     errsep::io::StagedDirectory stage(
         out_dir, {"separate", std::string("errsep-separate ") + errsep::kVersion, false, {}});
     if (const std::string swept = errsep::io::describe_swept(stage.swept()); !swept.empty())
       std::cout << swept << "\n";
-    errsep::io::ResultWriteInfo info{input, "X", "Y", {{"run_id", stage.run_id()}}};
+    errsep::io::RawFourSensorScan in = scan;
+    in.geometry = cfg;
+    errsep::service::FourSensorPipelineOptions po;
+    po.separation = opts;
+    errsep::service::FourSensorPipelineResult run;
     try {
-      errsep::io::carry_machine_axes(scan.metadata, info);  // where the scan ran, if recorded
-    } catch (const std::invalid_argument& bad_axes) {
-      throw errsep::io::CsvError(input, 0, bad_axes.what());
+      run = errsep::service::FourSensorPipeline(po).separate(in, stage.dir(), input, input,
+                                                             stage.run_id());
+    } catch (const std::exception& err) {  // name the file the data came from
+      throw std::runtime_error(input + ": " + err.what());
     }
-    errsep::io::write_four_sensor_result(stage.dir(), res, info);
+    const errsep::core::FourSensorResult& res = *run.separation;
     stage.commit();
     std::cout << res.brief_report() << "\n"
               << "results written to " << out_dir << "/ (motion.csv, reference.csv, lcurve.csv, "
               << "residuals.csv, summary.txt)\n";
-    if (res.lambda_fallback == errsep::core::LambdaFallback::discrepancy)
-      std::cerr << "warning: the L-curve has no corner inside the lambda range; lambda was "
-                   "chosen by the discrepancy principle instead (widen the range to check)\n";
-    else if (res.lambda_fallback == errsep::core::LambdaFallback::no_regularisation)
+    for (const auto& w : run.warnings)
+      std::cerr << "warning: " << w << "\n";
+    if (res.lambda_fallback == errsep::core::LambdaFallback::no_regularisation)
       std::cerr << "note: the L-curve has no corner (the unregularised solution is not "
                    "dominated by noise); no regularisation applied\n";
-    else if (res.lambda_fallback == errsep::core::LambdaFallback::collapse_least_squares)
-      std::cerr << "warning: " << res.determination_note << "\n";
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "errsep-separate: " << e.what() << "\n";

@@ -39,6 +39,17 @@ std::string fmt(double v, int prec = 4) {
   return os.str();
 }
 
+/// The daemon's scan metadata in front of the scan's own (acq::run_scan's), which it overrides
+/// key by key (outcome, started_utc): one line per key in the raw file.
+void prepend_metadata(std::vector<std::pair<std::string, std::string>>& md,
+                      const std::vector<std::pair<std::string, std::string>>& daemon_md) {
+  std::erase_if(md, [&](const auto& kv) {
+    return std::any_of(daemon_md.begin(), daemon_md.end(),
+                       [&](const auto& d) { return d.first == kv.first; });
+  });
+  md.insert(md.begin(), daemon_md.begin(), daemon_md.end());
+}
+
 }  // namespace
 
 const char* to_string(DaemonState s) noexcept {
@@ -144,6 +155,12 @@ void ScanContext::record(int config, std::size_t n, double m_um, double t_s) {
 
 void ScanContext::heartbeat() noexcept {
   progress_ns_.store(monotonic_ns());
+}
+
+void ScanContext::finish(io::RawFourSensorScan raw) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (raw.x_mm.size() != raw_.x_mm.size()) return;
+  raw_ = std::move(raw);
 }
 
 io::RawFourSensorScan ScanContext::snapshot() const {
@@ -494,7 +511,7 @@ void Daemon::write_checkpoint() {
                             "raw-incomplete, the daemon stopped before the scan ended");
   meta.emplace_back("points_measured",
                     std::to_string(measured) + "/" + std::to_string(ctx_->points_total()));
-  raw.metadata.insert(raw.metadata.begin(), meta.begin(), meta.end());
+  prepend_metadata(raw.metadata, meta);
   try {
     store_.write(scan_stem_, "raw-incomplete", io::format_csv(io::to_csv_table(raw), 12));
     checkpoint_points_ = static_cast<std::uint32_t>(measured);
@@ -514,15 +531,22 @@ void Daemon::write_checkpoint() {
 Daemon::ResultFigures Daemon::write_result(
     const std::string& stem, const io::RawFourSensorScan& raw,
     const std::vector<std::pair<std::string, std::string>>& meta, const std::string& raw_file) {
-  Eigen::MatrixXd m(static_cast<Eigen::Index>(raw.positions()), 4);
-  for (std::size_t i = 0; i < 4; ++i)
-    for (std::size_t n = 0; n < raw.positions(); ++n)
-      m(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(i)) = raw.m_um[i][n];
-  core::FourSensorOptions so;
-  so.compute_uncertainty = true;
-  const core::FourSensorResult r = core::separate_four_sensor(*raw.geometry, m, so);
+  core::FourSensorResult r;
+  const std::filesystem::path result_dir = store_.dir() / stem;
+  if (opts_.write_result_set) {
+    // The scan's result folder, as errsep-scan writes it, made visible whole before this file:
+    // a stop between the two leaves no result file, so the next start makes both again.
+    r = opts_.write_result_set(raw, result_dir);
+  } else {
+    Eigen::MatrixXd m(static_cast<Eigen::Index>(raw.positions()), 4);
+    for (std::size_t i = 0; i < 4; ++i)
+      for (std::size_t n = 0; n < raw.positions(); ++n)
+        m(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(i)) = raw.m_um[i][n];
+    r = core::separate_four_sensor(*raw.geometry, m, core::FourSensorOptions{});
+  }
   io::CsvTable t;
   t.set_meta("format", "errsep four-sensor result");
+  if (opts_.write_result_set) t.set_meta("result_dir", stem);
   for (const auto& [k, v] : meta)
     t.set_meta(k, v);
   t.set_meta("raw_file", std::filesystem::path(raw_file).filename().string());
@@ -636,7 +660,7 @@ void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd
   auto meta = scan_metadata(to_string(end.outcome), end.message);
   meta.emplace_back("points_measured", std::to_string(ctx_->points_done()) + "/" +
                                            std::to_string(ctx_->points_total()));
-  raw.metadata.insert(raw.metadata.begin(), meta.begin(), meta.end());
+  prepend_metadata(raw.metadata, meta);
   last_write_error_.clear();
 
   ScanOutcome outcome = end.outcome;

@@ -52,6 +52,8 @@ class Runner {
   void four_sensor_fixed();
   void displacement();
   void progress(const std::string& phase, double x_mm, std::vector<double> values);
+  void cell(std::size_t column, std::size_t n, double value_um, double t_s) const noexcept;
+  void heartbeat() const noexcept;
   double t_rel_s(double t_ns) const { return (t_ns - static_cast<double>(t0_ns_)) * 1e-9; }
 
   const ScanDevices& dev_;
@@ -59,13 +61,31 @@ class Runner {
   const ScanHooks& hooks_;
   WindowAverager averager_;
   std::int64_t t0_ns_ = 0;
+  double slowest_rate_hz_ = 0.0;  ///< of the buses' samplers: sets the window time-out
   ScanResult res_;
 };
+
+void Runner::cell(std::size_t column, std::size_t n, double value_um, double t_s) const noexcept {
+  if (!hooks_.cell) return;
+  try {
+    hooks_.cell(column, n, value_um, t_s);
+  } catch (...) {  // the record in res_ is the scan's; a caller's copy must not stop it
+  }
+}
+
+void Runner::heartbeat() const noexcept {
+  if (!hooks_.heartbeat) return;
+  try {
+    hooks_.heartbeat();
+  } catch (...) {
+  }
+}
 
 void Runner::sleep_checking_abort(std::chrono::milliseconds d) const {
   const auto until = std::chrono::steady_clock::now() + d;
   while (std::chrono::steady_clock::now() < until) {
     check_abort();
+    heartbeat();
     std::this_thread::sleep_for(std::min<std::chrono::steady_clock::duration>(
         until - std::chrono::steady_clock::now(), std::chrono::milliseconds(10)));
   }
@@ -84,6 +104,7 @@ void Runner::move(Stage& stage, double pos_mm, const std::string& where) {
   for (;;) {
     check_abort();
     st = stage.wait_in_position(std::chrono::milliseconds(100));
+    heartbeat();
     if (st == IoStatus::ok) return;
     if (st == IoStatus::fault) {
       unsigned code = 0;
@@ -108,7 +129,7 @@ WindowAverager::Window Runner::measure(const std::vector<std::size_t>& channels,
   for (int attempt = 0;; ++attempt) {
     check_abort();
     averager_.open(monotonic_ns(), k);
-    auto w = averager_.wait(opts_.window_timeout(),
+    auto w = averager_.wait(opts_.window_timeout(slowest_rate_hz_),
                             static_cast<std::uint64_t>(opts_.max_errors_per_point), hooks_.abort);
     check_abort();
     bool ok = true;
@@ -129,7 +150,8 @@ WindowAverager::Window Runner::measure(const std::vector<std::size_t>& channels,
     if (w.n_errors[worst] > 0)
       os << " (last: " << to_string(w.last_error) << ")";
     else
-      os << " (no readings arrived within " << opts_.window_timeout().count() << " ms)";
+      os << " (no readings arrived within " << opts_.window_timeout(slowest_rate_hz_).count()
+         << " ms)";
     if (attempt >= opts_.point_retries) {
       os << ", after " << opts_.point_retries << " retries";
       throw ScanStop{ScanRunOutcome::failed, os.str()};
@@ -140,6 +162,7 @@ WindowAverager::Window Runner::measure(const std::vector<std::size_t>& channels,
 
 void Runner::progress(const std::string& phase, double x_mm, std::vector<double> values) {
   ++res_.counts.points_done;
+  heartbeat();
   if (!hooks_.progress) return;
   ScanProgress p;
   p.phase = phase;
@@ -168,9 +191,10 @@ void Runner::four_sensor_single() {
       const std::string where = phase + ", x = " + fmt(x) + " mm";
       move(*dev_.slide, opts_.slide_start_mm + opts_.axes.scan_direction * x, where);
       const auto w = measure({0}, where);
-      raw.m_um[static_cast<std::size_t>(i)][static_cast<std::size_t>(n)] = w.mean[0];
-      (*raw.t_s)[static_cast<std::size_t>(i)][static_cast<std::size_t>(n)] =
-          t_rel_s(w.t_mean_ns[0]);
+      const auto col = static_cast<std::size_t>(i), nn = static_cast<std::size_t>(n);
+      raw.m_um[col][nn] = w.mean[0];
+      (*raw.t_s)[col][nn] = t_rel_s(w.t_mean_ns[0]);
+      cell(col, nn, raw.m_um[col][nn], (*raw.t_s)[col][nn]);
       progress(phase, x, {w.mean[0]});
     }
   }
@@ -186,8 +210,10 @@ void Runner::four_sensor_fixed() {
     move(*dev_.slide, opts_.slide_start_mm + opts_.axes.scan_direction * x, where);
     const auto w = measure({0, 1, 2, 3}, where);
     for (std::size_t i = 0; i < 4; ++i) {
-      raw.m_um[i][static_cast<std::size_t>(n)] = w.mean[i];
-      (*raw.t_s)[i][static_cast<std::size_t>(n)] = t_rel_s(w.t_mean_ns[i]);
+      const auto nn = static_cast<std::size_t>(n);
+      raw.m_um[i][nn] = w.mean[i];
+      (*raw.t_s)[i][nn] = t_rel_s(w.t_mean_ns[i]);
+      cell(i, nn, raw.m_um[i][nn], (*raw.t_s)[i][nn]);
     }
     progress("four sensors", x, w.mean);
   }
@@ -210,8 +236,11 @@ void Runner::displacement() {
       const auto kk = static_cast<std::size_t>(k);
       (pass == 0 ? raw.s1_scan1_um : raw.s1_scan2_um)[kk] = w.mean[0];
       (pass == 0 ? raw.s2_scan1_um : raw.s2_scan2_um)[kk] = w.mean[1];
-      (pass == 0 ? *raw.t_scan1_s : *raw.t_scan2_s)[kk] =
-          t_rel_s(0.5 * (w.t_mean_ns[0] + w.t_mean_ns[1]));
+      const double t = t_rel_s(0.5 * (w.t_mean_ns[0] + w.t_mean_ns[1]));
+      (pass == 0 ? *raw.t_scan1_s : *raw.t_scan2_s)[kk] = t;
+      const auto col0 = static_cast<std::size_t>(2 * pass);
+      cell(col0, kk, w.mean[0], t);
+      cell(col0 + 1, kk, w.mean[1], t);
       progress(phase, x, {w.mean[0], w.mean[1]});
     }
   }
@@ -260,6 +289,7 @@ ScanResult Runner::run() {
   std::vector<std::unique_ptr<SpscRing<Sample>>> rings;
   std::vector<std::unique_ptr<Sampler>> samplers;
   std::vector<SpscRing<Sample>*> ring_ptrs;
+  std::vector<double> bus_rate_hz;  // of each sampler
   for (std::size_t b : buses) {
     std::vector<DisplacementSensor*> sensors;
     std::vector<std::uint16_t> channels;
@@ -270,8 +300,11 @@ ScanResult Runner::run() {
       }
     rings.push_back(std::make_unique<SpscRing<Sample>>(opts_.ring_capacity));
     ring_ptrs.push_back(rings.back().get());
-    samplers.push_back(
-        std::make_unique<Sampler>(sensors, *rings.back(), opts_.sampler, std::move(channels)));
+    SamplerOptions so = opts_.sampler;
+    if (b < dev_.bus_rate_hz.size() && dev_.bus_rate_hz[b] > 0.0) so.rate_hz = dev_.bus_rate_hz[b];
+    bus_rate_hz.push_back(so.rate_hz);
+    slowest_rate_hz_ = slowest_rate_hz_ > 0.0 ? std::min(slowest_rate_hz_, so.rate_hz) : so.rate_hz;
+    samplers.push_back(std::make_unique<Sampler>(sensors, *rings.back(), so, std::move(channels)));
   }
   RingConsumer consumer(ring_ptrs, [this](const Sample& s) { averager_.add(s); });
   consumer.start();
@@ -361,6 +394,8 @@ ScanResult Runner::run() {
     md.emplace_back("jitter_us_bus" + std::to_string(b),
                     "p50 " + fmt(j.p50_us) + ", p99 " + fmt(j.p99_us) + ", max " + fmt(j.max_us));
     md.emplace_back("realtime_bus" + std::to_string(b), res_.samplers[b].realtime.brief());
+    if (bus_rate_hz[b] != opts_.sampler.rate_hz)
+      md.emplace_back("sample_rate_hz_bus" + std::to_string(b), fmt(bus_rate_hz[b]));
   }
   if (res_.four_sensor) {
     res_.four_sensor->complete = res_.complete();
@@ -390,9 +425,10 @@ const char* to_string(ScanRunOutcome o) noexcept {
   return "unknown";
 }
 
-std::chrono::milliseconds ScanOptions::window_timeout() const {
-  return std::chrono::milliseconds(
-      static_cast<long>(std::ceil(4.0 * averages * 1000.0 / sampler.rate_hz)) + 1000);
+std::chrono::milliseconds ScanOptions::window_timeout(double rate_hz) const {
+  const double rate = rate_hz > 0.0 ? rate_hz : sampler.rate_hz;
+  return std::chrono::milliseconds(static_cast<long>(std::ceil(4.0 * averages * 1000.0 / rate)) +
+                                   1000);
 }
 
 bool ScanOptions::is_valid(std::string* why) const {

@@ -55,6 +55,8 @@ acq::ScanDevices scan_devices(const Devices& dev, const io::MachineConfig& cfg,
     d.sensors.push_back(dev.sensors[i].get());
     d.sensor_bus.push_back(dev.sensor_bus[i]);
   }
+  for (std::size_t b = 0; b < cfg.buses.size(); ++b)  // Devices::buses is in config order
+    d.bus_rate_hz.push_back(cfg.sample_rate_hz(cfg.buses[b]));
   return d;
 }
 

@@ -213,6 +213,10 @@ int ResultsStore::prune(std::chrono::system_clock::time_point now) {
     std::vector<StoredFile> files = it->second;
     std::stable_partition(files.begin(), files.end(),
                           [](const StoredFile& f) { return f.kind != "raw"; });
+    // The scan's result folder (<stem>/, service/four_sensor_pipeline.hpp) goes first too.
+    std::error_code dir_ec;
+    if (!files.empty() && fs::is_directory(opts_.dir / files.front().stem, dir_ec))
+      fs::remove_all(opts_.dir / files.front().stem, dir_ec);
     for (const auto& f : files) {
       std::error_code ec;
       if (fs::remove(f.path, ec)) ++removed;

@@ -1,7 +1,10 @@
 #include "errsep/acq/scan_runner.hpp"
 
+#include <array>
+#include <atomic>
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <limits>
 #include <memory>
 
 #include "errsep/acq/fake_drivers.hpp"
@@ -269,6 +272,48 @@ TEST_CASE("a stuck slide times out and is stopped") {
   CHECK(res.outcome == ScanRunOutcome::failed);
   CHECK_THAT(res.stop_reason, Catch::Contains("not in position after 300 ms"));
   CHECK(stuck.stops() >= 1);
+}
+
+TEST_CASE("hooks: every cell as it is measured, heartbeats while waiting, per-bus rates") {
+  // The daemon keeps a scan's cells as they come (its checkpoints) and watches heartbeats; an
+  // abort after 12 points must leave exactly the cells of the record, no more.
+  FakeMachine m;
+  m.add_single();
+  std::atomic<bool> abort{false};
+  std::array<std::vector<double>, 4> cells;
+  for (auto& c : cells)
+    c.assign(9, std::numeric_limits<double>::quiet_NaN());
+  int n_cells = 0, beats = 0;
+  ScanHooks hooks;
+  hooks.abort = &abort;
+  hooks.cell = [&](std::size_t col, std::size_t n, double v, double) {
+    REQUIRE(col < 4);
+    REQUIRE(n < 9);
+    CHECK(std::isnan(cells[col][n]));  // each cell once
+    cells[col][n] = v;
+    ++n_cells;
+  };
+  hooks.heartbeat = [&] { ++beats; };
+  hooks.progress = [&](const ScanProgress& p) {
+    if (p.point == 12) abort = true;
+  };
+  ScanDevices dev = m.devices();
+  dev.bus_rate_hz = {1000.0};  // the bus's own rate, not the options' 2000 Hz
+  const auto res = run_scan(dev, m.options(), hooks);
+  CHECK(res.outcome == ScanRunOutcome::aborted);
+  CHECK(n_cells == 12);
+  CHECK(beats >= 12);  // at least one per point, more while moving and settling
+  const auto& raw = *res.four_sensor;
+  for (std::size_t i = 0; i < 4; ++i)
+    for (std::size_t n = 0; n < 9; ++n) {
+      INFO("configuration " << i + 1 << ", n = " << n);
+      if (std::isnan(raw.m_um[i][n]))
+        CHECK(std::isnan(cells[i][n]));
+      else
+        CHECK(cells[i][n] == raw.m_um[i][n]);
+    }
+  REQUIRE(res.samplers.size() == 1);
+  CHECK(raw.meta("sample_rate_hz_bus0") == std::optional<std::string>("1000"));
 }
 
 TEST_CASE("displacement scan: two passes, reference piece displaced by d in between") {

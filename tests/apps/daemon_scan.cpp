@@ -311,7 +311,7 @@ TEST_CASE("SIGHUP during a scan: the scan completes, then the edited config is l
   const auto raw1 = rig.find_file(1, "raw");
   REQUIRE(raw1);
   CHECK(test::check_raw_file(*raw1, &scan1) == "");
-  CHECK(scan1.meta("averages") == std::optional<std::string>("5"));
+  CHECK(scan1.meta("samples_per_point") == std::optional<std::string>("5"));
   CHECK(rig.find_file(1, "result"));
 
   // Reloaded after the scan: journal, RELOADING=1 then READY=1 again, STATUS= says so.
@@ -344,5 +344,5 @@ TEST_CASE("SIGHUP during a scan: the scan completes, then the edited config is l
   REQUIRE(raw2);
   io::RawFourSensorScan scan2;
   CHECK(test::check_raw_file(*raw2, &scan2) == "");
-  CHECK(scan2.meta("averages") == std::optional<std::string>("3"));
+  CHECK(scan2.meta("samples_per_point") == std::optional<std::string>("3"));
 }

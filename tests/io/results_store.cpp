@@ -120,6 +120,9 @@ TEST_CASE("retention: nothing deleted unless configured") {
       const auto stem = io::ResultsStore::stem(now - std::chrono::hours(24 * (6 - id)), id);
       store.write(stem, "raw", "x\n1\n");
       store.write(stem, "result", "x\n1\n");
+      // The scan's result folder (service/four_sensor_pipeline.hpp): goes with the scan.
+      std::filesystem::create_directories(o.dir / stem);
+      std::ofstream(o.dir / stem / "motion.csv") << "x_mm\n1\n";
     }
     CHECK(store.prune(now) == 0);  // retention off by default
     CHECK(store.list().size() == 10);
@@ -132,6 +135,11 @@ TEST_CASE("retention: nothing deleted unless configured") {
     REQUIRE(left.size() == 4);
     CHECK(left.front().scan_id == 4);
     CHECK(left.back().scan_id == 5);
+    int folders = 0;  // those of scans 4 and 5, the others removed with their scans
+    for (const auto& e : std::filesystem::directory_iterator(o.dir))
+      folders += e.is_directory() ? 1 : 0;
+    CHECK(folders == 2);
+    CHECK(std::filesystem::exists(o.dir / left.back().stem / "motion.csv"));
   }
   SECTION("delete scans older than 2.5 days") {
     o.retention.max_age_days = 2.5;

@@ -88,6 +88,18 @@ std::string check_store(const fs::path& dir, std::map<std::string, int>& kinds) 
       ++kinds["temporary"];  // a killed writer's temporary file: not a result, removed at start
       continue;
     }
+    if (e.is_directory()) {
+      // A scan's result folder (<stem>/, the folder errsep-scan writes): whole, or not there.
+      const auto f = io::parse_store_name(dir / (name + ".raw.csv"));
+      if (!f) return name + "/: not a scan's result folder";
+      const auto c = io::check_result_set(e.path());
+      if (!c.whole())
+        return name + "/: not a whole result set" +
+               (c.problems.empty() ? std::string() : ": " + c.problems.front());
+      scans[f->scan_id]["folder"] = e.path();
+      ++kinds["folder"];
+      continue;
+    }
     const auto f = io::parse_store_name(e.path());
     if (!f) return name + ": not a store file";
     scans[f->scan_id][f->kind] = e.path();
@@ -107,6 +119,9 @@ std::string check_store(const fs::path& dir, std::map<std::string, int>& kinds) 
         // No clean stop happened: every incomplete file is a checkpoint of a running scan.
         if (why.empty() && cp.meta("outcome") != std::optional<std::string>("in_progress"))
           why = "outcome " + cp.meta("outcome").value_or("(none)") + ", not in_progress";
+      } else if (kind == "folder") {
+        // Its raw file is the scan's, complete: the folder is made from it.
+        if (!files.count("raw")) why = "a result folder without its complete raw file";
       } else if (kind != "result") {
         why = "unexpected kind '" + kind + "' (no clean stop happened)";
       }
@@ -115,6 +130,9 @@ std::string check_store(const fs::path& dir, std::map<std::string, int>& kinds) 
     if (const auto r = files.find("result"); r != files.end()) {
       // A result is written after its raw file, and is of it (raw_crc32: the raw file's CRC).
       if (!have_raw) return r->second.filename().string() + ": no complete raw file beside it";
+      // ... and after the scan's result folder, which is whole (checked above).
+      if (!files.count("folder"))
+        return r->second.filename().string() + ": no result folder beside it";
       std::string why = check_result_file(r->second, raw);
       if (why.empty()) {
         char hex[16];
@@ -142,10 +160,14 @@ std::string landed_in_store(const fs::path& dir, std::uint64_t id) {
     }
     const auto f = io::parse_store_name(e.path());
     if (f && f->scan_id == id) kinds.insert(f->kind);
+    if (e.is_directory())
+      if (const auto d = io::parse_store_name(dir / (name + ".raw.csv")); d && d->scan_id == id)
+        kinds.insert("folder");
   }
   if (temporary == "raw-incomplete") return "inside a checkpoint's write (temporary left)";
   if (!temporary.empty()) return "inside the " + temporary + " file's write (temporary left)";
   if (kinds.count("result")) return "after the result file";
+  if (kinds.count("folder")) return "between the result folder and the result file";
   if (kinds.count("raw") && kinds.count("raw-incomplete"))
     return "between the raw file and the checkpoint's removal";
   if (kinds.count("raw")) return "between the raw and the result file";

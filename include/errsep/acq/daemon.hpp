@@ -46,6 +46,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -56,6 +57,7 @@
 
 #include "errsep/acq/digital_io.hpp"
 #include "errsep/acq/sd_notify.hpp"
+#include "errsep/core/four_sensor.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/results_store.hpp"
 
@@ -111,6 +113,10 @@ class ScanContext {
   void record(int config, std::size_t n, double m_um, double t_s);
   /// Backend: proof of life while waiting (a move, a settle time).
   void heartbeat() noexcept;
+  /// Backend: the scan's own record once it has ended (acq::run_scan's raw scan, with the
+  /// sampler's counters in its metadata), replacing the points recorded one by one.  Ignored when
+  /// its positions differ from begin()'s layout.
+  void finish(io::RawFourSensorScan raw);
 
   /// The raw data measured so far (complete = false).
   io::RawFourSensorScan snapshot() const;
@@ -193,6 +199,16 @@ struct DaemonOptions {
   /// more often than 10 times the last checkpoint's write time).
   std::chrono::milliseconds checkpoint_interval{1000};
   bool separate = true;  ///< compute and write the four-sensor result after a scan
+  /// Writes a complete scan's result set into `dir` (results/<stem>/, the folder errsep-scan
+  /// writes: raw.csv, motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt,
+  /// refine/) whole or not at all, and returns its separation, from which the daemon's result
+  /// file (the store's index of the scan) is made.  errsep-daemon sets it to
+  /// service::FourSensorPipeline (acq does not know the service layer).  Throws when the
+  /// separation fails (the raw file is kept).  Empty: the daemon separates with core's default
+  /// options and writes its result file alone (tests of the state machine).
+  std::function<core::FourSensorResult(const io::RawFourSensorScan& raw,
+                                       const std::filesystem::path& dir)>
+      write_result_set;
   /// Called on the main loop once a scan's files are on disk (each finished scan, and each
   /// result recovered at start), with its scan id and store stem: e.g. queue it for the plant's
   /// broker (service/plant_publisher.hpp).  Exceptions are logged, never stop the daemon.

@@ -63,8 +63,9 @@ struct ScanOptions {
   /// reader can refuse a reading no sensor can give (io/plausibility.hpp); sensor_range_metadata.
   std::vector<std::pair<std::string, std::string>> range_metadata;
 
-  /// Time allowed to collect one window of K readings: 4·K periods + 1 s.
-  std::chrono::milliseconds window_timeout() const;
+  /// Time allowed to collect one window of K readings: 4·K periods + 1 s, periods of `rate_hz`
+  /// (the slowest bus of the scan; 0 = sampler.rate_hz).
+  std::chrono::milliseconds window_timeout(double rate_hz = 0.0) const;
   bool is_valid(std::string* why = nullptr) const;
 };
 
@@ -90,6 +91,9 @@ struct ScanDevices {
   /// Bus index of each sensor: sensors on one bus share one sampling thread (a bus context is
   /// used by one thread).  Empty = all on one bus.
   std::vector<std::size_t> sensor_bus;
+  /// Sampling rate of each bus's thread, by bus index ([[bus]] sample_rate_hz); a bus without an
+  /// entry, or 0, samples at ScanOptions::sampler.rate_hz.
+  std::vector<double> bus_rate_hz;
 };
 
 struct ScanProgress {
@@ -106,6 +110,15 @@ struct ScanHooks {
   /// Set to true (from a signal handler, say) to stop the scan: stages stopped, data kept,
   /// result incomplete.
   const std::atomic<bool>* abort = nullptr;
+  /// Called on the scan thread for each cell of the raw record as soon as it is measured, so a
+  /// caller can keep what was measured even if the scan never returns (the daemon's checkpoints).
+  /// `column`: four-sensor, the configuration 0..3 (m1..m4); displacement, 0 s1 scan 1, 1 s2
+  /// scan 1, 2 s1 scan 2, 3 s2 scan 2.  `n`: the point's index; `t_s`: its mean time since the
+  /// scan started.  Must not throw.
+  std::function<void(std::size_t column, std::size_t n, double value_um, double t_s)> cell;
+  /// Called on the scan thread at least every ~100 ms while it moves or settles (and after each
+  /// point): proof of life for a watchdog.  Must not throw.
+  std::function<void()> heartbeat;
 };
 
 enum class ScanRunOutcome { complete, aborted, failed };

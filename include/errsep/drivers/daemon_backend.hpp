@@ -1,8 +1,10 @@
 #pragma once
 // The daemon's ScanBackend on real devices (or the device simulator): the drivers a machine
-// config describes, sampled by one Sampler thread per bus, averaged per point by a WindowAverager
-// and recorded into the daemon's ScanContext point by point, so an interrupted scan leaves every
-// point it measured.
+// config describes, scanned by acq::run_scan exactly as errsep-scan scans them (one Sampler thread
+// per bus, point retries, the same read-error budget and window time-out) and recorded into the
+// daemon's ScanContext cell by cell (ScanHooks::cell), so an interrupted scan leaves every point it
+// measured; at the end the scan's own record, with the sampler's counters (missed periods,
+// overruns, jitter, real-time set-up), replaces it (ScanContext::finish).
 //
 // Scan order (Zhao 2019, one sensor on a sensor stage): for each of the four configurations the
 // sensor stage moves to sensor_stage_origin_mm + offset_i, then the slide visits x_0..x_p; with

@@ -12,7 +12,11 @@
 //                  by each newer checkpoint, by the final raw-incomplete file, or removed once the
 //                  complete raw file is on disk), so a SIGKILL or power cut mid-scan leaves the
 //                  points measured up to the last checkpoint
-//   result         the separated profiles
+//   result         the separated profiles and the scan's figures (straightness, the raw file's
+//                  CRC-32): the store's index of the scan, written last
+// and beside them the scan's result folder <stem>/, the same set as errsep-scan's --out folder
+// (service/four_sensor_pipeline.hpp; raw.csv, motion.csv, ..., summary.txt), made visible whole
+// in one rename before the result file is written; retention removes it with the scan's files.
 // Every file is written with write_file_atomic (temp file, fsync, rename, directory fsync): a
 // power cut or SIGKILL leaves the whole file or none.  Stray temporary files of a killed writer
 // (".<name>.tmp.<pid>.XXXXXX") are removed by clean_stale_temporaries() at start, and a checkpoint

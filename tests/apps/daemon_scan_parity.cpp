@@ -1,0 +1,146 @@
+// errsep-daemon and errsep-scan on the same simulated machine write the same result folder
+// (issue 17, "one result directory"): one errsep-devsim, one machine config with [refine] on;
+// the daemon's scan is triggered through its register map (mbpoll on the start coil, as the
+// other daemon tests do), errsep-scan scans the same devices.  Both folders must hold the same
+// files (raw.csv, motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt, refine/, the
+// manifest) with the same CSV columns; the daemon's raw file, in its store and in its folder,
+// must carry every metadata line errsep-scan's raw file carries (the sampler's counters: missed
+// periods, overruns, jitter, the real-time set-up; the store's file all but run_id, which names a
+// result set's run), because both scans are acq::run_scan's; and
+// errsep-report must read both folders.
+#include <catch2/catch.hpp>
+#include <chrono>
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <string>
+
+#include "errsep/io/raw_scan_csv.hpp"
+#include "errsep/io/staged_directory.hpp"
+#include "support/daemon_rig.hpp"
+
+using namespace errsep;
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+
+namespace {
+
+/// Every file under `dir`, as paths relative to it (sorted).
+std::set<std::string> files_under(const fs::path& dir) {
+  std::set<std::string> out;
+  for (const auto& e : fs::recursive_directory_iterator(dir))
+    if (e.is_regular_file()) out.insert(fs::relative(e.path(), dir).generic_string());
+  return out;
+}
+
+/// The header line of an errsep CSV (the first line that is not a '#' metadata line).
+std::string header_of(const fs::path& csv) {
+  std::ifstream in(csv);
+  std::string line;
+  while (std::getline(in, line))
+    if (!line.empty() && line[0] != '#') return line;
+  return {};
+}
+
+std::set<std::string> metadata_keys(const io::RawFourSensorScan& raw) {
+  std::set<std::string> keys;
+  for (const auto& kv : raw.metadata)
+    keys.insert(kv.first);
+  return keys;
+}
+
+}  // namespace
+
+TEST_CASE("the daemon and errsep-scan write the same result folder, errsep-report reads both") {
+  test::DaemonRig rig;
+  rig.devsim.start(rig.config, rig.tmp / "devsim.log");
+  // The rig's machine with its buses on this simulator (so errsep-scan talks to it too, instead
+  // of starting its own) and the refine step on.
+  std::string toml = test::read_file(rig.config);
+  test::replace_once(toml, "embedded = true", "embedded = false");
+  for (int bus = 0; bus < 2; ++bus)
+    test::replace_once(toml, "port = 0\n", "port = " + std::to_string(rig.devsim.port) + "\n");
+  toml += "\n[refine]\nenabled = true\n";
+  rig.config = rig.tmp / "machine.toml";
+  std::ofstream(rig.config) << toml;
+
+  rig.start_daemon();
+  REQUIRE(rig.notify->wait_for("READY=1", 15s));
+  std::string out;
+  REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1, &out) == 0);
+  const auto r = rig.wait_regs(
+      [](const std::vector<long>& x) { return x[test::reg_last_scan_id] == 1 && x[0] == 1; }, 60s);
+  REQUIRE(r.size() == test::kRegisterCount);
+  REQUIRE(r[test::reg_last_outcome] == 1);  // complete
+  const auto store_raw = rig.find_file(1, "raw");
+  REQUIRE(store_raw);
+  REQUIRE(rig.find_file(1, "result"));
+  const std::string name = store_raw->filename().string();
+  const fs::path daemon_dir =
+      rig.results / name.substr(0, name.size() - std::string(".raw.csv").size());
+  REQUIRE(fs::is_directory(daemon_dir));
+  rig.daemon->signal(SIGTERM);
+  REQUIRE(rig.daemon->wait(10s));
+
+  const fs::path scan_dir = rig.tmp / "scan";
+  std::string scan_out;
+  const int rc =
+      test::run_command(test::app_path("scan").string() + " --config " + rig.config.string() +
+                            " --out " + scan_dir.string() + " --no-mqtt",
+                        &scan_out);
+  INFO(scan_out);
+  REQUIRE(rc == 0);
+
+  // The same files, refine/ included, each folder a whole result set.
+  const auto daemon_files = files_under(daemon_dir), scan_files = files_under(scan_dir);
+  CHECK(daemon_files == scan_files);
+  for (const char* f : {"raw.csv", "motion.csv", "reference.csv", "lcurve.csv", "residuals.csv",
+                        "summary.txt", "refine/refine_report.txt"})
+    CHECK(daemon_files.count(f) == 1);
+  CHECK(io::check_result_set(daemon_dir).whole());
+  CHECK(io::check_result_set(scan_dir).whole());
+  // The same columns in every CSV.
+  int csvs = 0;
+  for (const auto& f : scan_files)
+    if (f.size() > 4 && f.substr(f.size() - 4) == ".csv" && daemon_files.count(f)) {
+      INFO(f);
+      CHECK(header_of(daemon_dir / f) == header_of(scan_dir / f));
+      CHECK_FALSE(header_of(scan_dir / f).empty());
+      ++csvs;
+    }
+  CHECK(csvs >= 5);
+
+  // The daemon's raw file (in its store and in its folder) carries every metadata line of
+  // errsep-scan's: the sampler's counters among them.
+  const auto scan_raw = io::read_raw_four_sensor_csv(scan_dir / "raw.csv");
+  const auto scan_keys = metadata_keys(scan_raw);
+  for (const char* k : {"periods", "missed_periods", "overruns", "jitter_us_bus0", "realtime_bus0",
+                        "retries", "read_errors", "samples"})
+    CHECK(scan_keys.count(k) == 1);
+  for (const fs::path& p : {*store_raw, daemon_dir / "raw.csv"}) {
+    INFO(p.string());
+    const auto raw = io::read_raw_four_sensor_csv(p);
+    CHECK(raw.complete);
+    const auto keys = metadata_keys(raw);
+    for (const auto& k : scan_keys) {
+      // run_id names a result set's run: the store's own raw file is in no set.
+      if (k == "run_id" && p == *store_raw) continue;
+      INFO("metadata key " << k);
+      CHECK(keys.count(k) == 1);
+    }
+    CHECK(raw.metadata.size() == keys.size());  // one line per key
+    CHECK(raw.meta("missed_periods"));
+    CHECK(raw.meta("outcome") == std::optional<std::string>("complete"));
+  }
+
+  // errsep-report reads both.
+  for (const fs::path& dir : {daemon_dir, scan_dir}) {
+    std::string rep;
+    const int rrc = test::run_command(
+        test::app_path("report").string() + " " + dir.string() + " --no-plots", &rep);
+    INFO(dir.string() << "\n" << rep);
+    CHECK(rrc == 0);
+    CHECK(fs::exists(dir / "evaluation.csv"));
+  }
+}
