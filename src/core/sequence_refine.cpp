@@ -36,8 +36,9 @@ bool SequenceRefineOptions::is_valid(std::string* why) const {
   if (max_effects < 0) return fail("max_effects must be >= 0");
   if (!(identifiability_tol > 0 && identifiability_tol < 1))
     return fail("identifiability_tol must be in (0, 1)");
-  if (!(undetermined_S_max > 0 && undetermined_S_max <= 1))
-    return fail("undetermined_S_max must be in (0, 1]");
+  if (!(weak_direction_sv >= 0 && weak_direction_sv < 1))
+    return fail("weak_direction_sv must be in [0, 1)");
+  if (!(undetermined_S_max > 0)) return fail("undetermined_S_max must be > 0");
   if (thermal_grid < 1) return fail("thermal_grid must be >= 1");
   if (traverse_degree < 1) return fail("traverse_degree must be >= 1");
   return true;
@@ -126,10 +127,11 @@ Eigen::MatrixXd thin_q(const Eigen::MatrixXd& X) {
 struct Projected {
   Eigen::VectorXd D, sv;
   Eigen::MatrixXd U, V;
-  int identifiable = 0;
+  int identifiable = 0;  // above tol
+  int strong = 0;        // above weak_sv: determined well enough to be fitted
 };
 
-Projected project(const Eigen::MatrixXd& Q, const Eigen::MatrixXd& J, double tol) {
+Projected project(const Eigen::MatrixXd& Q, const Eigen::MatrixXd& J, double tol, double weak_sv) {
   Projected p;
   p.D.resize(J.cols());
   Eigen::MatrixXd Js = J;
@@ -144,6 +146,8 @@ Projected project(const Eigen::MatrixXd& Q, const Eigen::MatrixXd& J, double tol
   p.V = svd.matrixV();
   for (Eigen::Index j = 0; j < p.sv.size(); ++j)
     if (p.sv(j) > tol) ++p.identifiable;
+  for (Eigen::Index j = 0; j < p.sv.size(); ++j)
+    if (p.sv(j) > std::max(tol, weak_sv)) ++p.strong;
   return p;
 }
 
@@ -263,24 +267,26 @@ std::vector<SequenceIdentifiability> sequence_identifiability(const FourSensorCo
   for (auto kind :
        {SequenceEffectKind::drift, SequenceEffectKind::thermal, SequenceEffectKind::traverse}) {
     const auto cols = sequence_effect_columns(kind, cfg, seq, tau, o.traverse_degree);
-    const Projected pj = project(Q, cols.J, o.identifiability_tol);
+    const Projected pj = project(Q, cols.J, o.identifiability_tol, o.weak_direction_sv);
     SequenceIdentifiability id;
     id.kind = kind;
     id.parameters = static_cast<int>(cols.J.cols());
     id.identifiable = pj.identifiable;
+    id.strong = pj.strong;
+    id.relative_sv = pj.sv;
     // What the base fit puts into S from readings J·D⁻¹·v: (R⁻¹Qᵀ)_S·J·D⁻¹·v, after the gauge.
     const Eigen::MatrixXd Js = cols.J * pj.D.cwiseInverse().asDiagonal();
     const Eigen::MatrixXd toS =
         Pi * R.triangularView<Eigen::Upper>().solve(Q.transpose() * Js).middleRows(b.nf, b.P);
-    const double all = Eigen::JacobiSVD<Eigen::MatrixXd>(toS).singularValues()(0);
-    const Eigen::Index k0 = id.parameters - pj.identifiable;
-    double hidden = 0.0;
+    // A unit column spread over the P·T readings has RMS 1/sqrt(P·T); the RMS change of S it
+    // causes is |toS·v|/sqrt(P): the gain from the effect's reading RMS to S's is |toS·v|·sqrt(T).
+    const Eigen::Index k0 = id.parameters - pj.strong;
     if (k0 > 0) {
       const Eigen::MatrixXd Sh = toS * pj.V.rightCols(k0);
-      hidden = Eigen::JacobiSVD<Eigen::MatrixXd>(Sh).singularValues()(0);
+      id.undetermined_S_gain =
+          Eigen::JacobiSVD<Eigen::MatrixXd>(Sh).singularValues()(0) * std::sqrt(double(b.T));
     }
-    id.undetermined_S_fraction = all > 0 ? hidden / all : 0.0;
-    id.identifiable_from_plan = id.undetermined_S_fraction <= o.undetermined_S_max;
+    id.identifiable_from_plan = id.undetermined_S_gain <= o.undetermined_S_max;
     out.push_back(id);
   }
   return out;
@@ -329,8 +335,8 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
           kind == SequenceEffectKind::thermal ? taus : std::vector<double>{0.0};
       for (double tau : grid) {
         const auto cols = sequence_effect_columns(kind, cfg, seq, tau, o.traverse_degree);
-        const Projected pj = project(Q, cols.J, o.identifiability_tol);
-        const int kid = pj.identifiable;
+        const Projected pj = project(Q, cols.J, o.identifiability_tol, o.weak_direction_sv);
+        const int kid = pj.strong;
         if (kid == 0 || dof - kid <= 0) continue;
         double d = 0.0;
         for (int j = 0; j < kid; ++j)
@@ -354,11 +360,50 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
     }
     if (round == 0) res.first_round = scored;
     if (scored.empty()) break;
-    std::size_t ib = 0;
-    for (std::size_t i = 1; i < scored.size(); ++i)
-      if (scored[i].p_value < scored[ib].p_value) ib = i;
+    // Only an effect the plan can identify is added: fitting the visible part of one it cannot
+    // would leave (or put) its invisible part in S.  A significant one is reported instead.
     const double threshold = o.alpha / static_cast<double>(scored.size());
-    if (!(scored[ib].p_value < threshold) || directions[ib].size() == 0) break;
+    std::size_t ib = scored.size();
+    for (std::size_t i = 0; i < scored.size(); ++i) {
+      if (!(scored[i].p_value < threshold) || directions[i].size() == 0) continue;
+      if (!res.identifiable_from_plan(scored[i].kind)) {
+        if (std::none_of(res.detected_not_identifiable.begin(), res.detected_not_identifiable.end(),
+                         [&](const auto& c) { return c.kind == scored[i].kind; }))
+          res.detected_not_identifiable.push_back(scored[i]);
+        continue;
+      }
+      if (ib == scored.size() || scored[i].p_value < scored[ib].p_value) ib = i;
+    }
+    if (ib == scored.size()) break;
+    // Attribution: when another significant candidate explains the chosen one's signal (the
+    // chosen is no longer significant once the other is in the model), the data cannot tell
+    // which effect it is, and the two change S differently (a drift leaves S alone, a
+    // non-repeating S is the change of S): nothing is applied, the ambiguity is reported.
+    std::string rival;
+    for (std::size_t i = 0; i < scored.size(); ++i) {
+      if (i == ib || !(scored[i].p_value < threshold) || directions[i].size() == 0) continue;
+      Eigen::MatrixXd Xr(X.rows(), X.cols() + directions[i].cols());
+      Xr << X, directions[i];
+      const Eigen::MatrixXd Qr = thin_q(Xr);
+      const Eigen::VectorXd rr = y - Qr * (Qr.transpose() * y);
+      const Projected pb = project(Qr, directions[ib], o.identifiability_tol, 0.0);
+      const int kb = pb.identifiable, dof_r = static_cast<int>(Xr.rows() - Xr.cols()) - kb;
+      double d = 0.0;
+      for (int j = 0; j < kb; ++j)
+        d += std::pow(pb.U.col(j).dot(rr), 2);
+      const double F = kb > 0 && dof_r > 0 ? (d / kb) / ((rr.squaredNorm() - d) / dof_r) : 0.0;
+      if (!(p_value_F(F, kb, dof_r) < threshold)) rival = to_string(scored[i].kind);
+    }
+    if (!rival.empty()) {
+      char amb[300];
+      std::snprintf(amb, sizeof amb,
+                    "%s or %s: detected (F = %.3g, p = %.2g) but not separable from this plan "
+                    "(%s): either explains the other's signal; not applied.",
+                    to_string(scored[ib].kind), rival.c_str(), scored[ib].F, scored[ib].p_value,
+                    seq.name.c_str());
+      res.ambiguous.push_back(amb);
+      break;
+    }
     Eigen::MatrixXd grown(extra.rows(), extra.cols() + directions[ib].cols());
     grown << extra, directions[ib];
     extra = grown;
@@ -371,14 +416,23 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
                   to_string(a.kind), a.description.c_str(), a.identifiable, a.F, a.p_value);
     res.report.push_back(buf);
   }
+  res.report.insert(res.report.end(), res.ambiguous.begin(), res.ambiguous.end());
   for (const auto& id : res.plan_identifiability)
     if (!id.identifiable_from_plan) {
+      std::string detected;
+      for (const auto& c : res.detected_not_identifiable)
+        if (c.kind == id.kind) {
+          char d[120];
+          std::snprintf(d, sizeof d, " Detected (F = %.3g, p = %.2g), not applied.", c.F,
+                        c.p_value);
+          detected = d;
+        }
       std::snprintf(buf, sizeof buf,
                     "%s: not identifiable from this plan (%s): %d of %d parameter directions "
-                    "seen; what it cannot see changes S by %.0f %% of what it can. Measure with a "
-                    "closing pass or a reversed traverse.",
-                    to_string(id.kind), seq.name.c_str(), id.identifiable, id.parameters,
-                    100.0 * id.undetermined_S_fraction);
+                    "determined; the rest move S by up to %.2g um per um of the effect in the "
+                    "readings.%s Measure with a reversed traverse or a closing pass.",
+                    to_string(id.kind), seq.name.c_str(), id.strong, id.parameters,
+                    id.undetermined_S_gain, detected.c_str());
       res.report.push_back(buf);
     }
   return res;

@@ -26,11 +26,16 @@
 // (Šidák-corrected over τ's grid, Bonferroni over the candidates) decides whether it is added.
 //
 // Identifiability from the plan (independent of the data): the directions of an effect's
-// parameters that the data cannot see are absorbed by f, S, γ, e.  When such a direction
-// changes S beyond the gauge (constant, line, bow), the effect is "not identifiable from this
-// plan": its fitted correction cannot remove what it does to S.  The measure is the largest
-// change of S (after the gauge) a unit invisible combination causes, relative to the largest any
-// unit combination causes (columns scaled to unit norm).
+// parameters that the data cannot see, or see too weakly to fit (relative singular value of the
+// projected, unit-scaled columns below weak_direction_sv), are absorbed by f, S, γ, e.  When
+// such a direction changes S beyond the gauge (constant, line, bow), the effect is "not
+// identifiable from this plan": no fitted correction can remove what it does to S.  The measure
+// (undetermined_S_gain) is the largest ratio, over those directions, of the RMS change of Ŝ
+// (after the gauge) to the RMS of the effect in the readings.  Measured on Zhao 2019's geometry
+// (N = 69, s = 1, 1, 5, 10 mm/s, 2 s turnaround): single plan drift 4.9, thermal 2.9, traverse
+// 7.1 (all weakly determined); closing pass drift 2.2, thermal 0.89, traverse 0; reversed drift
+// 0, thermal 0.06, traverse 0; interleaved drift 1.2, thermal 0.73, traverse 0.  The threshold
+// undetermined_S_max = 0.1 separates them.
 #include <Eigen/Core>
 #include <string>
 #include <vector>
@@ -71,8 +76,11 @@ SequenceEffectColumns sequence_effect_columns(SequenceEffectKind kind, const Fou
 
 struct SequenceIdentifiability {
   SequenceEffectKind kind = SequenceEffectKind::drift;
-  int parameters = 0, identifiable = 0;
-  double undetermined_S_fraction = 0;  ///< file comment
+  int parameters = 0;
+  int identifiable = 0;  ///< directions above identifiability_tol
+  int strong = 0;        ///< directions above weak_direction_sv (fitted when added)
+  Eigen::VectorXd relative_sv;
+  double undetermined_S_gain = 0;  ///< file comment (µm of S RMS per µm of reading RMS)
   bool identifiable_from_plan = false;
 };
 
@@ -80,7 +88,11 @@ struct SequenceRefineOptions {
   double alpha = 0.01;                ///< family-wise level of one step
   int max_effects = 2;                ///< additions at most
   double identifiability_tol = 1e-6;  ///< relative singular value below which a direction is lost
-  /// An effect is not identifiable from the plan above this undetermined_S_fraction.
+  /// A direction whose relative singular value is below this is too poorly determined to fit
+  /// (its noise would go into S); it counts as undetermined.  0.05: the single plan's
+  /// non-repeating traverse has 0.013-0.035 (not identifiable), the closing pass's 0.51-0.56.
+  double weak_direction_sv = 0.05;
+  /// An effect is not identifiable from the plan above this undetermined_S_gain.
   double undetermined_S_max = 0.1;
   int thermal_grid = 10;    ///< τ values searched (ThermalDriftEffect::tau_grid_s)
   int traverse_degree = 4;  ///< K of the progressive traverse change
@@ -99,6 +111,11 @@ struct SequenceRefineResult {
   SequenceFit before, after;                   ///< without effects; with the added ones
   std::vector<SequenceCandidate> added;        ///< in order
   std::vector<SequenceCandidate> first_round;  ///< every candidate's score in round 1
+  /// Significant, but the plan cannot identify them: not added, reported.
+  std::vector<SequenceCandidate> detected_not_identifiable;
+  /// Significant candidates the data cannot tell apart (one explains the other's signal): not
+  /// applied; one line each, also in `report`.
+  std::vector<std::string> ambiguous;
   std::vector<SequenceIdentifiability> plan_identifiability;  ///< drift, thermal, traverse
   /// One line per added effect and one per effect this plan cannot identify, e.g.
   /// "drift: not identifiable from this plan (single): ...".  The report prints them.
