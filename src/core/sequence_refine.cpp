@@ -330,13 +330,17 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
       if (res.identified(kind)) continue;
       SequenceCandidate best;
       best.kind = kind;
+      const bool identifiable = res.identifiable_from_plan(kind);
       Eigen::MatrixXd best_dirs;
       const std::vector<double> grid =
           kind == SequenceEffectKind::thermal ? taus : std::vector<double>{0.0};
       for (double tau : grid) {
         const auto cols = sequence_effect_columns(kind, cfg, seq, tau, o.traverse_degree);
         const Projected pj = project(Q, cols.J, o.identifiability_tol, o.weak_direction_sv);
-        const int kid = pj.strong;
+        // An effect the plan identifies keeps its weakly determined directions too: by the
+        // plan's measure they do not reach S, and without them the effect is incomplete (a
+        // drift fitted on three of its four directions leaves a residual another effect takes).
+        const int kid = identifiable ? pj.identifiable : pj.strong;
         if (kid == 0 || dof - kid <= 0) continue;
         double d = 0.0;
         for (int j = 0; j < kid; ++j)
@@ -354,7 +358,7 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
       }
       // Šidák over the τ grid (neighbouring values are correlated: conservative).
       if (grid.size() > 1)
-        best.p_value = 1.0 - std::pow(1.0 - best.p_value, static_cast<double>(grid.size()));
+        best.p_value = -std::expm1(static_cast<double>(grid.size()) * std::log1p(-best.p_value));
       scored.push_back(best);
       directions.push_back(best_dirs);
     }
@@ -379,9 +383,15 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
     // chosen is no longer significant once the other is in the model), the data cannot tell
     // which effect it is, and the two change S differently (a drift leaves S alone, a
     // non-repeating S is the change of S): nothing is applied, the ambiguity is reported.
+    // A linear drift is the long-τ limit of the thermal one (a·t = lim A·(1 − exp(−t/τ)) with
+    // A/τ = a): one family, not rivals.
+    auto is_drift = [](SequenceEffectKind k) {
+      return k == SequenceEffectKind::drift || k == SequenceEffectKind::thermal;
+    };
     std::string rival;
     for (std::size_t i = 0; i < scored.size(); ++i) {
       if (i == ib || !(scored[i].p_value < threshold) || directions[i].size() == 0) continue;
+      if (is_drift(scored[i].kind) && is_drift(scored[ib].kind)) continue;
       Eigen::MatrixXd Xr(X.rows(), X.cols() + directions[i].cols());
       Xr << X, directions[i];
       const Eigen::MatrixXd Qr = thin_q(Xr);

@@ -12,6 +12,7 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <random>
 #include <string>
 #include <vector>
@@ -83,6 +84,7 @@ struct Run {
   bool identified = false, any_added = false, not_identifiable_reported = false;
   double err_clean = 0, err_before = 0, err_after = 0;
   double covered = 0, points = 0;
+  bool ambiguous = false;
   double u_rms = 0;  // RMS of the refined u_S: "worse" means beyond it
   std::string added;
 };
@@ -123,9 +125,22 @@ Run run_case(Case c, const Plan& plan, std::uint64_t seed) {
   const SequenceRefineResult r = refine_four_sensor_sequence(cfg, seq, d.m_um);
   Run out;
   out.any_added = !r.added.empty();
+  out.ambiguous = !r.ambiguous.empty();
+  if (std::getenv("ERRSEP_DEBUG_SEQUENCE")) {
+    for (const auto& cand : r.first_round)
+      std::printf("      %s: F %.3g p %.2g dirs %d\n", to_string(cand.kind), cand.F, cand.p_value,
+                  cand.identifiable);
+    for (const auto& line : r.report)
+      std::printf("      %s\n", line.c_str());
+  }
   for (const auto& a : r.added)
     out.added += std::string(out.added.empty() ? "" : "+") + to_string(a.kind);
-  if (c != Case::none) out.identified = r.identified(kind_of(c));
+  // A linear drift is the long-tau limit of a thermal one: either identifies a drift.
+  if (c != Case::none)
+    out.identified =
+        kind_of(c) == SequenceEffectKind::traverse
+            ? r.identified(SequenceEffectKind::traverse)
+            : r.identified(SequenceEffectKind::drift) || r.identified(SequenceEffectKind::thermal);
   const std::string needle =
       std::string(to_string(kind_of(c))) + ": not identifiable from this plan";
   for (const auto& line : r.report)
@@ -143,7 +158,7 @@ Run run_case(Case c, const Plan& plan, std::uint64_t seed) {
 }
 
 struct Cell {
-  int identified = 0, halved = 0, worse = 0, reported = 0, added = 0;
+  int identified = 0, halved = 0, worse = 0, reported = 0, added = 0, ambiguous = 0;
   int doubled = 0, halved_of_doubled = 0;  // runs where the effect at least doubles the clean error
   std::vector<double> clean, before, after;
   double covered = 0, points = 0;
@@ -163,6 +178,7 @@ Cell run_cell(Case c, const Plan& plan) {
     const Run r = run_case(c, plan, 1000 + static_cast<std::uint64_t>(s));
     cell.identified += r.identified;
     cell.added += r.any_added;
+    cell.ambiguous += r.ambiguous;
     cell.reported += r.not_identifiable_reported;
     cell.halved += r.err_after <= 0.5 * r.err_before;
     cell.worse += r.err_after > r.err_before + r.u_rms;
@@ -179,11 +195,13 @@ Cell run_cell(Case c, const Plan& plan) {
   }
   std::printf(
       "%-12s %-22s identified %2d/%d  halved %2d (%2d of %2d doubled)  worse %2d  'not "
-      "identifiable' %2d  added %2d | S err um clean %.3f, before %.3f (worst %.3f), after %.3f "
+      "identifiable' %2d  ambiguous %2d  added %2d | S err um clean %.3f, before %.3f (worst "
+      "%.3f), after %.3f "
       "(worst %.3f) | cov 2u %.3f\n",
       name(c), plan.label().c_str(), cell.identified, kSeeds, cell.halved, cell.halved_of_doubled,
-      cell.doubled, cell.worse, cell.reported, cell.added, median(cell.clean), median(cell.before),
-      worst(cell.before), median(cell.after), worst(cell.after), cell.covered / cell.points);
+      cell.doubled, cell.worse, cell.reported, cell.ambiguous, cell.added, median(cell.clean),
+      median(cell.before), worst(cell.before), median(cell.after), worst(cell.after),
+      cell.covered / cell.points);
   return cell;
 }
 
@@ -257,25 +275,29 @@ TEST_CASE("identifiability from the plan: what each sequence lets drift and a no
   CHECK(ids(ScanSequenceKind::interleaved) == std::vector<bool>{false, false, true});
 }
 
-// The must-show table of issue 16 item 2, one plan per test case (each ~6 s in release).  What
-// holds and is asserted:
-//   - clean data: nothing added in >= 19 of 20 runs;
+// The must-show table of issue 16 item 2, one plan per test case (each ~6 s in release).  A
+// linear drift is the long-tau limit of a thermal one, so either counts as identifying a drift.
+// What holds and is asserted:
+//   - clean data: nothing added in >= 19 of 20 runs (measured 0/20 in every plan);
 //   - without a plan that identifies it, drift, thermal drift and the non-repeating traverse are
 //     reported "not identifiable from this plan" in every run, and nothing is applied for them;
 //   - a non-repeating traverse with a closing pass or reversed traverses: identified in >= 80 %,
 //     S error halved in >= 80 % (measured 20/20 and 20/20 for both);
+//   - reversed traverses: linear drift (one configuration and all) and thermal drift on all
+//     configurations identified in >= 80 % (measured 20/20 each);
 //   - no run's S error grows by more than the RMS of its refined u_S, except in the reversed
 //     plan's linear-drift cells (see below).
 // What does not hold (figures at seeds 1001-1020, sigma 0.1 um, printed by this test):
 //   - linear drift is not identifiable from a closing pass (its own zero adjustment absorbs the
-//     offset a drift gives the repeated traverse; with the stage's zero kept, one rate of four is
+//     offset a drift gives the repeated traverse; with the stage's zero kept, 2 of 4 rates are
 //     seen) and is harmless in a reversed plan (forward and back cancel it: S error 0.151 um with
-//     and without the drift), so "halved" cannot happen there; in the reversed plan it is
-//     identified in 5/20 (one configuration) and 1/20 (all), and the loop made S worse beyond u
-//     in 4/20 and 1/20 (worst 4.0 and 7.0 um: taken for a thermal drift or a non-repeat);
-//   - thermal drift with the reversed plan: identified 5/20 (one configuration; the effect
-//     doubled the clean error in 3 of 20) and 11/20 (all), S error halved in 9 of the 19 runs
-//     where it doubled the clean error; the closing pass reports it not identifiable.
+//     and without the drift), so "halved" cannot happen there; fitting it made S worse beyond u
+//     in 1 of 20 runs (all configurations; 0.33 -> 2.04 um);
+//   - thermal drift with the reversed plan: identified 13/20 on one configuration (the effect
+//     doubled the clean error in only 3 of 20, all three halved) and 20/20 on all, S error halved
+//     in 11 of the 19 runs where it doubled the clean error (median 0.93 -> 0.35 um); the closing
+//     pass reports it not identifiable and, where it is significant, ambiguous with a
+//     non-repeating traverse (5/20 and 20/20): nothing applied.
 TEST_CASE("must-show: single plan reports drift and non-repeat not identifiable") {
   for (auto c : {Case::none, Case::drift_one, Case::drift_all, Case::thermal_one, Case::thermal_all,
                  Case::traverse}) {
@@ -308,6 +330,8 @@ static void check_redundant_plan(const Plan& plan) {
       CHECK(cell.identified >= kSeeds * 8 / 10);
       CHECK(cell.halved >= kSeeds * 8 / 10);
     }
+    if (plan.kind == ScanSequenceKind::reversed && (drift || c == Case::thermal_all))
+      CHECK(cell.identified >= kSeeds * 8 / 10);
   }
 }
 
@@ -319,6 +343,6 @@ TEST_CASE("must-show: closing pass with the stage's zero kept") {
   check_redundant_plan(Plan{ScanSequenceKind::closing_pass, true});
 }
 
-TEST_CASE("must-show: reversed traverses identify a non-repeating traverse") {
+TEST_CASE("must-show: reversed traverses identify drift and a non-repeating traverse") {
   check_redundant_plan(Plan{ScanSequenceKind::reversed});
 }
