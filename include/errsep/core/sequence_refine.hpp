@@ -24,6 +24,12 @@
 // A candidate's columns are projected onto the complement of the current model; directions with
 // a relative singular value above the tolerance are identifiable, and the F-test on them
 // (Šidák-corrected over τ's grid, Bonferroni over the candidates) decides whether it is added.
+// Only an effect the plan identifies (below) is added; a significant one it does not is
+// reported.  When another significant candidate explains the chosen one's signal (the chosen is
+// no longer significant with the other in the model) the two are reported as not separable from
+// the plan and neither is applied (a drift leaves S alone, a non-repeating S is a change of S:
+// applying the wrong one moves S).  Linear and thermal drift are one family (a·t is the long-τ
+// limit of A·(1 − exp(−t/τ))), not rivals.
 //
 // Identifiability from the plan (independent of the data): the directions of an effect's
 // parameters that the data cannot see, or see too weakly to fit (relative singular value of the
@@ -78,7 +84,10 @@ struct SequenceIdentifiability {
   SequenceEffectKind kind = SequenceEffectKind::drift;
   int parameters = 0;
   int identifiable = 0;  ///< directions above identifiability_tol
-  int strong = 0;        ///< directions above weak_direction_sv (fitted when added)
+  /// Directions above weak_direction_sv.  An effect the plan identifies is fitted on all its
+  /// identifiable directions (the weak ones do not reach S, by the plan's measure); one it does
+  /// not would be scored on these only.
+  int strong = 0;
   Eigen::VectorXd relative_sv;
   double undetermined_S_gain = 0;  ///< file comment (µm of S RMS per µm of reading RMS)
   bool identifiable_from_plan = false;
