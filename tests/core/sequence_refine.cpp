@@ -229,7 +229,7 @@ TEST_CASE("scan sequences: times, redundancy, validation") {
   CHECK(why.find("configuration 4") != std::string::npos);
 }
 
-TEST_CASE("sequence fit: the single plan equals the refine base; u_S covers clean data") {
+TEST_CASE("sequence fit: u_S covers clean data in every plan") {
   FourSensorConfig cfg;
   long covered = 0, points = 0;
   for (auto plan : {ScanSequenceKind::single, ScanSequenceKind::closing_pass,
