@@ -420,7 +420,7 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
     res.added.push_back(scored[ib]);
   }
   res.after = extra.cols() ? fit_four_sensor_sequence(cfg, seq, m_um, extra) : res.before;
-  char buf[400];
+  char buf[600];
   for (const auto& a : res.added) {
     std::snprintf(buf, sizeof buf, "%s identified: %s, %d direction(s), F = %.3g, p = %.2g",
                   to_string(a.kind), a.description.c_str(), a.identifiable, a.F, a.p_value);
@@ -440,9 +440,15 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
       std::snprintf(buf, sizeof buf,
                     "%s: not identifiable from this plan (%s): %d of %d parameter directions "
                     "determined; the rest move S by up to %.2g um per um of the effect in the "
-                    "readings.%s Measure with a reversed traverse or a closing pass.",
+                    "readings.%s Measure with %s.",
                     to_string(id.kind), seq.name.c_str(), id.strong, id.parameters,
-                    id.undetermined_S_gain, detected.c_str());
+                    id.undetermined_S_gain, detected.c_str(),
+                    // What identifies it (sequence_identifiability on Zhao 2019's geometry): a
+                    // drift needs each configuration forward and back; a change of S between
+                    // traverses shows in any repeated configuration.
+                    id.kind == SequenceEffectKind::traverse
+                        ? "a closing pass or reversed traverses"
+                        : "reversed traverses (each configuration forward and back)");
       res.report.push_back(buf);
     }
   return res;
