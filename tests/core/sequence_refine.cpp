@@ -292,7 +292,7 @@ TEST_CASE("identifiability from the plan: what each sequence lets drift and a no
 //     offset a drift gives the repeated traverse; with the stage's zero kept, 2 of 4 rates are
 //     seen) and is harmless in a reversed plan (forward and back cancel it: S error 0.151 um with
 //     and without the drift), so "halved" cannot happen there; fitting it made S worse beyond u
-//     in 1 of 20 runs (all configurations; 0.33 -> 2.04 um);
+//     in 1 of 20 runs (all configurations; S error 2.04 um, the cell's worst before was 0.33 um);
 //   - thermal drift with the reversed plan: identified 13/20 on one configuration (the effect
 //     doubled the clean error in only 3 of 20, all three halved) and 20/20 on all, S error halved
 //     in 11 of the 19 runs where it doubled the clean error (median 0.93 -> 0.35 um); the closing
