@@ -1,0 +1,66 @@
+#pragma once
+// The order of the traverses of a four-sensor scan (issue 16, item 2: measure so the missing
+// effect shows).
+//
+// The single-sensor system of Zhao et al. 2019 (section 2) moves one sensor to four
+// configurations and traverses the slide once per configuration.  Eq. (1) assumes that nothing
+// changes between those traverses.  A drift of the sensor in time, a warm-up, or a straightness
+// that does not repeat then lies almost entirely in what one scan's model absorbs (S, γ and the
+// zero-adjustment values e: see effect_drift.hpp, effect_thermal_drift.hpp, effect_traverse.hpp),
+// so the residual stays white.  A sequence that measures a configuration twice makes the
+// configuration disagree with itself by exactly such an effect:
+//   single        1, 2, 3, 4 forward (the paper's scan, no redundancy)
+//   closing pass  1, 2, 3, 4, then 1 again (a change between the first and the last traverse)
+//   reversed      each configuration forward and back (a drift linear in time becomes a slope
+//                 between the two directions that no zero-adjustment value can absorb)
+//   interleaved   1, 2, 3, 4, 4, 3, 2, 1 (each configuration at two times symmetric about the
+//                 middle of the scan)
+// Every traverse carries its start time and direction, so the reading times t(n, k) (P × T,
+// column k = traverse k) follow from the slide speed, and time-dependent effects are modelled on
+// them.
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "errsep/core/four_sensor_config.hpp"
+
+namespace errsep::core {
+
+enum class TraverseDirection { forward, backward };
+
+struct Traverse {
+  int configuration = 0;  ///< 0..3: configuration 1..4 of Eq. (1)
+  TraverseDirection direction = TraverseDirection::forward;
+  double start_s = 0.0;  ///< time of its first reading, from the start of the scan
+};
+
+enum class ScanSequenceKind { single, closing_pass, reversed, interleaved };
+const char* to_string(ScanSequenceKind k);
+
+struct ScanSequence {
+  std::vector<Traverse> traverses;
+  std::string name = "custom";   ///< the kind's name when made by make()
+  double speed_mm_per_s = 10.0;  ///< slide speed while reading
+  /// Whether a configuration measured again reproduces its zero-adjustment value (a sensor stage
+  /// that returns to the same position within noise).  False (the default): each repeated
+  /// traverse has its own zero-adjustment unknown, the safe assumption for a stage that is moved
+  /// away and back.
+  bool repeat_keeps_zero = false;
+
+  int size() const { return static_cast<int>(traverses.size()); }
+  /// More traverses than configurations: some configuration is measured more than once.
+  bool redundant() const { return size() > 4; }
+  /// Reading times t(n, k) in s, P × T: traverse k reads x_n at start_s + (distance travelled
+  /// since its first reading)/speed.
+  Eigen::MatrixXd times_s(const FourSensorConfig& cfg) const;
+  /// Every configuration at least once, configurations in 0..3, traverse 0 is configuration 1
+  /// (its zero adjustment is the reference e_1 = 0), start times non-decreasing, speed > 0.
+  bool is_valid(std::string* why = nullptr) const;
+
+  /// The plans of the file comment; consecutive traverses follow each other after
+  /// `turnaround_s` (moving the sensor stage, reversing the slide).
+  static ScanSequence make(ScanSequenceKind kind, const FourSensorConfig& cfg,
+                           double speed_mm_per_s = 10.0, double turnaround_s = 2.0);
+};
+
+}  // namespace errsep::core

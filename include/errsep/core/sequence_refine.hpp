@@ -1,0 +1,148 @@
+#pragma once
+// Separation and refinement of a four-sensor scan measured with a scan sequence
+// (scan_sequence.hpp; issue 16, items 2 and 3): the redundant traverses enter the least-squares
+// system of Eq. (1) (Zhao et al. 2019) as extra rows, each with its own zero-adjustment unknown,
+// and the refinement identifies the time-dependent effects the redundancy makes visible.
+//
+// The fit.  Unknowns: f(x_0..x_{N−1}) in the gauge f(x_0) = f(x_{N−1}) = 0, f ⟂ bow (as the
+// refine base and the solver's default), S(x_n) and γ(x_n) per position, a zero adjustment e_k
+// per traverse (traverse 1 and the first traverse of configuration 4 held at 0: the constant and
+// γ's constant; a repeated configuration shares its first traverse's e when
+// ScanSequence::repeat_keeps_zero).  Ordinary least squares (λ = 0) because only an
+// unregularised fit has a residual whose distribution is known.  u_S is the standard uncertainty
+// of Ŝ about its best-fit constant, line and bow (what one scan cannot see is removed from the
+// estimate and the truth alike), from σ̂ and the covariance of the joint fit, so the effects'
+// fitted directions are carried in it.
+//
+// The effects, in reading space (the physics of effect_drift.hpp, effect_thermal_drift.hpp and a
+// progressive form of effect_traverse.hpp):
+//   drift     a_c·t per configuration c (4 rates)
+//   thermal   A_c·(1 − exp(−t/τ)) per configuration, τ searched on ThermalDriftEffect's grid
+//   traverse  s_k·Σ_j b_j·P_j(2x/L − 1), j = 1..K: a straightness that changes in proportion to
+//             time, s_k = (mid-time of traverse k − that of traverse 1)/(span of mid-times); the
+//             truth is the first traverse's S
+// A candidate's columns are projected onto the complement of the current model; directions with
+// a relative singular value above the tolerance are identifiable, and the F-test on them
+// (Šidák-corrected over τ's grid, Bonferroni over the candidates) decides whether it is added.
+// Only an effect the plan identifies (below) is added; a significant one it does not is
+// reported.  When another significant candidate explains the chosen one's signal (the chosen is
+// no longer significant with the other in the model) the two are reported as not separable from
+// the plan and neither is applied (a drift leaves S alone, a non-repeating S is a change of S:
+// applying the wrong one moves S).  Linear and thermal drift are one family (a·t is the long-τ
+// limit of A·(1 − exp(−t/τ))), not rivals.
+//
+// Identifiability from the plan (independent of the data): the directions of an effect's
+// parameters that the data cannot see, or see too weakly to fit (relative singular value of the
+// projected, unit-scaled columns below weak_direction_sv), are absorbed by f, S, γ, e.  When
+// such a direction changes S beyond the gauge (constant, line, bow), the effect is "not
+// identifiable from this plan": no fitted correction can remove what it does to S.  The measure
+// (undetermined_S_gain) is the largest ratio, over those directions, of the RMS change of Ŝ
+// (after the gauge) to the RMS of the effect in the readings.  Measured on Zhao 2019's geometry
+// (N = 69, s = 1, 1, 5, 10 mm/s, 2 s turnaround): single plan drift 4.9, thermal 2.9, traverse
+// 7.1 (all weakly determined); closing pass drift 2.2, thermal 0.89, traverse 0; reversed drift
+// 0, thermal 0.06, traverse 0; interleaved drift 1.2, thermal 0.73, traverse 0.  The threshold
+// undetermined_S_max = 0.1 separates them.
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "errsep/core/four_sensor_config.hpp"
+#include "errsep/core/scan_sequence.hpp"
+
+namespace errsep::core {
+
+enum class SequenceEffectKind { drift, thermal, traverse };
+const char* to_string(SequenceEffectKind k);
+
+struct SequenceFit {
+  Eigen::VectorXd f_um, S_um, gamma_rad;  ///< N, P, P
+  Eigen::VectorXd e_um;                   ///< T zero-adjustment values, one per traverse
+  Eigen::VectorXd u_S_um;              ///< of S about its best-fit constant, line and bow (k = 1)
+  Eigen::VectorXd extra_coefficients;  ///< along the extra columns
+  Eigen::MatrixXd residual_um;         ///< P × T
+  double rss_um2 = 0, sigma_um = 0;
+  int dof = 0;
+};
+
+/// The fit of the file comment with extra reading-space columns (PT × q, row k·P + n; may be
+/// empty).  Throws std::invalid_argument for a bad configuration, sequence or shape.
+SequenceFit fit_four_sensor_sequence(const FourSensorConfig& cfg, const ScanSequence& seq,
+                                     const Eigen::MatrixXd& m_um,
+                                     const Eigen::MatrixXd& extra = {});
+
+/// An effect's columns for a sequence (rows k·P + n), at time constant tau_s for thermal.
+struct SequenceEffectColumns {
+  SequenceEffectKind kind = SequenceEffectKind::drift;
+  std::string description;
+  Eigen::MatrixXd J;
+};
+SequenceEffectColumns sequence_effect_columns(SequenceEffectKind kind, const FourSensorConfig& cfg,
+                                              const ScanSequence& seq, double tau_s = 40.0,
+                                              int traverse_degree = 4);
+
+struct SequenceIdentifiability {
+  SequenceEffectKind kind = SequenceEffectKind::drift;
+  int parameters = 0;
+  int identifiable = 0;  ///< directions above identifiability_tol
+  /// Directions above weak_direction_sv.  An effect the plan identifies is fitted on all its
+  /// identifiable directions (the weak ones do not reach S, by the plan's measure); one it does
+  /// not would be scored on these only.
+  int strong = 0;
+  Eigen::VectorXd relative_sv;
+  double undetermined_S_gain = 0;  ///< file comment (µm of S RMS per µm of reading RMS)
+  bool identifiable_from_plan = false;
+};
+
+struct SequenceRefineOptions {
+  double alpha = 0.01;                ///< family-wise level of one step
+  int max_effects = 2;                ///< additions at most
+  double identifiability_tol = 1e-6;  ///< relative singular value below which a direction is lost
+  /// A direction whose relative singular value is below this is too poorly determined to fit
+  /// (its noise would go into S); it counts as undetermined.  0.05: the single plan's
+  /// non-repeating traverse has 0.013-0.035 (not identifiable), the closing pass's 0.51-0.56.
+  double weak_direction_sv = 0.05;
+  /// An effect is not identifiable from the plan above this undetermined_S_gain.
+  double undetermined_S_max = 0.1;
+  int thermal_grid = 10;    ///< τ values searched (ThermalDriftEffect::tau_grid_s)
+  int traverse_degree = 4;  ///< K of the progressive traverse change
+  bool is_valid(std::string* why = nullptr) const;
+};
+
+struct SequenceCandidate {
+  SequenceEffectKind kind = SequenceEffectKind::drift;
+  std::string description;
+  int identifiable = 0;
+  double F = 0, p_value = 1, delta_rss_um2 = 0;
+};
+
+struct SequenceRefineResult {
+  std::string plan;                            ///< "single", "closing pass", … or "custom"
+  SequenceFit before, after;                   ///< without effects; with the added ones
+  std::vector<SequenceCandidate> added;        ///< in order
+  std::vector<SequenceCandidate> first_round;  ///< every candidate's score in round 1
+  /// Significant, but the plan cannot identify them: not added, reported.
+  std::vector<SequenceCandidate> detected_not_identifiable;
+  /// Significant candidates the data cannot tell apart (one explains the other's signal): not
+  /// applied; one line each, also in `report`.
+  std::vector<std::string> ambiguous;
+  std::vector<SequenceIdentifiability> plan_identifiability;  ///< drift, thermal, traverse
+  /// One line per added effect and one per effect this plan cannot identify, e.g.
+  /// "drift: not identifiable from this plan (single): ...".  The report prints them.
+  std::vector<std::string> report;
+  bool identified(SequenceEffectKind k) const;
+  bool identifiable_from_plan(SequenceEffectKind k) const;
+};
+
+/// Data-independent: what the plan lets each effect show (file comment).
+std::vector<SequenceIdentifiability> sequence_identifiability(const FourSensorConfig& cfg,
+                                                              const ScanSequence& seq,
+                                                              const SequenceRefineOptions& o = {});
+
+/// The loop on readings m (P × T, column k = traverse k).  Throws std::invalid_argument for bad
+/// inputs.
+SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
+                                                 const ScanSequence& seq,
+                                                 const Eigen::MatrixXd& m_um,
+                                                 const SequenceRefineOptions& o = {});
+
+}  // namespace errsep::core

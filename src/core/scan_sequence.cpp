@@ -1,0 +1,96 @@
+#include "errsep/core/scan_sequence.hpp"
+
+#include <array>
+#include <stdexcept>
+
+namespace errsep::core {
+
+const char* to_string(ScanSequenceKind k) {
+  switch (k) {
+    case ScanSequenceKind::single:
+      return "single";
+    case ScanSequenceKind::closing_pass:
+      return "closing pass";
+    case ScanSequenceKind::reversed:
+      return "reversed";
+    case ScanSequenceKind::interleaved:
+      return "interleaved";
+  }
+  return "unknown";
+}
+
+Eigen::MatrixXd ScanSequence::times_s(const FourSensorConfig& cfg) const {
+  const int P = cfg.positions();
+  Eigen::MatrixXd t(P, size());
+  for (int k = 0; k < size(); ++k) {
+    const Traverse& tr = traverses[static_cast<std::size_t>(k)];
+    for (int n = 0; n < P; ++n) {
+      const int steps = tr.direction == TraverseDirection::forward ? n : P - 1 - n;
+      t(n, k) = tr.start_s + steps * cfg.dx_mm / speed_mm_per_s;
+    }
+  }
+  return t;
+}
+
+bool ScanSequence::is_valid(std::string* why) const {
+  auto fail = [&](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  if (!(speed_mm_per_s > 0))
+    return fail("speed_mm_per_s = " + std::to_string(speed_mm_per_s) + ": must be > 0");
+  if (traverses.empty() || traverses.front().configuration != 0)
+    return fail("traverse 1 must measure configuration 1 (the zero-adjustment reference)");
+  std::array<bool, 4> seen{};
+  for (std::size_t k = 0; k < traverses.size(); ++k) {
+    const int c = traverses[k].configuration;
+    if (c < 0 || c > 3)
+      return fail("traverse " + std::to_string(k + 1) + ": configuration " + std::to_string(c) +
+                  " not in 0..3");
+    seen[static_cast<std::size_t>(c)] = true;
+    if (k > 0 && traverses[k].start_s < traverses[k - 1].start_s)
+      return fail("traverse " + std::to_string(k + 1) + " starts before traverse " +
+                  std::to_string(k));
+  }
+  for (std::size_t c = 0; c < 4; ++c)
+    if (!seen[c]) return fail("configuration " + std::to_string(c + 1) + " is never measured");
+  return true;
+}
+
+ScanSequence ScanSequence::make(ScanSequenceKind kind, const FourSensorConfig& cfg,
+                                double speed_mm_per_s, double turnaround_s) {
+  if (!(speed_mm_per_s > 0) || !(turnaround_s >= 0))
+    throw std::invalid_argument("scan sequence: speed must be > 0 and turnaround >= 0");
+  using D = TraverseDirection;
+  std::vector<std::pair<int, D>> order;
+  switch (kind) {
+    case ScanSequenceKind::single:
+      order = {{0, D::forward}, {1, D::forward}, {2, D::forward}, {3, D::forward}};
+      break;
+    case ScanSequenceKind::closing_pass:
+      order = {{0, D::forward}, {1, D::forward}, {2, D::forward}, {3, D::forward}, {0, D::forward}};
+      break;
+    case ScanSequenceKind::reversed:
+      for (int c = 0; c < 4; ++c) {
+        order.push_back({c, D::forward});
+        order.push_back({c, D::backward});
+      }
+      break;
+    case ScanSequenceKind::interleaved:
+      for (int c : {0, 1, 2, 3, 3, 2, 1, 0})
+        order.push_back({c, D::forward});
+      break;
+  }
+  ScanSequence s;
+  s.speed_mm_per_s = speed_mm_per_s;
+  s.name = to_string(kind);
+  const double duration = (cfg.positions() - 1) * cfg.dx_mm / speed_mm_per_s;
+  double t = 0.0;
+  for (const auto& [c, d] : order) {
+    s.traverses.push_back({c, d, t});
+    t += duration + turnaround_s;
+  }
+  return s;
+}
+
+}  // namespace errsep::core
