@@ -427,11 +427,9 @@ struct SearchOutcome {
 
 // Grid in log λ (on `threads` threads, each with its own factor), then a refinement around the
 // best point: its two neighbours at half the spacing, evaluated at once (one on a worker when
-// there are two threads), the best of the three kept and the spacing halved; from a quarter of
-// the grid's spacing on, the vertex of a parabola through the best point and its neighbours ±
-// the final resolution (grid spacing / 2^refine_iterations) ends it.  Each step costs the wall
-// time of one evaluation on two threads (golden section: 0.618 of the bracket per evaluation,
-// which cannot run in parallel); the result is always the best λ evaluated.
+// there are two threads), the best of the three kept and the spacing halved, refine_iterations
+// times.  For a unimodal criterion each step halves the bracket for the wall time of one
+// evaluation on two threads (golden section: 0.618 per evaluation, which cannot run in parallel).
 template <class F>
 SearchOutcome minimise_over_lambda(TikhonovSolver& solver, const LambdaSearchOptions& o, F&& crit) {
   const double lmax = solver.sigma_max_bound() * std::pow(10.0, o.decades_above);
@@ -485,48 +483,21 @@ SearchOutcome minimise_over_lambda(TikhonovSolver& solver, const LambdaSearchOpt
   out.at_edge = best == 0 || best == count - 1;
   double best_l = grid[static_cast<std::size_t>(best)],
          best_v = val[static_cast<std::size_t>(best)];
-  const double lo = grid.front(), hi = grid.back(), h0 = grid[1] - grid[0];
-  const double resolution = h0 * std::pow(0.5, o.refine_iterations);
-  std::vector<std::pair<double, double>> seen;  // (log λ, criterion) of every evaluation
-  for (int i = 0; i < count; ++i)
-    seen.emplace_back(grid[static_cast<std::size_t>(i)], val[static_cast<std::size_t>(i)]);
-  auto known = [&](double l) {
-    for (const auto& [x, v] : seen)
-      if (std::abs(x - l) <= 1e-9 * h0) return v;
-    return std::numeric_limits<double>::quiet_NaN();
-  };
-  // Two points at once (the second on a worker when there are two threads); outside the range
-  // they count as +∞.
-  auto pair = [&](double a, double b) {
-    const double at[2] = {a, b};
+  double h = grid[1] - grid[0];
+  const double lo = grid.front(), hi = grid.back();
+  for (int it = 0; it < o.refine_iterations; ++it) {
+    h *= 0.5;
+    const double at[2] = {best_l - h, best_l + h};
     double v[2] = {std::numeric_limits<double>::infinity(),
                    std::numeric_limits<double>::infinity()};
-    const int n = std::min(threads, 2);
-    in_parallel(n, [&](int t, TikhonovSolver& s) {
-      for (int i = t; i < 2; i += n)
-        if (at[i] >= lo - 1e-12 && at[i] <= hi + 1e-12) v[i] = eval(s, at[i]);
-    });
-    for (int i = 0; i < 2; ++i) {
-      seen.emplace_back(at[i], v[i]);
+    auto job = [&](int t, TikhonovSolver& s) {
+      for (int i = t; i < 2; i += std::min(threads, 2))
+        if (at[i] >= lo - 1e-12 && at[i] <= hi + 1e-12)  // inside the range only
+          v[i] = eval(s, at[i]);
+    };
+    in_parallel(std::min(threads, 2), job);
+    for (int i = 0; i < 2; ++i)
       if (v[i] < best_v) best_v = v[i], best_l = at[i];
-    }
-  };
-  double h = h0;
-  for (int halvings = 0; halvings < o.refine_iterations;) {
-    // Once the spacing is a quarter of the grid's: the vertex of the parabola through the best
-    // point and its two neighbours (the criterion is smooth in log λ), then the two points at
-    // the final resolution either side of it; the best of everything evaluated is kept.
-    if (halvings >= 3) {
-      const double fm = known(best_l - h), fp = known(best_l + h), c = fm + fp - 2.0 * best_v;
-      if (std::isfinite(fm) && std::isfinite(fp) && c > 0.0) {
-        const double vertex = best_l - 0.5 * h * (fp - fm) / c;  // within best_l ± h/2
-        pair(vertex - resolution, vertex + resolution);
-        break;
-      }
-    }
-    h *= 0.5;
-    ++halvings;
-    pair(best_l - h, best_l + h);
   }
   for (const auto& w : workers)
     out.worker_factorizations += w->stats().factorizations;

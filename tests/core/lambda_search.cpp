@@ -1,5 +1,5 @@
-// The λ search of LambdaRule::reml (a coarse log grid, halvings around its best point, then the
-// vertex of a parabola: four_sensor_posterior.cpp, minimise_over_lambda) against a fine grid of
+// The λ search of LambdaRule::reml (a coarse log grid, then halvings around its best point:
+// four_sensor_posterior.cpp, minimise_over_lambda) against a fine grid of
 // the same range (201 points, 0.05 decade apart, then 6 halvings: λ to < 0.001 decade), on random
 // smooth profiles (core::random_smooth_truth) with noise on every reading.  What matters is the
 // answer, not λ itself: where REML's criterion is flat λ may move without changing S.  Asserted

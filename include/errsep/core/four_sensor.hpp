@@ -80,16 +80,15 @@ enum class MotionEstimator {
 
 /// The λ search of LambdaRule::reml and gcv: a log grid (evaluated on `threads` threads), then a
 /// refinement around the best grid point: its two neighbours at half the spacing (evaluated at
-/// once on two threads), the best kept, the spacing halved twice; then the vertex of the parabola
-/// through the best point and its neighbours, ± the final resolution.  λ is relative to the bound
-/// of σ_max(A).  The defaults (one decade between grid points, resolution 1/64 decade) find the
+/// once on two threads), the best kept, the spacing halved.  λ is relative to the bound of
+/// σ_max(A).  The defaults (one decade between grid points, 6 halvings: λ to 1/64 decade) find the
 /// λ of a 201-point grid with 40 golden-section steps to within 0.01 decade on random profiles,
-/// with 11 + 6 criteria (6 + 3 sequential on two threads) instead of 21 + 12 (11 + 12).
+/// with 11 + 12 criteria instead of 21 + 12, and 12 sequential ones on two threads instead of 23.
 struct LambdaSearchOptions {
   int count = 11;              ///< grid points (>= 3)
   double decades_below = 6.0;  ///< range [σ_max·10^−below, σ_max·10^above]
   double decades_above = 4.0;
-  int refine_iterations = 6;  ///< final resolution: the grid's spacing / 2^this (in log λ)
+  int refine_iterations = 6;  ///< halvings of the spacing in log λ
   int threads = 1;
   bool is_valid(std::string* why = nullptr) const;
 };

@@ -15,7 +15,7 @@
 // half-width b (Takahashi's recurrence), without forming anything dense of size n.
 //
 // A sweep over λ can run on several threads: worker() gives another solver over the same A and
-// AᵀA (shared, read-only) with its own CHOLMOD workspace and its own analysed factor.  Each
+// AᵀA (shared, read-only) with its own CHOLMOD workspace and a copy of the analysed factor.  Each
 // solver object is used by one thread at a time.
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
@@ -83,9 +83,8 @@ class TikhonovSolver {
   explicit TikhonovSolver(Eigen::SparseMatrix<double>&& A, int border_columns = 0,
                           const Eigen::SparseMatrix<double>& penalty = {});
   ~TikhonovSolver();
-  /// Another solver over the same A and AᵀA (shared, not copied) with its own factor, for use on
-  /// another thread.  Its stats start at 0.  It reads only what this solver's factorisations do
-  /// not write, so it may be called on the other thread while this solver factorises.
+  /// Another solver over the same A and AᵀA (shared, not copied) with its own factor (the
+  /// symbolic analysis is copied, not redone), for use on another thread.  Its stats start at 0.
   std::unique_ptr<TikhonovSolver> worker() const;
   TikhonovSolver(const TikhonovSolver&) = delete;
   TikhonovSolver& operator=(const TikhonovSolver&) = delete;
