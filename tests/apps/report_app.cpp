@@ -102,6 +102,24 @@ TEST_CASE("errsep-report evaluates a bow and a sine tilt exactly and writes ever
   CHECK_THAT(html, Catch::Contains("minimum zone"));
   CHECK_THAT(html, Catch::Contains("/data/scans/simulated-demo-scan.csv"));  // raw data file
   CHECK_THAT(html, Catch::Contains("<table id=\"refine\">"));
+  // The refine step table read as errsep-refine writes it (nan where not applicable): one row a
+  // step, the parameters with u, the residual before -> after.
+  {
+    const auto at = html.find("<table id=\"refine\">");
+    const std::string rt = html.substr(at, html.find("</table>", at) - at);
+    CHECK_THAT(rt, Catch::Contains("<td>gain</td>"));
+    CHECK_THAT(rt, Catch::Contains("g3 = 0.05 \xC2\xB1 0.002"));
+    CHECK_THAT(rt, Catch::Contains("0.31 \xE2\x86\x92 0.26"));
+    CHECK_THAT(rt, Catch::Contains("applied: the gain changes S by 0.4 um"));
+    CHECK_THAT(rt, !Catch::Contains("nan"));
+    CHECK_THAT(rt, !Catch::Contains("error vs truth"));  // no truth in this run: no such column
+  }
+  // The particulars a customer's report states; what the inputs do not say is said so.
+  CHECK_THAT(html, Catch::Contains("<table id=\"measurement\">"));
+  CHECK_THAT(html, Catch::Contains("ISO 230-1:2012"));
+  CHECK_THAT(html, Catch::Contains("none configured: no verdict"));
+  CHECK_THAT(html, !Catch::Contains("id=\"verdict\""));
+  CHECK_THAT(html, Catch::Contains("Appendix: diagnostics"));
   CHECK_THAT(html, Catch::Contains("<table id=\"configuration\">"));
   CHECK_THAT(html, Catch::Contains("data:image/png;base64,"));
   CHECK_THAT(html, !Catch::Contains("src=\"plots/"));  // self-contained: no external images

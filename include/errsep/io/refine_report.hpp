@@ -5,6 +5,7 @@
 
 #include "errsep/core/refine.hpp"
 #include "errsep/io/csv.hpp"
+#include "errsep/io/html_report.hpp"
 
 namespace errsep::io {
 
@@ -22,5 +23,11 @@ std::string lambda_summary(const core::FourSensorResult& sep);
 /// The step table, the λ of the separations before and after, the final candidate scores and the
 /// whiteness verdict as text.
 std::string format_refine_text(const core::RefineResult& r);
+
+/// A refine_steps.csv (refine_csv) read back as a readable table for a report: one row per step
+/// with the effect, its parameters (value ± u, k = 1), F and p, the residual RMS before -> after,
+/// the errors against the truth before -> after where the run had one, and the verdict.  Throws
+/// CsvError naming `file` when a column or a step's metadata is missing.
+HtmlTable refine_steps_table(const CsvTable& steps, const std::filesystem::path& file);
 
 }  // namespace errsep::io
