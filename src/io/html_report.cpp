@@ -128,7 +128,8 @@ std::string render_html_report(const HtmlReport& r) {
   if (!r.generated_by.empty()) o << " &middot; " << html_escape(r.generated_by);
   o << "</p>\n";
 
-  auto table = [&](const HtmlTable& t) {
+  // numbers_right: right-align cells that read as numbers (result tables, not key-value lists).
+  auto table = [&](const HtmlTable& t, bool numbers_right = true) {
     o << "<table";
     if (!t.id.empty()) o << " id=\"" << html_escape(t.id) << "\"";
     o << ">\n";
@@ -140,7 +141,8 @@ std::string render_html_report(const HtmlReport& r) {
     for (const auto& row : t.rows) {
       o << "<tr>";
       for (const auto& c : row)
-        o << (numeric_like(c) ? "<td class=\"num\">" : "<td>") << html_escape(c) << "</td>";
+        o << (numbers_right && numeric_like(c) ? "<td class=\"num\">" : "<td>") << html_escape(c)
+          << "</td>";
       o << "</tr>\n";
     }
     o << "</tbody>\n</table>\n";
@@ -156,7 +158,7 @@ std::string render_html_report(const HtmlReport& r) {
     t.header = std::move(header);
     for (const auto& [k, v] : kv)
       t.rows.push_back({k, v});
-    table(t);
+    table(t, false);
   };
   pairs("Measurement", "measurement", {"", ""}, r.measurement);
   if (!r.verdict.empty()) {
@@ -165,12 +167,6 @@ std::string render_html_report(const HtmlReport& r) {
                                                         : "open";
     o << "<div id=\"verdict\" class=\"verdict " << cls << "\">" << html_escape(r.verdict)
       << "</div>\n";
-  }
-
-  if (!r.notes.empty()) {
-    o << "<h2>Notes</h2>\n";
-    for (const auto& n : r.notes)
-      o << "<div class=\"note\">" << html_escape(n) << "</div>\n";
   }
 
   for (std::size_t i = 0; i < r.tables.size(); ++i) {
@@ -204,6 +200,12 @@ std::string render_html_report(const HtmlReport& r) {
   if (any(false)) {
     o << "<h2>Figures</h2>\n";
     figures(false);
+  }
+  // Warnings and the statements of method, after the results they qualify.
+  if (!r.notes.empty()) {
+    o << "<h2>Notes</h2>\n";
+    for (const auto& n : r.notes)
+      o << "<div class=\"note\">" << html_escape(n) << "</div>\n";
   }
   // Diagnostics of the separation (L-curve, residuals): for the metrologist, after the results.
   if (any(true)) {

@@ -77,6 +77,16 @@ struct GridData {
   std::string m_column;
 };
 
+// Files of a result set that are not a displacement grid or profile: not read in the search for
+// one (the refine step table has nan cells, which only its own reader accepts).
+bool is_other_result_file(const std::string& stem) {
+  for (const char* known :
+       {"motion", "reference", "lcurve", "residuals", "evaluation", "refine_steps",
+        "refine_residual", "reference_comparison", "verification", "trend"})
+    if (stem == known) return true;
+  return false;
+}
+
 std::optional<GridData> find_grid(const fs::path& dir, const fs::path& given) {
   std::vector<fs::path> candidates;
   if (!given.empty()) {
@@ -88,9 +98,7 @@ std::optional<GridData> find_grid(const fs::path& dir, const fs::path& given) {
   }
   for (const auto& p : candidates) {
     const std::string stem = p.stem().string();
-    if (stem == "motion" || stem == "reference" || stem == "lcurve" || stem == "residuals" ||
-        stem == "refine" || stem == "evaluation")
-      continue;
+    if (is_other_result_file(stem)) continue;
     CsvTable t = read_csv(p);
     if (!t.find_column("x_mm") || !t.find_column("y_mm") || !t.find_column("w_um")) {
       if (!given.empty()) throw CsvError(p, 1, "grid CSV needs columns x_mm, y_mm, w_um");
@@ -136,9 +144,7 @@ std::optional<ProfileData> find_one_axis(const fs::path& dir) {
   std::sort(candidates.begin(), candidates.end());
   for (const auto& p : candidates) {
     const std::string stem = p.stem().string();
-    if (stem == "motion" || stem == "reference" || stem == "lcurve" || stem == "residuals" ||
-        stem == "refine" || stem == "evaluation")
-      continue;
+    if (is_other_result_file(stem)) continue;
     CsvTable t = read_csv(p);
     if (!t.find_column("x_mm") || t.find_column("y_mm") || !t.find_column("m_um") ||
         !t.find_column("w_um"))
@@ -471,8 +477,24 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
       p.series.push_back(line_series("minimum zone (" + sig(mz.straightness_um, 3) + " um)",
                                      mz.line, mz.straightness_um / 2));
       p.series.push_back(line_series("", mz.line, -mz.straightness_um / 2));
+      // A band of U = 0.06 um is a line's width on a 40 um plot: say its size in the key, and
+      // draw U(x) itself in the next figure.
+      if (!md.u_s.empty())
+        p.series[0].title =
+            "S(x) (max U = " + sig(k * *std::max_element(md.u_s.begin(), md.u_s.end()), 2) + " um)";
       plot_line(p, es + ": S(x) with its expanded uncertainty band (k = " + sig(k) +
                        "), the least-squares reference line and the minimum-zone band");
+    }
+    if (!md.u_s.empty() && !all_zero(md.u_s)) {
+      LinePlot p;
+      p.name = "uncertainty";
+      p.title = "Expanded uncertainty U(x) = k u(x) of the profiles (k = " + sig(k) + ")";
+      p.xlabel = "x / mm";
+      p.ylabel = "U / \xC2\xB5m";
+      p.series.push_back({"U of S(x)", md.x, scaled(md.u_s, k), {}});
+      if (!uf.empty()) p.series.push_back({"U of f(x)", fx, scaled(uf, k), {}});
+      plot_line(p, "Expanded uncertainty of S(x) and f(x) at each point (k = " + sig(k) +
+                       "; the bands of the profile figures, drawn on their own scale)");
     }
     if (!md.gamma_urad.empty()) {
       LinePlot p;
