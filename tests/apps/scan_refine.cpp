@@ -244,6 +244,16 @@ TEST_CASE(
   CHECK(t.find(fmt4(before) + " \xE2\x86\x92 " + fmt4(after)) != std::string::npos);
   CHECK(t.find("g3 = ") != std::string::npos);  // the fitted gain of configuration 3, with its u
   CHECK(t.find("nan") == std::string::npos);
+
+  // errsep-report reads the refine result on its own too (OUT/refine, as errsep-refine writes
+  // it): the refined S evaluated, the same step table.
+  std::string rep;
+  REQUIRE(run_command(app_path("report").string() + " " + (out / "refine").string(), &rep) == 0);
+  INFO(rep);
+  const std::string rhtml = read_text(out / "refine" / "report.html");
+  CHECK(rhtml.find("<table id=\"refine\">") != std::string::npos);
+  CHECK(rhtml.find("<td>gain</td>") != std::string::npos);
+  CHECK(rhtml.find("<table id=\"evaluation\">") != std::string::npos);
 }
 
 TEST_CASE("scan --no-report makes no report") {
