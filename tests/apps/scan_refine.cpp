@@ -368,3 +368,29 @@ TEST_CASE("a report that fails keeps the scan's results and exits non-zero with 
   // The set is whole: errsep-report reads it (and, with a step that divides, would report it).
   CHECK(output.find("results: " + out.string()) != std::string::npos);
 }
+
+TEST_CASE(
+    "the separation table of the machine config is honoured by errsep-scan and errsep-refine, "
+    "--gauge over it") {
+  TempDir dir;
+  const auto cfg = write_test_config(dir);
+  std::string t = read_text(cfg);
+  const std::string from = "gauge = \"reference\"";
+  REQUIRE(t.find(from) != std::string::npos);
+  t.replace(t.find(from), from.size(), "gauge = \"sensor_stage\"");
+  std::ofstream(cfg) << t;
+  auto gauge_of = [](const std::filesystem::path& result) {
+    return io::read_csv(result / "reference.csv").meta("gauge").value_or("?");
+  };
+  std::string output;
+  REQUIRE(run_command(scan_cmd(cfg, dir / "a") + " --no-report", &output) == 0);
+  CHECK(gauge_of(dir / "a") == "sensor_stage");
+  REQUIRE(run_command(scan_cmd(cfg, dir / "b") + " --no-report --gauge reference", &output) == 0);
+  CHECK(gauge_of(dir / "b") == "reference");
+  // errsep-refine --config: the same table.
+  REQUIRE(run_command(app_path("refine").string() + " " + (dir / "a" / "raw.csv").string() +
+                          " --config " + cfg.string() + " --out " + (dir / "r").string(),
+                      &output) == 0);
+  INFO(output);
+  CHECK(gauge_of(dir / "r") == "sensor_stage");
+}
