@@ -16,6 +16,26 @@ std::string lambda_summary(const core::FourSensorResult& sep) {
   return out + ")";
 }
 
+const std::vector<std::string>& refine_csv_columns() {
+  static const std::vector<std::string> columns = {"step",
+                                                   "parameter_index",
+                                                   "value",
+                                                   "u_value",
+                                                   "F",
+                                                   "p_value",
+                                                   "rms_before_um",
+                                                   "rms_after_um",
+                                                   "whiteness_p",
+                                                   "S_err_before_um",
+                                                   "S_err_after_um",
+                                                   "gamma_err_before_urad",
+                                                   "gamma_err_after_urad",
+                                                   "f_err_before_um",
+                                                   "f_err_after_um",
+                                                   "applied"};
+  return columns;
+}
+
 CsvTable refine_csv(const core::RefineResult& r) {
   CsvTable t;
   t.set_meta("format", "errsep refine steps");
@@ -37,22 +57,7 @@ CsvTable refine_csv(const core::RefineResult& r) {
   // corner that the corrected readings no longer have), so both λ go with them.
   t.set_meta("lambda_before", lambda_summary(r.before));
   t.set_meta("lambda_after", lambda_summary(r.after));
-  t.columns = {"step",
-               "parameter_index",
-               "value",
-               "u_value",
-               "F",
-               "p_value",
-               "rms_before_um",
-               "rms_after_um",
-               "whiteness_p",
-               "S_err_before_um",
-               "S_err_after_um",
-               "gamma_err_before_urad",
-               "gamma_err_after_urad",
-               "f_err_before_um",
-               "f_err_after_um",
-               "applied"};
+  t.columns = refine_csv_columns();
   const double nan = std::numeric_limits<double>::quiet_NaN();
   for (const auto& s : r.steps) {
     t.set_meta("step" + std::to_string(s.index) + "_effect", s.effect);

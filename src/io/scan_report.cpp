@@ -778,10 +778,26 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     }
   }
 
-  if (!res.four_sensor && !res.grid)
-    throw std::runtime_error(dir.string() +
-                             ": no motion.csv, no grid CSV (x_mm, y_mm, w_um) and no one-axis "
-                             "profile (x_mm, m_um, w_um) found");
+  if (!res.four_sensor && !res.grid) {
+    // Say what was looked for, and what to do with what is there.
+    std::string hint;
+    if (fs::exists(dir / "raw.csv"))
+      hint +=
+          "; it holds a raw four-sensor scan (raw.csv) but no separation: run errsep-separate " +
+          (dir / "raw.csv").string() + " --out DIR (or errsep-scan without --no-separate)";
+    if (fs::exists(dir / "raw_displacement.csv"))
+      hint +=
+          "; it holds a raw displacement scan (raw_displacement.csv): errsep-scan does not "
+          "write its profiles; run errsep-separate-displacement on it, then errsep-report on "
+          "its output";
+    throw std::runtime_error(
+        dir.string() +
+        ": no result errsep-report can read: no motion.csv (four-sensor result of errsep-scan, "
+        "errsep-separate, errsep-refine, errsep-simulate), no grid CSV (x_mm, y_mm, w_um: "
+        "two-axis displacement result) and no one-axis profile (x_mm, m_um, w_um: displacement "
+        "result)" +
+        hint);
+  }
 
   // ---- tables, text, html --------------------------------------------------------------------
   HtmlTable ev;

@@ -191,9 +191,23 @@ TEST_CASE("errsep-report fails with a message and writes nothing for an empty di
   std::string out;
   const int rc = run_command(quote(app_path("report")) + " " + quote(tmp / "empty"), &out);
   CHECK(rc != 0);
-  CHECK_THAT(out, Catch::Contains("no motion.csv, no grid CSV"));
+  CHECK_THAT(out, Catch::Contains("no result errsep-report can read: no motion.csv"));
+  CHECK_THAT(out, Catch::Contains("no grid CSV (x_mm, y_mm, w_um"));
   CHECK_FALSE(fs::exists(tmp / "empty" / "report.html"));
   CHECK_FALSE(fs::exists(tmp / "empty" / "evaluation.csv"));
+  // A folder with raw data only (errsep-scan --no-separate): what to run on it.
+  {
+    errsep::io::CsvTable raw;
+    raw.set_meta("dx_mm", "5");
+    raw.add_column("x_mm", {0, 5, 10});
+    for (const char* c : {"m1_um", "m2_um", "m3_um", "m4_um"})
+      raw.add_column(c, {0.1, 0.2, 0.3});
+    fs::create_directories(tmp / "rawonly");
+    errsep::io::write_csv(tmp / "rawonly" / "raw.csv", raw);
+    CHECK(run_command(quote(app_path("report")) + " " + quote(tmp / "rawonly"), &out) != 0);
+    CHECK_THAT(out, Catch::Contains("holds a raw four-sensor scan (raw.csv) but no separation: run "
+                                    "errsep-separate"));
+  }
   // A malformed motion.csv names the file and line.
   std::ofstream(tmp / "empty" / "motion.csv") << "x_mm,S_um\n0,1\n5,abc\n";
   const int rc2 = run_command(quote(app_path("report")) + " " + quote(tmp / "empty"), &out);

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "errsep/io/csv.hpp"
+#include "errsep/io/refine_report.hpp"
 
 namespace errsep::test {
 
@@ -127,22 +128,7 @@ inline void write_four_sensor_result(const std::filesystem::path& dir, ResultDir
     t.set_meta("step1_verdict", "applied: the gain changes S by 0.4 um");
     for (int j = 0; j < 3; ++j)
       t.set_meta("step1_parameter" + std::to_string(j), "g" + std::to_string(j + 2));
-    t.columns = {"step",
-                 "parameter_index",
-                 "value",
-                 "u_value",
-                 "F",
-                 "p_value",
-                 "rms_before_um",
-                 "rms_after_um",
-                 "whiteness_p",
-                 "S_err_before_um",
-                 "S_err_after_um",
-                 "gamma_err_before_urad",
-                 "gamma_err_after_urad",
-                 "f_err_before_um",
-                 "f_err_after_um",
-                 "applied"};
+    t.columns = io::refine_csv_columns();
     t.rows.push_back(
         {0, nan, nan, nan, nan, nan, nan, 0.31, 0.001, nan, nan, nan, nan, nan, nan, nan});
     for (int j = 0; j < 3; ++j)

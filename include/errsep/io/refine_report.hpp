@@ -2,6 +2,7 @@
 // The refinement loop's step table (core/refine.hpp) as CSV (one row per parameter of each step,
 // step-level figures repeated; effect names and the model in metadata) and as readable text.
 #include <string>
+#include <vector>
 
 #include "errsep/core/refine.hpp"
 #include "errsep/io/csv.hpp"
@@ -15,6 +16,8 @@ namespace errsep::io {
 /// "step<k>_effect" and "step<k>_parameter<j>" names, "lambda_before" / "lambda_after" (the λ of
 /// the separations of the raw and the corrected readings, see lambda_summary).
 CsvTable refine_csv(const core::RefineResult& r);
+/// The columns of refine_csv, in order.
+const std::vector<std::string>& refine_csv_columns();
 
 /// "λ (rule)" or "λ (rule, fallback)" of a separation, e.g. "0.3481 (lcurve)" or
 /// "9.033e-07 (lcurve, no_regularisation)".
