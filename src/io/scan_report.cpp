@@ -308,6 +308,13 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
   eval_csv.set_meta("errsep evaluation", std::string("v") + kVersion);
   eval_csv.set_meta("coverage_factor", sig(k));
   eval_csv.set_meta("correlation", core::to_string(opts.evaluation.correlation));
+  // Every CSV of a set names the run that wrote it (the set's manifest lists this run as one that
+  // extended the set).
+  eval_csv.set_meta("run_id", stage.run_id());
+  const auto with_run_id = [&](CsvTable t) {
+    t.set_meta("run_id", stage.run_id());
+    return t;
+  };
   auto add_eval = [&](const Row& r) {
     rows.push_back(r);
     eval_csv.add_column(r.csv_name + "_" + r.unit, {r.value});
@@ -615,7 +622,12 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
       res.compensation_summary = ex.summary();
       for (const auto& t : ex.tables) {
         for (const auto& file : t.files) {
-          outputs.emplace_back(comp_dir / file.name, file.content);
+          // The table's own CSV (format csv) gets the run id too; the controllers' formats are
+          // written as their controllers read them.
+          outputs.emplace_back(comp_dir / file.name,
+                               fs::path(file.name).extension() == ".csv"
+                                   ? format_csv(with_run_id(parse_csv(file.content, file.name)), 12)
+                                   : file.content);
           html.files.emplace_back("compensation/" + file.name,
                                   compensation_writer(t.format).description() + "; " +
                                       std::to_string(t.read_back.table.points()) +
@@ -623,7 +635,8 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
                                       sig(t.accuracy.max_um, 3) + " um");
         }
       }
-      outputs.emplace_back(comp_dir / "accuracy.csv", format_csv(ex.accuracy_csv(), 10));
+      outputs.emplace_back(comp_dir / "accuracy.csv",
+                           format_csv(with_run_id(ex.accuracy_csv()), 10));
       html.files.emplace_back("compensation/accuracy.csv",
                               "each table's interpolation error against the measurement, with U");
       html.notes.push_back(
@@ -918,7 +931,7 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
   if (!opts.trend_results_dir.empty()) {
     const StraightnessTrend trend = straightness_trend(opts.trend_results_dir);
     res.text += "\n" + format_trend(trend);
-    outputs.emplace_back(out / "trend.csv", format_csv(trend_table(trend), 10));
+    outputs.emplace_back(out / "trend.csv", format_csv(with_run_id(trend_table(trend)), 10));
     html.files.push_back({"trend.csv", "straightness over the machine's past scans"});
     if (trend.any_significant())
       res.warnings.push_back("straightness changed beyond the combined U (see trend.csv)");

@@ -198,7 +198,6 @@ TEST_CASE("errsep-report fails with a message and writes nothing for an empty di
   // A folder with raw data only (errsep-scan --no-separate): what to run on it.
   {
     errsep::io::CsvTable raw;
-    raw.set_meta("dx_mm", "5");
     raw.add_column("x_mm", {0, 5, 10});
     for (const char* c : {"m1_um", "m2_um", "m3_um", "m4_um"})
       raw.add_column(c, {0.1, 0.2, 0.3});
