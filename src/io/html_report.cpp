@@ -160,7 +160,7 @@ std::string render_html_report(const HtmlReport& r) {
       t.rows.push_back({k, v});
     table(t, false);
   };
-  pairs("Measurement", "measurement", {"", ""}, r.measurement);
+  pairs("Measurement", "measurement", {"item", "value"}, r.measurement);
   if (!r.verdict.empty()) {
     const char* cls = r.verdict.rfind("PASS", 0) == 0   ? "pass"
                       : r.verdict.rfind("FAIL", 0) == 0 ? "fail"
