@@ -146,7 +146,7 @@ int main(int argc, char** argv) {
         if (b.kind == errsep::io::BusKind::tcp && b.port == 0)
           throw std::runtime_error(config_path + ": bus '" + b.name +
                                    "' has port 0: give --device-port (the simulator's port)");
-      *pipeline = errsep::service::pipeline_options(cfg, "reference");  // errsep-scan's gauge
+      *pipeline = errsep::service::pipeline_options(cfg, "");  // [separation], as errsep-scan
       return std::make_unique<errsep::drivers::DeviceScanBackend>(std::move(cfg));
     };
     // A bad config is an error at start (exit non-zero, message names file:line); later, on

@@ -9,6 +9,7 @@
 #include <CLI/CLI.hpp>
 #include <iostream>
 
+#include "errsep/io/machine_config.hpp"
 #include "errsep/io/refine_run.hpp"
 #include "errsep/io/staged_directory.hpp"
 #include "errsep/version.hpp"
@@ -24,7 +25,7 @@ int main(int argc, char** argv) {
       "--reference: an independent trace x_mm,S_um[,gamma_urad] or x_mm,f_um (interferometer, "
       "CMM) on its own grid."};
   app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
-  std::string input, out_dir = "out/refine", truth, reference, gauge = "reference";
+  std::string input, out_dir = "out/refine", truth, reference, gauge, config;
   errsep::io::GeometryOverrides geo;
   errsep::io::RefineRunOptions opts;
   app.add_option("raw_csv", input, "raw four-sensor scan CSV")->required();
@@ -37,10 +38,13 @@ int main(int argc, char** argv) {
   app.add_option("--s3", geo.s3, "spacing s3 in samples (default: from metadata)");
   app.add_option("--s4", geo.s4, "spacing s4 in samples (default: from metadata)");
   app.add_option("--gauge", gauge,
-                 "curvature gauge of the separations, as errsep-separate: sensor_stage, reference, "
-                 "paper_eq12")
-      ->check(CLI::IsMember({"sensor_stage", "reference", "paper_eq12"}))
-      ->capture_default_str();
+                 "curvature gauge of the separations, as errsep-separate (default: [separation] "
+                 "gauge of --config, else reference)")
+      ->check(CLI::IsMember(errsep::core::curvature_gauge_names()));
+  app.add_option("-c,--config", config,
+                 "machine config: its [separation] (gauge, lambda rule and range, threads) and "
+                 "[refine] alpha set the defaults; options given here override them")
+      ->check(CLI::ExistingFile);
   app.add_option("--alpha", opts.refine.alpha, "significance of one step (family-wise)")
       ->capture_default_str();
   app.add_option("--whiteness-alpha", opts.refine.residual.alpha,
@@ -57,11 +61,15 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   try {
-    using errsep::core::curvature_gauge_from_string;
-    using errsep::core::options_for_gauge;
-    const auto g = curvature_gauge_from_string(gauge);
-    if (!g) throw std::invalid_argument("--gauge: unknown gauge '" + gauge + "'");
-    opts.refine.solve = options_for_gauge(*g);
+    // [separation] and [refine] of the machine config, the command line over them.
+    errsep::io::SeparationConfig separation;
+    if (!config.empty()) {
+      const auto cfg = errsep::io::load_machine_config(config);
+      separation = cfg.separation;
+      if (!app.count("--alpha")) opts.refine.alpha = cfg.refine.alpha;
+    }
+    if (!gauge.empty()) separation.gauge = *errsep::core::curvature_gauge_from_string(gauge);
+    opts.refine.solve = separation.options();
     if (!truth.empty()) opts.truth_csv = truth;
     if (!reference.empty()) opts.reference_csv = reference;
     const auto run = errsep::io::run_refine(input, out_dir, opts, geo);

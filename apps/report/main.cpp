@@ -1,7 +1,9 @@
 // errsep-report: turns a result directory (errsep-separate / errsep-simulate / errsep-scan --out,
-// or a displacement-method grid CSV) into the ISO 230-1 evaluation (evaluation.csv,
-// evaluation.txt), figures (plots/), a self-contained report.html and CNC compensation tables in
-// machine coordinates (compensation/, with each table's interpolation error in accuracy.csv).
+// errsep-refine --out or OUT/refine, a displacement-method result or grid CSV) into the ISO 230-1
+// evaluation (evaluation.csv, evaluation.txt), figures (plots/), a self-contained report.html
+// (with the refine steps when the set holds them; --pdf: report.pdf too) and CNC compensation
+// tables in machine coordinates (compensation/, with each table's interpolation error in
+// accuracy.csv).  errsep-scan makes the same report in OUT/report/ after every scan.
 #include <CLI/CLI.hpp>
 #include <exception>
 #include <iostream>
@@ -9,7 +11,7 @@
 #include "errsep/io/cnc/compensation_format.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/scan_report.hpp"
-#include "errsep/io/staged_directory.hpp"
+#include "errsep/service/scan_report_job.hpp"
 #include "errsep/version.hpp"
 
 int main(int argc, char** argv) {
@@ -24,7 +26,7 @@ int main(int argc, char** argv) {
   std::string grid;
   std::vector<std::string> formats, table_params;
   double table_step = 0;
-  bool no_plots = false, no_tables = false;
+  bool no_plots = false, no_tables = false, pdf = false;
   app.add_option("dir", dir, "result directory (motion.csv, reference.csv, lcurve.csv, ...)")
       ->required()
       ->check(CLI::ExistingDirectory);
@@ -75,15 +77,26 @@ int main(int argc, char** argv) {
   app.add_flag("--no-plots", no_plots, "do not run gnuplot (the report then has no figures)");
   app.add_flag("--no-tables", no_tables, "do not write compensation tables");
   app.add_option("--gnuplot", o.plot.gnuplot, "gnuplot program");
+  app.add_flag("--pdf", pdf,
+               "also print the report to report.pdf with headless Chromium (skipped, with the "
+               "reason, when Chromium is absent)");
+  app.add_option("--chromium", o.pdf_print.chromium, "Chromium program for --pdf")
+      ->capture_default_str();
+  app.add_option("--subdir", o.output_subdir,
+                 "write the outputs into DIR/SUBDIR (errsep-scan writes OUT/report/) instead of "
+                 "DIR itself");
   CLI11_PARSE(app, argc, argv);
 
   try {
     if (!config.empty()) {
-      const io::MachineConfig cfg = io::load_machine_config(config);
-      o.axes = cfg.axes;
-      o.compensation = cfg.compensation.profile;
-      o.tables_export = cfg.compensation.tables;
+      const io::ScanReportOptions from_config =
+          service::report_options_from_config(io::load_machine_config(config));
+      o.axes = from_config.axes;
+      o.compensation = from_config.compensation;
+      o.tables_export = from_config.tables_export;
+      o.particulars = from_config.particulars;
     }
+    o.pdf = pdf;
     if (!axis.empty()) o.axis = axis[0];
     if (!direction.empty()) o.direction = direction[0];
     o.local_reference = *core::parse_reference_line(local_ref);
@@ -122,14 +135,7 @@ int main(int argc, char** argv) {
     o.grid_csv = grid;
 
     const auto r = io::write_scan_report(dir, o);
-    if (const std::string swept = io::describe_swept(r.swept); !swept.empty())
-      std::cout << swept << "\n";
-    std::cout << r.text;
-    for (const auto& w : r.warnings)
-      std::cerr << "warning: " << w << "\n";
-    if (!r.compensation_summary.empty())
-      std::cout << "compensation tables (" << dir << "/compensation/):\n" << r.compensation_summary;
-    std::cout << "wrote " << r.written.size() << " files, report: " << dir << "/report.html\n";
+    service::print_report_outcome(r, dir, std::cout, std::cerr);
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "errsep-report: " << e.what() << "\n";

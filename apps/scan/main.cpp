@@ -13,8 +13,13 @@
 // leaves the earlier set (or none), and the simulator started for the embedded default dies with
 // the scan.  Ctrl-C / SIGTERM: the stages are stopped, the raw data measured so far is written
 // marked "complete: false" (the set then holds only it), nothing is separated, exit status 130.
+// Then the report (unless --no-report), as errsep-report makes it, into OUT/report/: the ISO 230-1
+// evaluation, figures, report.html, report.pdf (headless Chromium; skipped with the reason when
+// it is absent) and the compensation tables; it is made after the results are in place, so a
+// report that fails loses none of them.
 // Exit status: 0 complete, 1 usage/config/device set-up error or a separation that failed (the
-// set then holds the raw data alone), 3 scan failed (device fault), 130 aborted.
+// set then holds the raw data alone), 3 scan failed (device fault), 4 the report failed (the
+// scan's results are kept), 130 aborted.
 #include <unistd.h>
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -44,6 +49,7 @@
 #include "errsep/io/verification_report.hpp"
 #include "errsep/service/four_sensor_pipeline.hpp"
 #include "errsep/service/plant_publisher.hpp"
+#include "errsep/service/scan_report_job.hpp"
 #include "errsep/version.hpp"
 
 namespace {
@@ -148,12 +154,12 @@ int main(int argc, char** argv) {
       "separate it."};
   app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
   std::string config_path, out_dir, method, devsim;
-  std::string gauge = "reference";
+  std::string gauge;
   int averages = 0, settle_ms = -1;
   bool no_separate = false, refine = false;
   std::string refine_reference, verify_table, before_dir;
   double mqtt_wait_s = 10;
-  bool no_mqtt = false;
+  bool no_mqtt = false, no_report = false, no_pdf = false;
   app.add_option("-c,--config", config_path,
                  "machine config (TOML); default: config/simulator.toml of this errsep (its "
                  "source tree, or share/errsep/config/ when installed), from any directory");
@@ -178,17 +184,23 @@ int main(int argc, char** argv) {
       ->excludes(no_sep)
       ->check(CLI::ExistingFile);
   app.add_option("--gauge", gauge,
-                 "curvature gauge of the separation, as errsep-separate: reference (the reference "
-                 "surface has no bow; exact, the default), sensor_stage (the sensor stage's "
-                 "zero-adjustment values have no quadratic part), paper_eq12")
-      ->check(CLI::IsMember({"sensor_stage", "reference", "paper_eq12"}))
-      ->capture_default_str();
+                 "curvature gauge of the separation, as errsep-separate (default: [separation] "
+                 "gauge, else reference): reference (the reference surface has no bow; exact), "
+                 "sensor_stage (the sensor stage's zero-adjustment values have no quadratic "
+                 "part), paper_eq12")
+      ->check(CLI::IsMember(core::curvature_gauge_names()));
   app.add_option("--mqtt-wait-s", mqtt_wait_s,
                  "[mqtt] in the config: wait this long for the broker to take the scan's summary "
                  "(what is not delivered stays queued on disk for the next run)")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 3600.0));
   app.add_flag("--no-mqtt", no_mqtt, "do not publish, even with [mqtt] in the config");
+  auto* no_rep =
+      app.add_flag("--no-report", no_report,
+                   "do not make the report (OUT/report/: evaluation, figures, HTML, PDF, "
+                   "compensation tables; errsep-report OUT --subdir report makes it later)");
+  app.add_flag("--no-pdf", no_pdf, "make the HTML report but no PDF (default: [report] pdf, true)")
+      ->excludes(no_rep);
   app.add_option("--verify-with", verify_table,
                  "measure - compensate - verify: the compensation table now loaded in the "
                  "controller (any errsep format; the embedded simulator applies it itself); the "
@@ -214,6 +226,8 @@ int main(int argc, char** argv) {
     io::MachineConfig cfg = io::load_machine_config(config_path);
     if (averages > 0) cfg.scan.averages = averages;
     if (settle_ms >= 0) cfg.scan.settle_ms = settle_ms;
+    // [separation] of the config, the command line over it.
+    if (!gauge.empty()) cfg.separation.gauge = *core::curvature_gauge_from_string(gauge);
     io::ScanMethod m = cfg.scan.method;
     if (method == "four_sensor") m = io::ScanMethod::four_sensor;
     if (method == "displacement") m = io::ScanMethod::displacement;
@@ -376,6 +390,25 @@ int main(int argc, char** argv) {
     stage.commit();  // the whole set, in one rename
     for (const auto& line : written)
       std::cout << line << "\n";
+    // The report, from the result set now in place: a report that fails loses no result.
+    if (summary && !no_report) {
+      io::ScanReportOptions ro = service::report_options_from_config(cfg);
+      ro.output_subdir = "report";
+      ro.pdf = ro.pdf && !no_pdf;
+      std::cout << "report: evaluating " << out.string() << " into " << (out / "report").string()
+                << "/ (figures, HTML" << (ro.pdf ? ", PDF" : "") << ", compensation tables)\n";
+      try {
+        service::print_report_outcome(io::write_scan_report(out, ro), out, std::cout, std::cerr);
+      } catch (const std::exception& e) {
+        std::cerr << "errsep-scan: the report failed: " << e.what() << "; the scan's results are "
+                  << "kept in " << out.string() << " (errsep-report " << out.string()
+                  << " --subdir report makes the report again)\n";
+        exit_code = 4;
+      }
+    } else if (!no_report && exit_code == 0 && !no_separate) {
+      std::cout << "report: none (the displacement scan's profiles are written by "
+                   "errsep-separate-displacement; errsep-report reads them)\n";
+    }
     // Store and forward: the result is on disk first, then its summary goes to the queue.
     if (summary && cfg.mqtt && !no_mqtt) publish_summary(*cfg.mqtt, *summary, out, mqtt_wait_s);
   } catch (const std::exception& e) {

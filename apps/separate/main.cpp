@@ -8,6 +8,7 @@
 
 #include "errsep/core/four_sensor.hpp"
 #include "errsep/io/csv.hpp"
+#include "errsep/io/machine_config.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/staged_directory.hpp"
 #include "errsep/service/four_sensor_pipeline.hpp"
@@ -41,6 +42,12 @@ int main(int argc, char** argv) {
                  "prior on the reference profile f: second_difference (smooth f; default), "
                  "identity (the paper's Eq. 17), none (unregularised, exact covariance)")
       ->capture_default_str();
+  std::string config;
+  app.add_option("-c,--config", config,
+                 "machine config: its [separation] table (gauge, lambda_rule, lambda_min, "
+                 "lambda_max, fixed_lambda, threads) sets the defaults; options given here "
+                 "override it")
+      ->check(CLI::ExistingFile);
   app.add_option("--rule", rule, "lambda rule: reml, gcv, lcurve, discrepancy, fixed, ls")
       ->capture_default_str();
   app.add_option("--lambda", lambda, "lambda for --rule fixed");
@@ -48,6 +55,7 @@ int main(int argc, char** argv) {
          "--gauge", gauge,
          "curvature gauge: reference (f has no bow, exact; default), sensor_stage (the stage's "
          "zero-adjustment values have no quadratic part, weak row), paper_eq12")
+      ->check(CLI::IsMember(errsep::core::curvature_gauge_names()))
       ->capture_default_str();
   app.add_option("--lcurve-points", opts.lcurve.count, "lambda values on the L-curve grid")
       ->capture_default_str();
@@ -58,6 +66,16 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   try {
+    if (!config.empty()) {
+      // [separation] of the machine config, the command line over it.
+      const auto sc = errsep::io::load_machine_config(config).separation;
+      if (!app.count("--gauge")) gauge = errsep::core::to_string(sc.gauge);
+      if (!app.count("--rule") && sc.lambda_rule) rule = errsep::core::to_string(*sc.lambda_rule);
+      if (!app.count("--lambda")) lambda = sc.fixed_lambda;
+      if (!app.count("--threads")) opts.lcurve.threads = sc.threads;
+      opts.lcurve.lambda_min = sc.lambda_min;
+      opts.lcurve.lambda_max = sc.lambda_max;
+    }
     const auto r = errsep::core::lambda_rule_from_string(rule);
     if (!r) throw std::invalid_argument("--rule: unknown rule '" + rule + "'");
     const auto g = errsep::core::curvature_gauge_from_string(gauge);

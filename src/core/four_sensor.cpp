@@ -29,12 +29,24 @@ const char* to_string(LambdaRule r) {
   return "unknown";
 }
 
+namespace {
+constexpr LambdaRule kRules[] = {LambdaRule::reml,   LambdaRule::gcv,
+                                 LambdaRule::lcurve, LambdaRule::discrepancy,
+                                 LambdaRule::fixed,  LambdaRule::least_squares};
+}
+
 std::optional<LambdaRule> lambda_rule_from_string(std::string_view s) {
   if (s == "ls") return LambdaRule::least_squares;
-  for (auto r : {LambdaRule::reml, LambdaRule::gcv, LambdaRule::lcurve, LambdaRule::discrepancy,
-                 LambdaRule::fixed, LambdaRule::least_squares})
+  for (auto r : kRules)
     if (s == to_string(r)) return r;
   return std::nullopt;
+}
+
+std::vector<std::string> lambda_rule_names() {
+  std::vector<std::string> out;
+  for (auto r : kRules)
+    out.emplace_back(to_string(r));
+  return out;
 }
 
 const char* to_string(Estimator e) {

@@ -20,12 +20,23 @@ const char* to_string(CurvatureGauge g) {
   return "unknown";
 }
 
+namespace {
+constexpr CurvatureGauge kGauges[] = {CurvatureGauge::reference_without_curvature,
+                                      CurvatureGauge::sensor_stage_without_curvature,
+                                      CurvatureGauge::paper_eq12_literal};
+}
+
 std::optional<CurvatureGauge> curvature_gauge_from_string(std::string_view s) {
-  for (auto g :
-       {CurvatureGauge::reference_without_curvature, CurvatureGauge::sensor_stage_without_curvature,
-        CurvatureGauge::paper_eq12_literal})
+  for (auto g : kGauges)
     if (s == to_string(g)) return g;
   return std::nullopt;
+}
+
+std::vector<std::string> curvature_gauge_names() {
+  std::vector<std::string> out;
+  for (auto g : kGauges)
+    out.emplace_back(to_string(g));
+  return out;
 }
 
 Eigen::Matrix4d combination_matrix(const FourSensorConfig& cfg) {

@@ -273,13 +273,14 @@ struct ModbusDeviceSimulator::Impl {
         std::size_t nearest = 0;
         for (std::size_t i = 1; i < 4; ++i)
           if (std::abs(o - offsets_mm[i]) < std::abs(o - offsets_mm[nearest])) nearest = i;
-        v = core::four_sensor_reading_um(truth, x, o) + truth.e_um[nearest] + compensation_um(p);
+        v = cfg.simulator.gain[nearest] *
+            (core::four_sensor_reading_um(truth, x, o) + truth.e_um[nearest] + compensation_um(p));
         break;
       }
       case SensorRole::fixed: {
         const auto i = static_cast<std::size_t>(s.config_index);
-        v = core::four_sensor_reading_um(truth, x, offsets_mm[i]) + truth.e_um[i] +
-            compensation_um(p);
+        v = cfg.simulator.gain[i] * (core::four_sensor_reading_um(truth, x, offsets_mm[i]) +
+                                     truth.e_um[i] + compensation_um(p));
         break;
       }
       case SensorRole::workpiece:  // Haramiishi 2024 Eq. (1): S1 = w(x) + m(x)

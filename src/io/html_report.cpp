@@ -38,6 +38,16 @@ figcaption { font-size: 0.9em; color: #444; }
 .meta { color: #555; font-size: 0.9em; }
 .note { background: #fff8e1; border-left: 4px solid #f0b400; padding: 4px 8px; margin: 4px 0; }
 code { background: #f4f4f4; padding: 0 3px; }
+.verdict { font-size: 1.15em; font-weight: bold; padding: 6px 10px; margin: 8px 0; border: 2px solid; }
+.verdict.pass { color: #1b5e20; border-color: #2e7d32; background: #e8f5e9; }
+.verdict.fail { color: #b71c1c; border-color: #c62828; background: #ffebee; }
+.verdict.open { color: #6d4c00; border-color: #f0b400; background: #fff8e1; }
+@media print {
+  body { margin: 0; max-width: none; font-size: 10pt; }
+  h2 { break-after: avoid; }
+  figure, table { break-inside: avoid; }
+  .appendix { break-before: page; }
+}
 )";
 
 // Right-align cells that start with a number ("12.3", "-0.5 ± 0.1"), not "-" or text.
@@ -118,13 +128,8 @@ std::string render_html_report(const HtmlReport& r) {
   if (!r.generated_by.empty()) o << " &middot; " << html_escape(r.generated_by);
   o << "</p>\n";
 
-  if (!r.notes.empty()) {
-    o << "<h2>Notes</h2>\n";
-    for (const auto& n : r.notes)
-      o << "<div class=\"note\">" << html_escape(n) << "</div>\n";
-  }
-
-  auto table = [&](const HtmlTable& t) {
+  // numbers_right: right-align cells that read as numbers (result tables, not key-value lists).
+  auto table = [&](const HtmlTable& t, bool numbers_right = true) {
     o << "<table";
     if (!t.id.empty()) o << " id=\"" << html_escape(t.id) << "\"";
     o << ">\n";
@@ -136,11 +141,33 @@ std::string render_html_report(const HtmlReport& r) {
     for (const auto& row : t.rows) {
       o << "<tr>";
       for (const auto& c : row)
-        o << (numeric_like(c) ? "<td class=\"num\">" : "<td>") << html_escape(c) << "</td>";
+        o << (numbers_right && numeric_like(c) ? "<td class=\"num\">" : "<td>") << html_escape(c)
+          << "</td>";
       o << "</tr>\n";
     }
     o << "</tbody>\n</table>\n";
   };
+
+  // A section of key-value rows (the measurement's particulars, the configuration).
+  auto pairs = [&](const char* heading, const char* id, std::vector<std::string> header,
+                   const std::vector<std::pair<std::string, std::string>>& kv) {
+    if (kv.empty()) return;
+    o << "<h2>" << heading << "</h2>\n";
+    HtmlTable t;
+    t.id = id;
+    t.header = std::move(header);
+    for (const auto& [k, v] : kv)
+      t.rows.push_back({k, v});
+    table(t, false);
+  };
+  pairs("Measurement", "measurement", {"item", "value"}, r.measurement);
+  if (!r.verdict.empty()) {
+    const char* cls = r.verdict.rfind("PASS", 0) == 0   ? "pass"
+                      : r.verdict.rfind("FAIL", 0) == 0 ? "fail"
+                                                        : "open";
+    o << "<div id=\"verdict\" class=\"verdict " << cls << "\">" << html_escape(r.verdict)
+      << "</div>\n";
+  }
 
   for (std::size_t i = 0; i < r.tables.size(); ++i) {
     if (i == 0) o << "<h2>Evaluation</h2>\n";
@@ -148,9 +175,9 @@ std::string render_html_report(const HtmlReport& r) {
     table(r.tables[i]);
   }
 
-  if (!r.figures.empty()) {
-    o << "<h2>Figures</h2>\n";
+  auto figures = [&](bool appendix) {
     for (const auto& f : r.figures) {
+      if (f.appendix != appendix) continue;
       o << "<figure>\n";
       const std::string ext = f.image.extension().string();
       const std::string bytes = read_bytes(f.image);
@@ -164,17 +191,29 @@ std::string render_html_report(const HtmlReport& r) {
       }
       o << "<figcaption>" << html_escape(f.caption) << "</figcaption>\n</figure>\n";
     }
+  };
+  const auto any = [&](bool appendix) {
+    for (const auto& f : r.figures)
+      if (f.appendix == appendix) return true;
+    return false;
+  };
+  if (any(false)) {
+    o << "<h2>Figures</h2>\n";
+    figures(false);
+  }
+  // Warnings and the statements of method, after the results they qualify.
+  if (!r.notes.empty()) {
+    o << "<h2>Notes</h2>\n";
+    for (const auto& n : r.notes)
+      o << "<div class=\"note\">" << html_escape(n) << "</div>\n";
+  }
+  // Diagnostics of the separation (L-curve, residuals): for the metrologist, after the results.
+  if (any(true)) {
+    o << "<h2 class=\"appendix\">Appendix: diagnostics of the separation</h2>\n";
+    figures(true);
   }
 
-  if (!r.configuration.empty()) {
-    o << "<h2>Configuration</h2>\n";
-    HtmlTable t;
-    t.id = "configuration";
-    t.header = {"key", "value"};
-    for (const auto& [k, v] : r.configuration)
-      t.rows.push_back({k, v});
-    table(t);
-  }
+  pairs("Configuration", "configuration", {"key", "value"}, r.configuration);
 
   if (!r.files.empty()) {
     o << "<h2>Files</h2>\n<ul>\n";

@@ -588,7 +588,7 @@ void read_simulator(const Reader& root, MachineConfig& c) {
   Reader r(root.file(), *t, "simulator");
   r.only({"embedded", "host", "port", "preset", "S_um", "gamma_urad", "f_um", "e_um", "w_um",
           "r_um", "m_um", "noise_sigma_um", "drift_um_per_s", "stage_speed_mm_s", "settle_ms",
-          "seed", "faults"});
+          "seed", "faults", "gain"});
   SimulatorConfig& s = c.simulator;
   r.get("embedded", s.embedded);
   r.get("host", s.host);
@@ -613,6 +613,16 @@ void read_simulator(const Reader& root, MachineConfig& c) {
       auto v = arr->get(i)->value<double>();
       if (!v || !std::isfinite(*v)) r.fail("e_um", "every element must be a finite number");
       s.e_um[i] = *v;
+    }
+  }
+  if (const toml::node* n = t->get("gain")) {
+    const toml::array* arr = n->as_array();
+    if (!arr || arr->size() != 4)
+      r.fail("gain", "expected 4 numbers, the gain of configurations 1..4, e.g. [1, 1, 1.05, 1]");
+    for (std::size_t i = 0; i < 4; ++i) {
+      auto v = arr->get(i)->value<double>();
+      if (!v || !(*v > 0.5 && *v < 2)) r.fail("gain", "every element must be a number in (0.5, 2)");
+      s.gain[i] = *v;
     }
   }
   r.get("noise_sigma_um", s.noise_sigma_um);
@@ -641,6 +651,49 @@ void read_simulator(const Reader& root, MachineConfig& c) {
   }
 }
 
+std::string one_of(const std::vector<std::string>& names) {
+  std::string out;
+  for (const auto& n : names)
+    out += (out.empty() ? "\"" : ", \"") + n + "\"";
+  return out;
+}
+
+void read_separation(const Reader& root, MachineConfig& c) {
+  const toml::table* t = root.sub("separation");
+  if (!t) return;
+  Reader r(root.file(), *t, "separation");
+  r.only({"gauge", "lambda_rule", "lambda_min", "lambda_max", "fixed_lambda", "threads"});
+  SeparationConfig& s = c.separation;
+  std::string name;
+  if (t->contains("gauge")) {
+    r.get("gauge", name);
+    const auto g = core::curvature_gauge_from_string(name);
+    if (!g)
+      r.fail("gauge", "'" + name + "' is not one of " + one_of(core::curvature_gauge_names()));
+    s.gauge = *g;
+  }
+  if (t->contains("lambda_rule")) {
+    r.get("lambda_rule", name);
+    const auto l = core::lambda_rule_from_string(name);
+    if (!l)
+      r.fail("lambda_rule", "'" + name + "' is not one of " + one_of(core::lambda_rule_names()));
+    s.lambda_rule = *l;
+  }
+  r.get("lambda_min", s.lambda_min);
+  r.check("lambda_min", s.lambda_min >= 0, "must be >= 0 (0 = automatic)");
+  r.get("lambda_max", s.lambda_max);
+  r.check("lambda_max", s.lambda_max >= 0, "must be >= 0 (0 = automatic)");
+  r.check("lambda_max", s.lambda_max == 0 || s.lambda_max > s.lambda_min,
+          "must be above lambda_min");
+  r.get("fixed_lambda", s.fixed_lambda);
+  r.check("fixed_lambda", s.fixed_lambda >= 0, "must be >= 0");
+  r.check("fixed_lambda", s.lambda_rule != core::LambdaRule::fixed || s.fixed_lambda > 0,
+          "lambda_rule = \"fixed\" needs fixed_lambda > 0");
+  r.get_int("threads", s.threads, 1, 64);
+  std::string why;
+  if (!s.is_valid(&why)) r.fail("gauge", why);
+}
+
 void read_refine(const Reader& root, MachineConfig& c) {
   const toml::table* t = root.sub("refine");
   if (!t) return;
@@ -650,6 +703,31 @@ void read_refine(const Reader& root, MachineConfig& c) {
   r.get("alpha", c.refine.alpha);
   // A significance level: 0 would never add anything, 1 would add every candidate.
   r.check("alpha", c.refine.alpha > 0.0 && c.refine.alpha < 1.0, "must be in (0, 1)");
+}
+
+void read_report(const Reader& root, MachineConfig& c) {
+  const toml::table* t = root.sub("report");
+  if (!t) return;
+  Reader r(root.file(), *t, "report");
+  r.only(
+      {"machine", "operator", "instrument", "temperature_c", "straightness_tolerance_um", "pdf"});
+  ReportConfig& p = c.report;
+  r.get("machine", p.machine);
+  r.get("operator", p.operator_name);
+  r.get("instrument", p.instrument);
+  r.get("pdf", p.pdf);
+  if (t->contains("temperature_c")) {
+    double v = 0;
+    r.get("temperature_c", v);
+    r.check("temperature_c", v > -50 && v < 100, "must be in (-50, 100) degC");
+    p.temperature_c = v;
+  }
+  if (t->contains("straightness_tolerance_um")) {
+    double v = 0;
+    r.get("straightness_tolerance_um", v);
+    r.check("straightness_tolerance_um", v > 0, "must be > 0");
+    p.straightness_tolerance_um = v;
+  }
 }
 
 void read_mqtt(const Reader& root, MachineConfig& c) {
@@ -810,8 +888,8 @@ MachineConfig build(const toml::table& root, const std::string& name) {
   MachineConfig c;
   c.source = name;
   Reader r(name, root, "");
-  r.only({"bus", "sensor", "stage", "gpio", "sampler", "scan", "axes", "compensation", "refine",
-          "simulator", "mqtt"});
+  r.only({"bus", "sensor", "stage", "gpio", "sampler", "scan", "axes", "compensation", "separation",
+          "refine", "report", "simulator", "mqtt"});
   read_buses(name, root, c);
   if (c.buses.empty()) throw ConfigError(name, 0, "bus", "at least one [[bus]] is required");
   read_sensors(name, root, c);
@@ -821,7 +899,9 @@ MachineConfig build(const toml::table& root, const std::string& name) {
   read_scan(r, c);
   read_axes(r, c);
   read_compensation(r, c);
+  read_separation(r, c);
   read_refine(r, c);
+  read_report(r, c);
   read_simulator(r, c);
   read_mqtt(r, c);
   // Port 0 means "the embedded simulator's ephemeral port"; without it nothing fills it in.
@@ -857,6 +937,34 @@ MachineConfig load_machine_config(const std::filesystem::path& file) {
   MachineConfig c = parse_machine_config(ss.str(), file.string());
   c.source = file;
   return c;
+}
+
+bool SeparationConfig::is_valid(std::string* why) const {
+  auto fail = [&](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  if (threads < 1 || threads > 64)
+    return fail("threads = " + std::to_string(threads) + " must be in 1..64");
+  if (!(lambda_min >= 0) || !(lambda_max >= 0) || (lambda_max > 0 && !(lambda_max > lambda_min)))
+    return fail("lambda range [" + std::to_string(lambda_min) + ", " + std::to_string(lambda_max) +
+                "] must be 0 (automatic) or 0 <= lambda_min < lambda_max");
+  if (lambda_rule == core::LambdaRule::fixed && !(fixed_lambda > 0))
+    return fail("lambda_rule fixed needs fixed_lambda > 0");
+  std::string w;
+  if (!options().is_valid(&w)) return fail(w);
+  return true;
+}
+
+core::FourSensorOptions SeparationConfig::options() const {
+  core::FourSensorOptions o = core::options_for_gauge(gauge);
+  if (lambda_rule) o.rule = *lambda_rule;
+  o.fixed_lambda = fixed_lambda;
+  o.lcurve.lambda_min = lambda_min;
+  o.lcurve.lambda_max = lambda_max;
+  o.lcurve.threads = threads;
+  o.search.threads = threads;
+  return o;
 }
 
 }  // namespace errsep::io

@@ -16,8 +16,7 @@
 #include <stdexcept>
 
 #include "errsep/io/atomic_file.hpp"
-
-extern char** environ;
+#include "errsep/io/child_process.hpp"
 
 namespace errsep::io {
 namespace {
@@ -71,35 +70,11 @@ std::string read_text(const std::filesystem::path& p) {
 // (-1: not started).
 int run_gnuplot(const std::string& program, const std::filesystem::path& script,
                 const std::filesystem::path& log, std::string* err) {
-  const std::filesystem::path dir =
-      script.has_parent_path() ? script.parent_path() : std::filesystem::path(".");
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_adddup2(&fa, 1, 2);
-  posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
-  posix_spawn_file_actions_addchdir_np(&fa, dir.c_str());  // after the opens: log stays as given
-  std::string prog = program, scr = script.filename().string();
-  char* argv[] = {prog.data(), scr.data(), nullptr};
-  pid_t pid = 0;
-  const int rc = posix_spawnp(&pid, prog.c_str(), &fa, nullptr, argv, environ);
-  posix_spawn_file_actions_destroy(&fa);
-  if (rc != 0) {
-    if (err) *err = "cannot run '" + program + "': " + std::strerror(rc);
-    return -1;
-  }
-  int status = 0;
-  while (waitpid(pid, &status, 0) < 0) {
-    if (errno != EINTR) {
-      if (err) *err = std::string("waitpid: ") + std::strerror(errno);
-      return -1;
-    }
-  }
-  if (!WIFEXITED(status)) {
-    if (err) *err = "gnuplot was killed by a signal";
-    return -1;
-  }
-  return WEXITSTATUS(status);
+  ChildRun run;
+  run.argv = {program, script.filename().string()};
+  run.cwd = script.has_parent_path() ? script.parent_path() : std::filesystem::path(".");
+  run.log = log;
+  return run_child(run, err);
 }
 
 std::string terminals(const PlotOptions& o, const PlotFiles& f, const std::string& body) {
@@ -209,7 +184,7 @@ PlotFiles render_line_plot(const LinePlot& p, const std::filesystem::path& dir,
   bool first = true;
   for (std::size_t k = 0; k < p.series.size(); ++k) {
     const Series& s = p.series[k];
-    const std::string c = colours[k % 8];
+    const std::string c = s.colour.empty() ? colours[k % 8] : s.colour;
     if (!s.band.empty()) {
       b << (first ? "" : ", \\\n     ") << "datafile index " << k
         << " using 1:($2-$3):($2+$3) with filledcurves fc rgb '" << c
@@ -217,8 +192,11 @@ PlotFiles render_line_plot(const LinePlot& p, const std::filesystem::path& dir,
       first = false;
     }
     b << (first ? "" : ", \\\n     ") << "datafile index " << k << " using 1:2 with "
-      << (s.points ? "points pt 7 ps 0.5" : "lines lw 2") << " lc rgb '" << c << "' title "
-      << enh(s.title);
+      << (s.points   ? "points pt 7 ps 0.5"
+          : s.dashed ? "lines lw 1.5 dt 2"
+                     : "lines lw 2")
+      << " lc rgb '" << c << "' "
+      << (s.title.empty() ? std::string("notitle") : "title " + enh(s.title));
     first = false;
   }
   b << "\n";

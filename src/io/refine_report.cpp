@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <map>
 
 namespace errsep::io {
 
@@ -13,6 +14,26 @@ std::string lambda_summary(const core::FourSensorResult& sep) {
   if (sep.lambda_fallback != core::LambdaFallback::none)
     out += std::string(", ") + core::to_string(sep.lambda_fallback);
   return out + ")";
+}
+
+const std::vector<std::string>& refine_csv_columns() {
+  static const std::vector<std::string> columns = {"step",
+                                                   "parameter_index",
+                                                   "value",
+                                                   "u_value",
+                                                   "F",
+                                                   "p_value",
+                                                   "rms_before_um",
+                                                   "rms_after_um",
+                                                   "whiteness_p",
+                                                   "S_err_before_um",
+                                                   "S_err_after_um",
+                                                   "gamma_err_before_urad",
+                                                   "gamma_err_after_urad",
+                                                   "f_err_before_um",
+                                                   "f_err_after_um",
+                                                   "applied"};
+  return columns;
 }
 
 CsvTable refine_csv(const core::RefineResult& r) {
@@ -36,22 +57,7 @@ CsvTable refine_csv(const core::RefineResult& r) {
   // corner that the corrected readings no longer have), so both λ go with them.
   t.set_meta("lambda_before", lambda_summary(r.before));
   t.set_meta("lambda_after", lambda_summary(r.after));
-  t.columns = {"step",
-               "parameter_index",
-               "value",
-               "u_value",
-               "F",
-               "p_value",
-               "rms_before_um",
-               "rms_after_um",
-               "whiteness_p",
-               "S_err_before_um",
-               "S_err_after_um",
-               "gamma_err_before_urad",
-               "gamma_err_after_urad",
-               "f_err_before_um",
-               "f_err_after_um",
-               "applied"};
+  t.columns = refine_csv_columns();
   const double nan = std::numeric_limits<double>::quiet_NaN();
   for (const auto& s : r.steps) {
     t.set_meta("step" + std::to_string(s.index) + "_effect", s.effect);
@@ -191,6 +197,86 @@ std::string format_refine_text(const core::RefineResult& r) {
     out += "\n";
   }
   return out;
+}
+
+namespace {
+
+std::string g(double v, int digits) {
+  if (!std::isfinite(v)) return "\xE2\x80\x94";  // not applicable / not known
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "%.*g", digits, v);
+  return buf;
+}
+
+std::string before_after(double before, double after) {
+  if (!std::isfinite(before) && !std::isfinite(after)) return "\xE2\x80\x94";
+  return g(before, 4) + " \xE2\x86\x92 " + g(after, 4);
+}
+
+}  // namespace
+
+HtmlTable refine_steps_table(const CsvTable& t, const std::filesystem::path& file) {
+  const auto col = [&](const char* name) {
+    const auto c = t.find_column(name);
+    if (!c) throw CsvError(file, 1, std::string("refine steps: no column '") + name + "'");
+    return *c;
+  };
+  const std::size_t c_step = col("step"), c_par = col("parameter_index"), c_val = col("value"),
+                    c_u = col("u_value"), c_F = col("F"), c_p = col("p_value"),
+                    c_rb = col("rms_before_um"), c_ra = col("rms_after_um"),
+                    c_sb = col("S_err_before_um"), c_sa = col("S_err_after_um"),
+                    c_gb = col("gamma_err_before_urad"), c_ga = col("gamma_err_after_urad"),
+                    c_fb = col("f_err_before_um"), c_fa = col("f_err_after_um");
+  // The errors against the truth exist only when the run was given one (errsep-refine --truth).
+  bool truth = false;
+  for (const auto& r : t.rows)
+    truth = truth || std::isfinite(r[c_sb]) || std::isfinite(r[c_sa]);
+  HtmlTable h;
+  h.id = "refine";
+  h.caption = "Refine steps (" + file.filename().string() + "): model " +
+              t.meta("model").value_or("?") + "; stopped: " + t.meta("stop_reason").value_or("?") +
+              "; residual white: " + t.meta("residual_white").value_or("?") + "; lambda before " +
+              t.meta("lambda_before").value_or("?") + ", after " +
+              t.meta("lambda_after").value_or("?") + ". Parameters: value \xC2\xB1 u (k = 1).";
+  h.header = {"step", "effect", "parameters",
+              "F",    "p",      "residual RMS before \xE2\x86\x92 after / \xC2\xB5m"};
+  if (truth)
+    for (const char* s : {"S error vs truth / \xC2\xB5m", "\xCE\xB3 error vs truth / \xC2\xB5rad",
+                          "f error vs truth / \xC2\xB5m"})
+      h.header.push_back(std::string(s) + " (before \xE2\x86\x92 after)");
+  h.header.push_back("verdict");
+  // One CSV row per parameter of a step: gather each step's rows.
+  std::map<int, std::vector<const std::vector<double>*>> by_step;
+  for (const auto& r : t.rows) {
+    if (!std::isfinite(r[c_step]))
+      throw CsvError(file, 0, "refine steps: a row without a step number");
+    by_step[static_cast<int>(r[c_step])].push_back(&r);
+  }
+  for (const auto& [step, rows] : by_step) {
+    const std::string k = "step" + std::to_string(step);
+    const auto effect = t.meta(k + "_effect");
+    if (!effect) throw CsvError(file, 0, "refine steps: no '# " + k + "_effect:' metadata");
+    std::string params;
+    for (const auto* r : rows) {
+      if (!std::isfinite((*r)[c_par])) continue;
+      const std::string name =
+          t.meta(k + "_parameter" + std::to_string(static_cast<int>((*r)[c_par]))).value_or("?");
+      params += (params.empty() ? "" : ", ") + name + " = " + g((*r)[c_val], 4) + " \xC2\xB1 " +
+                g((*r)[c_u], 2);
+    }
+    const auto& r = *rows.front();
+    std::vector<std::string> cells = {
+        std::to_string(step), *effect,      params.empty() ? "\xE2\x80\x94" : params,
+        g(r[c_F], 4),         g(r[c_p], 3), before_after(r[c_rb], r[c_ra])};
+    if (truth) {
+      cells.push_back(before_after(r[c_sb], r[c_sa]));
+      cells.push_back(before_after(r[c_gb], r[c_ga]));
+      cells.push_back(before_after(r[c_fb], r[c_fa]));
+    }
+    cells.push_back(step == 0 ? "base model" : t.meta(k + "_verdict").value_or("?"));
+    h.rows.push_back(std::move(cells));
+  }
+  return h;
 }
 
 }  // namespace errsep::io

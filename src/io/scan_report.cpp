@@ -17,6 +17,7 @@
 #include "errsep/io/html_report.hpp"
 #include "errsep/io/machine_axes_metadata.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
+#include "errsep/io/refine_report.hpp"
 #include "errsep/io/staged_directory.hpp"
 #include "errsep/io/verification_report.hpp"
 #include "errsep/version.hpp"
@@ -76,6 +77,16 @@ struct GridData {
   std::string m_column;
 };
 
+// Files of a result set that are not a displacement grid or profile: not read in the search for
+// one (the refine step table has nan cells, which only its own reader accepts).
+bool is_other_result_file(const std::string& stem) {
+  for (const char* known :
+       {"motion", "reference", "lcurve", "residuals", "evaluation", "refine_steps",
+        "refine_residual", "reference_comparison", "verification", "trend"})
+    if (stem == known) return true;
+  return false;
+}
+
 std::optional<GridData> find_grid(const fs::path& dir, const fs::path& given) {
   std::vector<fs::path> candidates;
   if (!given.empty()) {
@@ -87,9 +98,7 @@ std::optional<GridData> find_grid(const fs::path& dir, const fs::path& given) {
   }
   for (const auto& p : candidates) {
     const std::string stem = p.stem().string();
-    if (stem == "motion" || stem == "reference" || stem == "lcurve" || stem == "residuals" ||
-        stem == "refine" || stem == "evaluation")
-      continue;
+    if (is_other_result_file(stem)) continue;
     CsvTable t = read_csv(p);
     if (!t.find_column("x_mm") || !t.find_column("y_mm") || !t.find_column("w_um")) {
       if (!given.empty()) throw CsvError(p, 1, "grid CSV needs columns x_mm, y_mm, w_um");
@@ -135,9 +144,7 @@ std::optional<ProfileData> find_one_axis(const fs::path& dir) {
   std::sort(candidates.begin(), candidates.end());
   for (const auto& p : candidates) {
     const std::string stem = p.stem().string();
-    if (stem == "motion" || stem == "reference" || stem == "lcurve" || stem == "residuals" ||
-        stem == "refine" || stem == "evaluation")
-      continue;
+    if (is_other_result_file(stem)) continue;
     CsvTable t = read_csv(p);
     if (!t.find_column("x_mm") || t.find_column("y_mm") || !t.find_column("m_um") ||
         !t.find_column("w_um"))
@@ -173,12 +180,46 @@ std::string text_table(const std::vector<Row>& rows, double k) {
 
 }  // namespace
 
+bool ReportParticulars::is_valid(std::string* why) const {
+  auto fail = [&](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  if (temperature_c &&
+      !(std::isfinite(*temperature_c) && *temperature_c > -50 && *temperature_c < 100))
+    return fail("temperature_c = " + sig(*temperature_c) + " must be in (-50, 100) degC");
+  if (straightness_tolerance_um &&
+      !(std::isfinite(*straightness_tolerance_um) && *straightness_tolerance_um > 0))
+    return fail("straightness_tolerance_um = " + sig(*straightness_tolerance_um) + " must be > 0");
+  return true;
+}
+
+std::string conformance_verdict(double value, double U, double tolerance) {
+  const std::string t = sig(tolerance) + " um";
+  if (!(U > 0) || !std::isfinite(U))
+    return "NOT PROVEN: " + sig(value) + " um against the tolerance " + t +
+           ", but its uncertainty is not known (ISO 14253-1 needs U to decide)";
+  const std::string vu = sig(value) + " um (U = " + sig(round_up_2sig(U), 2) + " um, k = 2)";
+  if (value + U <= tolerance)
+    return "PASS: " + vu + " is within the tolerance " + t + " including its uncertainty " +
+           "(ISO 14253-1)";
+  if (value - U > tolerance)
+    return "FAIL: " + vu + " exceeds the tolerance " + t + " beyond its uncertainty " +
+           "(ISO 14253-1)";
+  return "NOT PROVEN: " + vu + " straddles the tolerance " + t +
+         " within its uncertainty: neither conformance nor non-conformance is proven (ISO " +
+         "14253-1); a better measurement can decide";
+}
+
 bool ScanReportOptions::is_valid(std::string* why) const {
   auto fail = [&](const std::string& m) {
     if (why) *why = m;
     return false;
   };
   std::string w;
+  if (!particulars.is_valid(&w)) return fail("particulars: " + w);
+  if (output_subdir.find('/') != std::string::npos || output_subdir == "." || output_subdir == "..")
+    return fail("output_subdir '" + output_subdir + "' must be one folder name");
   if (!evaluation.is_valid(&w)) return fail("evaluation: " + w);
   if (tables && !tables_export.is_valid(&w)) return fail("compensation tables: " + w);
   if (axes && !axes->is_valid(&w)) return fail("axes: " + w);
@@ -207,6 +248,8 @@ std::string format_value_with_uncertainty(double value, double u) {
 ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions& opts) {
   std::string why;
   if (!opts.is_valid(&why)) throw std::invalid_argument("ScanReportOptions: " + why);
+  if (opts.pdf && !opts.pdf_print.is_valid(&why))
+    throw std::invalid_argument("ScanReportOptions: pdf_print: " + why);
   if (!fs::is_directory(dir))
     throw std::runtime_error(dir.string() + ": not a directory (expected a result directory)");
   ScanReportResult res;
@@ -214,13 +257,13 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
   // (refused otherwise, naming what is missing), its files are linked into a staging folder
   // beside DIR, the outputs written there, and the whole set moved into place at the end
   // (io/staged_directory.hpp): a kill leaves the earlier set, never a report of another run.
+  std::vector<std::string> replaced = {"evaluation.csv", "evaluation.txt", "report.html", "plots",
+                                       "compensation"};
+  if (!opts.output_subdir.empty()) replaced = {opts.output_subdir};
   StagedDirectory stage(
-      dir, {"result",
-            std::string("errsep-report ") + kVersion,
-            true,
-            {"evaluation.csv", "evaluation.txt", "report.html", "plots", "compensation"}});
+      dir, {"result", std::string("errsep-report ") + kVersion, true, std::move(replaced)});
   res.swept = stage.swept();
-  const fs::path out = stage.dir();
+  const fs::path out = opts.output_subdir.empty() ? stage.dir() : stage.dir() / opts.output_subdir;
   if (!fs::exists(dir / kManifestName))
     res.warnings.push_back(dir.string() + " has no " + kManifestName +
                            " (written by hand or by an older errsep): its files cannot be "
@@ -232,13 +275,23 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
   // reading, position and time), incomplete ones included.
   RawReadOptions inspect;
   inspect.require_complete = false;
-  if (fs::exists(dir / "raw.csv")) (void)read_raw_four_sensor_csv(dir / "raw.csv", inspect);
+  std::vector<std::pair<std::string, std::string>> raw_meta;  // when and with what it was measured
+  if (fs::exists(dir / "raw.csv"))
+    raw_meta = read_raw_four_sensor_csv(dir / "raw.csv", inspect).metadata;
   if (fs::exists(dir / "raw_displacement.csv"))
     (void)read_raw_displacement_csv(dir / "raw_displacement.csv", inspect);
   const double k = opts.evaluation.coverage_factor;
   std::vector<Row> rows;
   HtmlReport html;
   html.result_dir = fs::absolute(dir).lexically_normal().string();
+  const auto raw_value = [&](const std::string& key) -> std::optional<std::string> {
+    for (const auto& [name, value] : raw_meta)
+      if (name == key) return value;
+    return std::nullopt;
+  };
+  std::string axis_line = "not recorded";  // the moving axis and the direction evaluated
+  // The straightness of S (minimum zone) with U: what a tolerance is checked against.
+  std::optional<std::pair<double, double>> mz_straightness;
   html.generated_by = std::string("errsep-report ") + kVersion;
   html.raw_data_file = "unknown (no '# source:' metadata)";
   const fs::path plot_dir = out / "plots";
@@ -255,6 +308,13 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
   eval_csv.set_meta("errsep evaluation", std::string("v") + kVersion);
   eval_csv.set_meta("coverage_factor", sig(k));
   eval_csv.set_meta("correlation", core::to_string(opts.evaluation.correlation));
+  // Every CSV of a set names the run that wrote it (the set's manifest lists this run as one that
+  // extended the set).
+  eval_csv.set_meta("run_id", stage.run_id());
+  const auto with_run_id = [&](CsvTable t) {
+    t.set_meta("run_id", stage.run_id());
+    return t;
+  };
   auto add_eval = [&](const Row& r) {
     rows.push_back(r);
     eval_csv.add_column(r.csv_name + "_" + r.unit, {r.value});
@@ -315,6 +375,8 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     const std::string ea = core::angular_symbol(axis, dirn);
     html.title =
         "errsep scan report: " + es + " / " + ea + " of the " + std::string(1, axis) + " slideway";
+    axis_line = std::string(1, axis) + " slideway: straightness in " + std::string(1, dirn) + " (" +
+                es + "), angular deviation " + ea;
     if (md.u_s.empty() || all_zero(md.u_s))
       res.warnings.push_back(
           "motion.csv gives no u_S_um (or only zeros): straightness "
@@ -331,10 +393,13 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
       if (v && U && opts.evaluation.coverage_factor == 2.0) {
         add_eval({es, "straightness S(x)", core::label(ref), es + "_" + core::to_string(ref), "um",
                   *v, *U});
+        if (ref == ReferenceLine::minimum_zone) mz_straightness = {*v, *U};
         from_covariance = true;
         continue;
       }
       const auto r = core::evaluate_straightness(md.x, md.s, md.u_s, ref, opts.evaluation);
+      if (ref == ReferenceLine::minimum_zone)
+        mz_straightness = {r.straightness_um, r.uncertainty.expanded};
       add_eval({es, "straightness S(x)", core::label(ref), es + "_" + core::to_string(ref), "um",
                 r.straightness_um, r.uncertainty.expanded});
     }
@@ -402,7 +467,41 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
       p.xlabel = "x / mm";
       p.ylabel = "S / \xC2\xB5m";
       p.series.push_back({"S(x)", md.x, md.s, md.u_s.empty() ? md.u_s : scaled(md.u_s, k)});
-      plot_line(p, es + ": S(x) with its expanded uncertainty band (k = " + sig(k) + ")");
+      // The reference lines of ISO 230-1 the figures are taken about: the least-squares line,
+      // and the minimum zone as its two parallel lines (mid-line ± half the zone).
+      const auto ls = core::evaluate_straightness(md.x, md.s, {}, ReferenceLine::least_squares,
+                                                  opts.evaluation);
+      const auto mz =
+          core::evaluate_straightness(md.x, md.s, {}, ReferenceLine::minimum_zone, opts.evaluation);
+      auto line_series = [&](const std::string& title, const core::Line& l, double shift) {
+        const std::vector<double> ends = {md.x.front(), md.x.back()};
+        Series ser{title, ends, {l.at(ends[0]) + shift, l.at(ends[1]) + shift}, {}};
+        ser.dashed = true;
+        ser.colour = shift == 0 ? "#2ca02c" : "#7f7f7f";
+        return ser;
+      };
+      p.series.push_back(line_series("least-squares reference line", ls.line, 0));
+      p.series.push_back(line_series("minimum zone (" + sig(mz.straightness_um, 3) + " um)",
+                                     mz.line, mz.straightness_um / 2));
+      p.series.push_back(line_series("", mz.line, -mz.straightness_um / 2));
+      // A band of U = 0.06 um is a line's width on a 40 um plot: say its size in the key, and
+      // draw U(x) itself in the next figure.
+      if (!md.u_s.empty())
+        p.series[0].title =
+            "S(x) (max U = " + sig(k * *std::max_element(md.u_s.begin(), md.u_s.end()), 2) + " um)";
+      plot_line(p, es + ": S(x) with its expanded uncertainty band (k = " + sig(k) +
+                       "), the least-squares reference line and the minimum-zone band");
+    }
+    if (!md.u_s.empty() && !all_zero(md.u_s)) {
+      LinePlot p;
+      p.name = "uncertainty";
+      p.title = "Expanded uncertainty U(x) = k u(x) of the profiles (k = " + sig(k) + ")";
+      p.xlabel = "x / mm";
+      p.ylabel = "U / \xC2\xB5m";
+      p.series.push_back({"U of S(x)", md.x, scaled(md.u_s, k), {}});
+      if (!uf.empty()) p.series.push_back({"U of f(x)", fx, scaled(uf, k), {}});
+      plot_line(p, "Expanded uncertainty of S(x) and f(x) at each point (k = " + sig(k) +
+                       "; the bands of the profile figures, drawn on their own scale)");
     }
     if (!md.gamma_urad.empty()) {
       LinePlot p;
@@ -523,7 +622,12 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
       res.compensation_summary = ex.summary();
       for (const auto& t : ex.tables) {
         for (const auto& file : t.files) {
-          outputs.emplace_back(comp_dir / file.name, file.content);
+          // The table's own CSV (format csv) gets the run id too; the controllers' formats are
+          // written as their controllers read them.
+          outputs.emplace_back(comp_dir / file.name,
+                               fs::path(file.name).extension() == ".csv"
+                                   ? format_csv(with_run_id(parse_csv(file.content, file.name)), 12)
+                                   : file.content);
           html.files.emplace_back("compensation/" + file.name,
                                   compensation_writer(t.format).description() + "; " +
                                       std::to_string(t.read_back.table.points()) +
@@ -531,7 +635,8 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
                                       sig(t.accuracy.max_um, 3) + " um");
         }
       }
-      outputs.emplace_back(comp_dir / "accuracy.csv", format_csv(ex.accuracy_csv(), 10));
+      outputs.emplace_back(comp_dir / "accuracy.csv",
+                           format_csv(with_run_id(ex.accuracy_csv()), 10));
       html.files.emplace_back("compensation/accuracy.csv",
                               "each table's interpolation error against the measurement, with U");
       html.notes.push_back(
@@ -686,10 +791,26 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     }
   }
 
-  if (!res.four_sensor && !res.grid)
-    throw std::runtime_error(dir.string() +
-                             ": no motion.csv, no grid CSV (x_mm, y_mm, w_um) and no one-axis "
-                             "profile (x_mm, m_um, w_um) found");
+  if (!res.four_sensor && !res.grid) {
+    // Say what was looked for, and what to do with what is there.
+    std::string hint;
+    if (fs::exists(dir / "raw.csv"))
+      hint +=
+          "; it holds a raw four-sensor scan (raw.csv) but no separation: run errsep-separate " +
+          (dir / "raw.csv").string() + " --out DIR (or errsep-scan without --no-separate)";
+    if (fs::exists(dir / "raw_displacement.csv"))
+      hint +=
+          "; it holds a raw displacement scan (raw_displacement.csv): errsep-scan does not "
+          "write its profiles; run errsep-separate-displacement on it, then errsep-report on "
+          "its output";
+    throw std::runtime_error(
+        dir.string() +
+        ": no result errsep-report can read: no motion.csv (four-sensor result of errsep-scan, "
+        "errsep-separate, errsep-refine, errsep-simulate), no grid CSV (x_mm, y_mm, w_um: "
+        "two-axis displacement result) and no one-axis profile (x_mm, m_um, w_um: displacement "
+        "result)" +
+        hint);
+  }
 
   // ---- tables, text, html --------------------------------------------------------------------
   HtmlTable ev;
@@ -718,19 +839,69 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     html.files.emplace_back("verification.csv",
                             "before, predicted and measured residual at machine positions");
   }
-  if (fs::exists(dir / "refine.csv")) {
-    const auto t = read_csv(dir / "refine.csv", {.allow_non_finite = true, .min_rows = 1});
-    HtmlTable rt;
-    rt.id = "refine";
-    rt.caption = "Refine steps (refine.csv)";
-    rt.header = t.columns;
-    for (const auto& row : t.rows) {
-      std::vector<std::string> cells;
-      for (double v : row)
-        cells.push_back(sig(v, 6));
-      rt.rows.push_back(std::move(cells));
-    }
-    html.tables.push_back(rt);
+  // The refine step: DIR is its result (errsep-refine --out, OUT/refine), or a scan's set holds
+  // it in refine/ (errsep-scan --refine).  The base step has no parameters: nan there.
+  for (const fs::path& rel :
+       {fs::path("refine_steps.csv"), fs::path("refine") / "refine_steps.csv"}) {
+    const fs::path rf = dir / rel;
+    if (!fs::exists(rf)) continue;
+    const auto t = read_csv(rf, {.allow_non_finite = true, .min_rows = 1});
+    HtmlTable rt = refine_steps_table(t, rf);
+    rt.caption = rel.string() + ": " + rt.caption;
+    html.tables.push_back(std::move(rt));
+    html.files.emplace_back(
+        (opts.output_subdir.empty() ? fs::path() : fs::path("..")) / rel,
+        "the refine step table; the refined S, gamma, f are in " +
+            (rel.has_parent_path() ? std::string("refine/motion.csv, refine/reference.csv")
+                                   : std::string("motion.csv, reference.csv of this folder")));
+    if (auto m = t.meta("model_complete"); m && *m != "true")
+      res.warnings.push_back(rf.string() +
+                             ": the refined model is incomplete (residual not white or implausible "
+                             "effects rejected): see refine_report.txt beside it.");
+    break;
+  }
+  // The particulars a customer's report states; what the inputs do not say is said to be unknown.
+  const ReportParticulars& pt = opts.particulars;
+  auto stated = [](const std::string& v, const char* none) { return v.empty() ? none : v; };
+  html.measurement = {
+      {"Date and time of the measurement (UTC)",
+       raw_value("started_utc").value_or("not recorded (no raw.csv with '# started_utc:')") +
+           (raw_value("finished_utc") ? " to " + *raw_value("finished_utc") : "")},
+      {"Machine", stated(pt.machine, "not stated")},
+      {"Axis", axis_line},
+      {"Operator", stated(pt.operator_name, "not stated")},
+      {"Instrument and sensor",
+       stated(pt.instrument, "not stated") +
+           (raw_value("sensors") ? "; sensors: " + *raw_value("sensors") +
+                                       (raw_value("setup") ? " (" + *raw_value("setup") + ")" : "")
+                                 : "")},
+      {"Environment temperature", pt.temperature_c ? sig(*pt.temperature_c, 4) + " \xC2\xB0"
+                                                                                 "C"
+                                                   : "not recorded"},
+      {"Software", std::string("errsep ") + kVersion},
+      {"Standard applied",
+       "ISO 230-1:2012 (straightness and angular deviation of a linear axis: end-point, "
+       "least-squares and minimum-zone reference lines); uncertainty after the GUM (JCGM "
+       "100:2008), U = k u_c with k = " +
+           sig(k) + "; separation after Zhao et al. 2019 (four-sensor method)"},
+      {"Tolerance", pt.straightness_tolerance_um
+                        ? sig(*pt.straightness_tolerance_um) +
+                              " \xC2\xB5m on the straightness (minimum zone); decision rule ISO "
+                              "14253-1 (U counts against conformance)"
+                        : "none configured: no verdict"}};
+  if (res.grid && !res.four_sensor)
+    html.measurement[7].second =
+        "ISO 230-1:2012 (straightness, flatness); uncertainty after the GUM (JCGM 100:2008); "
+        "separation after Haramiishi et al. 2024 (extended displacement method)";
+  if (pt.straightness_tolerance_um) {
+    if (mz_straightness)
+      res.verdict = conformance_verdict(mz_straightness->first, mz_straightness->second,
+                                        *pt.straightness_tolerance_um);
+    else
+      res.warnings.push_back(
+          "a straightness tolerance is configured, but this result has no straightness of S: no "
+          "verdict.");
+    html.verdict = res.verdict;
   }
   html.notes.insert(html.notes.begin(), res.warnings.begin(), res.warnings.end());
   html.notes.push_back(
@@ -746,8 +917,11 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
                                : render_line_plot(line_jobs[i].first, plot_dir, opts.plot);
     for (const auto& q : {f.png, f.svg, f.script, f.data})
       if (!q.empty()) res.written.push_back(q);
-    figures.push_back(
-        {is_map ? map_jobs[i].second : line_jobs[i].second, opts.plot.png ? f.png : f.svg});
+    // The separation's diagnostics go to the report's appendix.
+    const bool diagnostic =
+        !is_map && (line_jobs[i].first.name == "residuals" || line_jobs[i].first.name == "lcurve");
+    figures.push_back({is_map ? map_jobs[i].second : line_jobs[i].second,
+                       opts.plot.png ? f.png : f.svg, diagnostic});
   }
   html.figures = figures;
   html.files.insert(html.files.begin(), {"evaluation.csv", "the evaluation, one row"});
@@ -757,11 +931,12 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
   if (!opts.trend_results_dir.empty()) {
     const StraightnessTrend trend = straightness_trend(opts.trend_results_dir);
     res.text += "\n" + format_trend(trend);
-    outputs.emplace_back(out / "trend.csv", format_csv(trend_table(trend), 10));
+    outputs.emplace_back(out / "trend.csv", format_csv(with_run_id(trend_table(trend)), 10));
     html.files.push_back({"trend.csv", "straightness over the machine's past scans"});
     if (trend.any_significant())
       res.warnings.push_back("straightness changed beyond the combined U (see trend.csv)");
   }
+  if (!res.verdict.empty()) res.text += "verdict: " + res.verdict + "\n";
   outputs.emplace_back(out / "evaluation.csv", format_csv(eval_csv, 12, NonFiniteCell::empty));
   outputs.emplace_back(out / "evaluation.txt", res.text);
   outputs.emplace_back(out / "report.html", render_html_report(html));
@@ -770,9 +945,21 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     write_file_atomic(path, content);
     res.written.push_back(path);
   }
+  if (opts.pdf) {
+    // Printed in the staging folder, so that the PDF joins the set with the rest.
+    const PdfOutcome pdf =
+        print_html_to_pdf(out / "report.html", out / "report.pdf", opts.pdf_print);
+    if (pdf.written) {
+      res.written.push_back(out / "report.pdf");
+      res.pdf = dir / (out / "report.pdf").lexically_relative(stage.dir());
+    } else {
+      res.pdf_skipped = pdf.why_not;
+    }
+  }
   stage.commit();
   for (auto& p : res.written)  // where they are now
-    p = dir / p.lexically_relative(out);
+    p = dir / p.lexically_relative(stage.dir());
+  res.html = dir / (out / "report.html").lexically_relative(stage.dir());
   return res;
 }
 

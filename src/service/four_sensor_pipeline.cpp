@@ -20,10 +20,15 @@ bool FourSensorPipelineOptions::is_valid(std::string* why) const {
 }
 
 FourSensorPipelineOptions pipeline_options(const io::MachineConfig& cfg, const std::string& gauge) {
-  const auto g = core::curvature_gauge_from_string(gauge);
-  if (!g) throw std::invalid_argument("--gauge: unknown gauge '" + gauge + "'");
+  // [separation] of the config; a gauge given here (the command line) over it.
+  io::SeparationConfig sep = cfg.separation;
+  if (!gauge.empty()) {
+    const auto g = core::curvature_gauge_from_string(gauge);
+    if (!g) throw std::invalid_argument("--gauge: unknown gauge '" + gauge + "'");
+    sep.gauge = *g;
+  }
   FourSensorPipelineOptions o;
-  o.separation = core::options_for_gauge(*g);
+  o.separation = sep.options();
   o.refine = cfg.refine.enabled;
   o.refine_alpha = cfg.refine.alpha;
   return o;

@@ -102,6 +102,24 @@ TEST_CASE("errsep-report evaluates a bow and a sine tilt exactly and writes ever
   CHECK_THAT(html, Catch::Contains("minimum zone"));
   CHECK_THAT(html, Catch::Contains("/data/scans/simulated-demo-scan.csv"));  // raw data file
   CHECK_THAT(html, Catch::Contains("<table id=\"refine\">"));
+  // The refine step table read as errsep-refine writes it (nan where not applicable): one row a
+  // step, the parameters with u, the residual before -> after.
+  {
+    const auto at = html.find("<table id=\"refine\">");
+    const std::string rt = html.substr(at, html.find("</table>", at) - at);
+    CHECK_THAT(rt, Catch::Contains("<td>gain</td>"));
+    CHECK_THAT(rt, Catch::Contains("g3 = 0.05 \xC2\xB1 0.002"));
+    CHECK_THAT(rt, Catch::Contains("0.31 \xE2\x86\x92 0.26"));
+    CHECK_THAT(rt, Catch::Contains("applied: the gain changes S by 0.4 um"));
+    CHECK_THAT(rt, !Catch::Contains("nan"));
+    CHECK_THAT(rt, !Catch::Contains("error vs truth"));  // no truth in this run: no such column
+  }
+  // The particulars a customer's report states; what the inputs do not say is said so.
+  CHECK_THAT(html, Catch::Contains("<table id=\"measurement\">"));
+  CHECK_THAT(html, Catch::Contains("ISO 230-1:2012"));
+  CHECK_THAT(html, Catch::Contains("none configured: no verdict"));
+  CHECK_THAT(html, !Catch::Contains("id=\"verdict\""));
+  CHECK_THAT(html, Catch::Contains("Appendix: diagnostics"));
   CHECK_THAT(html, Catch::Contains("<table id=\"configuration\">"));
   CHECK_THAT(html, Catch::Contains("data:image/png;base64,"));
   CHECK_THAT(html, !Catch::Contains("src=\"plots/"));  // self-contained: no external images
@@ -173,9 +191,22 @@ TEST_CASE("errsep-report fails with a message and writes nothing for an empty di
   std::string out;
   const int rc = run_command(quote(app_path("report")) + " " + quote(tmp / "empty"), &out);
   CHECK(rc != 0);
-  CHECK_THAT(out, Catch::Contains("no motion.csv, no grid CSV"));
+  CHECK_THAT(out, Catch::Contains("no result errsep-report can read: no motion.csv"));
+  CHECK_THAT(out, Catch::Contains("no grid CSV (x_mm, y_mm, w_um"));
   CHECK_FALSE(fs::exists(tmp / "empty" / "report.html"));
   CHECK_FALSE(fs::exists(tmp / "empty" / "evaluation.csv"));
+  // A folder with raw data only (errsep-scan --no-separate): what to run on it.
+  {
+    errsep::io::CsvTable raw;
+    raw.add_column("x_mm", {0, 5, 10});
+    for (const char* c : {"m1_um", "m2_um", "m3_um", "m4_um"})
+      raw.add_column(c, {0.1, 0.2, 0.3});
+    fs::create_directories(tmp / "rawonly");
+    errsep::io::write_csv(tmp / "rawonly" / "raw.csv", raw);
+    CHECK(run_command(quote(app_path("report")) + " " + quote(tmp / "rawonly"), &out) != 0);
+    CHECK_THAT(out, Catch::Contains("holds a raw four-sensor scan (raw.csv) but no separation: run "
+                                    "errsep-separate"));
+  }
   // A malformed motion.csv names the file and line.
   std::ofstream(tmp / "empty" / "motion.csv") << "x_mm,S_um\n0,1\n5,abc\n";
   const int rc2 = run_command(quote(app_path("report")) + " " + quote(tmp / "empty"), &out);

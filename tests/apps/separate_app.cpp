@@ -204,3 +204,43 @@ TEST_CASE("an error leaves an earlier result alone") {
   CHECK(run((dir / "raw.csv").string() + " --out " + (dir / "res").string(), &out) == 1);
   CHECK(slurp(dir / "res" / "motion.csv") == before);
 }
+
+TEST_CASE(
+    "the separation table of a machine config sets the separation, the command line over it") {
+  TempDir dir;
+  io::write_raw_four_sensor_csv(dir / "raw.csv", raw_of(simulate()));
+  std::string cfg_text;
+  {
+    std::ifstream in(test::source_dir() / "config" / "simulator.toml");
+    std::stringstream ss;
+    ss << in.rdbuf();
+    cfg_text = ss.str();
+  }
+  // The shipped config has a [separation] table: give it another rule.
+  const std::string from = "threads = 1                     # threads of the lambda search";
+  REQUIRE(cfg_text.find(from) != std::string::npos);
+  cfg_text.replace(cfg_text.find(from), from.size(),
+                   "lambda_rule = \"gcv\"\nthreads = 2 # threads of the lambda search");
+  const auto cfg = dir / "machine.toml";
+  std::ofstream(cfg) << cfg_text;
+  std::string out;
+  REQUIRE(run((dir / "raw.csv").string() + " --config " + cfg.string() + " --out " +
+                  (dir / "a").string(),
+              &out) == 0);
+  INFO(out);
+  CHECK(io::read_csv(dir / "a" / "motion.csv").meta("lambda_rule") == "gcv");
+  // --rule over [separation].
+  REQUIRE(run((dir / "raw.csv").string() + " --config " + cfg.string() + " --rule reml --out " +
+                  (dir / "b").string(),
+              &out) == 0);
+  CHECK(io::read_csv(dir / "b" / "motion.csv").meta("lambda_rule") == "reml");
+  // A bad value: file:line: key: what is wrong, nothing written.
+  cfg_text.replace(cfg_text.find("lambda_rule = \"gcv\""), 19, "lambda_rule = \"best\"");
+  std::ofstream(cfg) << cfg_text;
+  CHECK(run((dir / "raw.csv").string() + " --config " + cfg.string() + " --out " +
+                (dir / "c").string(),
+            &out) == 1);
+  CHECK(out.find(cfg.string() + ":") != std::string::npos);
+  CHECK(out.find("separation.lambda_rule: 'best' is not one of \"reml\"") != std::string::npos);
+  CHECK(!std::filesystem::exists(dir / "c"));
+}

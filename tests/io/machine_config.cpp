@@ -1,5 +1,6 @@
 // The machine config reader: the shipped configs parse to what they say, and every kind of
 // mistake gives "file:line: key: problem" naming the right key and line.
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <fstream>
 #include <string>
@@ -317,4 +318,97 @@ table_dir = "PLC:\\comp\\"
         std::string::npos);
   CHECK(error_of(base + "[compensation]\nstep = 5\n").find("compensation.step: unknown key") !=
         std::string::npos);
+}
+
+namespace {
+// Line number of the first line of `tail` appended to kMinimal.
+int line_after_minimal() {
+  const std::string t = kMinimal;
+  return static_cast<int>(std::count(t.begin(), t.end(), '\n')) + 1;
+}
+}  // namespace
+
+TEST_CASE("[separation]: one vocabulary with core, defaults, and file:line: key errors") {
+  using errsep::core::CurvatureGauge;
+  using errsep::core::LambdaRule;
+  // Without the table: the defaults errsep-scan used before it existed (core::options_for_gauge).
+  const MachineConfig d = parse_machine_config(kMinimal, "t.toml");
+  CHECK(d.separation.gauge == CurvatureGauge::reference_without_curvature);
+  CHECK(!d.separation.lambda_rule);
+  CHECK(d.separation.options().rule ==
+        errsep::core::options_for_gauge(CurvatureGauge::reference_without_curvature).rule);
+  CHECK(d.separation.is_valid(nullptr));
+
+  const MachineConfig c =
+      parse_machine_config(std::string(kMinimal) +
+                               "[separation]\ngauge = \"sensor_stage\"\nlambda_rule = \"lcurve\"\n"
+                               "lambda_min = 1e-4\nlambda_max = 10.0\nthreads = 2\n",
+                           "t.toml");
+  CHECK(c.separation.gauge == CurvatureGauge::sensor_stage_without_curvature);
+  REQUIRE(c.separation.lambda_rule);
+  CHECK(*c.separation.lambda_rule == LambdaRule::lcurve);
+  const auto o = c.separation.options();
+  CHECK(o.gauge == CurvatureGauge::sensor_stage_without_curvature);
+  CHECK(o.rule == LambdaRule::lcurve);
+  CHECK(o.lcurve.lambda_min == 1e-4);
+  CHECK(o.lcurve.lambda_max == 10.0);
+  CHECK(o.lcurve.threads == 2);
+  CHECK(o.search.threads == 2);
+  // Every name core knows is accepted, and is the one core writes back.
+  for (const auto& g : errsep::core::curvature_gauge_names()) {
+    const auto p = parse_machine_config(
+        std::string(kMinimal) + "[separation]\ngauge = \"" + g + "\"\n", "t.toml");
+    CHECK(errsep::core::to_string(p.separation.gauge) == g);
+  }
+  for (const auto& r : errsep::core::lambda_rule_names()) {
+    const auto p =
+        parse_machine_config(std::string(kMinimal) + "[separation]\nlambda_rule = \"" + r + "\"" +
+                                 (r == "fixed" ? "\nfixed_lambda = 0.5" : "") + "\n",
+                             "t.toml");
+    CHECK(errsep::core::to_string(*p.separation.lambda_rule) == r);
+  }
+
+  struct Bad {
+    const char* body;
+    int line;  // of the body, from 1
+    const char* where;
+    const char* problem;
+  };
+  for (const Bad& b :
+       {Bad{"gauge = \"flat\"\n", 1, "separation.gauge", "'flat' is not one of \"reference\""},
+        Bad{"lambda_rule = \"best\"\n", 1, "separation.lambda_rule", "is not one of \"reml\""},
+        Bad{"threads = 0\n", 1, "separation.threads", ""},
+        Bad{"lambda_min = 2.0\nlambda_max = 1.0\n", 2, "separation.lambda_max",
+            "must be above lambda_min"},
+        Bad{"lambda_rule = \"fixed\"\n", 1, "separation.fixed_lambda", "needs fixed_lambda > 0"},
+        Bad{"guage = \"reference\"\n", 1, "separation.guage", "unknown key"}}) {
+    const std::string m = error_of(std::string(kMinimal) + "[separation]\n" + b.body);
+    INFO(m);
+    const std::string at = "t.toml:" + std::to_string(line_after_minimal() + b.line) + ": ";
+    if (std::string(b.where) != "separation.fixed_lambda")  // no such key: the table's line
+      CHECK(m.find(at + b.where) == 0);
+    CHECK(m.find(b.where) != std::string::npos);
+    CHECK(m.find(b.problem) != std::string::npos);
+  }
+}
+
+TEST_CASE("[report]: particulars, tolerance and PDF switch") {
+  const MachineConfig d = parse_machine_config(kMinimal, "t.toml");
+  CHECK(d.report.pdf);
+  CHECK(!d.report.straightness_tolerance_um);
+  const MachineConfig c = parse_machine_config(
+      std::string(kMinimal) +
+          "[report]\nmachine = \"M1\"\noperator = \"J. Doe\"\ninstrument = \"rig 2\"\n"
+          "temperature_c = 20.5\nstraightness_tolerance_um = 8\npdf = false\n",
+      "t.toml");
+  CHECK(c.report.machine == "M1");
+  CHECK(c.report.operator_name == "J. Doe");
+  CHECK(c.report.instrument == "rig 2");
+  CHECK(*c.report.temperature_c == 20.5);
+  CHECK(*c.report.straightness_tolerance_um == 8.0);
+  CHECK(!c.report.pdf);
+  const std::string m =
+      error_of(std::string(kMinimal) + "[report]\nstraightness_tolerance_um = -1\n");
+  CHECK(m.find("t.toml:" + std::to_string(line_after_minimal() + 1) +
+               ": report.straightness_tolerance_um: must be > 0") == 0);
 }

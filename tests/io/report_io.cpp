@@ -93,3 +93,45 @@ TEST_CASE("gnuplot draws PNG and SVG line plots and heat maps") {
   CHECK_FALSE(gnuplot_available(bad));
   CHECK_THROWS_WITH(render_line_plot(p, tmp.path(), bad), Catch::Contains("cannot run"));
 }
+
+TEST_CASE("conformance with a tolerance: ISO 14253-1, the uncertainty counts against the claim") {
+  using errsep::io::conformance_verdict;
+  // Well inside, well outside, straddling on either side of the tolerance, U unknown.
+  CHECK(conformance_verdict(6.0, 1.0, 10.0).rfind("PASS: ", 0) == 0);
+  CHECK(conformance_verdict(9.0, 1.0, 10.0).rfind("PASS: ", 0) == 0);  // 9 + 1 = 10: still in
+  CHECK(conformance_verdict(12.0, 1.0, 10.0).rfind("FAIL: ", 0) == 0);
+  CHECK(conformance_verdict(9.5, 1.0, 10.0).rfind("NOT PROVEN: ", 0) == 0);
+  CHECK(conformance_verdict(10.5, 1.0, 10.0).rfind("NOT PROVEN: ", 0) == 0);
+  CHECK(conformance_verdict(11.0, 1.0, 10.0).rfind("NOT PROVEN: ", 0) == 0);  // 11 - 1 = 10
+  CHECK(conformance_verdict(2.0, 0.0, 10.0).rfind("NOT PROVEN: ", 0) == 0);
+  CHECK_THAT(conformance_verdict(2.0, 0.0, 10.0), Catch::Contains("not known"));
+  CHECK_THAT(conformance_verdict(6.0, 1.0, 10.0), Catch::Contains("10 um"));
+}
+
+TEST_CASE("the measurement, the verdict, and the diagnostics in an appendix after the results") {
+  errsep::test::TempDir tmp;
+  const auto svg = tmp / "f.svg";
+  std::ofstream(svg) << "<?xml version=\"1.0\"?><svg xmlns=\"http://www.w3.org/2000/svg\"></svg>";
+  HtmlReport r;
+  r.title = "t";
+  r.measurement = {{"Machine", "M1 <hall 2>"}, {"Operator", "not stated"}};
+  r.verdict = "FAIL: 12 um exceeds the tolerance 10 um";
+  r.figures = {{"the L-curve", svg, true}, {"S(x)", svg, false}};
+  const std::string h = render_html_report(r);
+  const auto measurement = h.find("<table id=\"measurement\">");
+  const auto verdict = h.find("<div id=\"verdict\" class=\"verdict fail\">");
+  const auto results = h.find("<figcaption>S(x)</figcaption>");
+  const auto appendix = h.find("Appendix: diagnostics");
+  const auto lcurve = h.find("<figcaption>the L-curve</figcaption>");
+  REQUIRE(measurement != std::string::npos);
+  REQUIRE(verdict != std::string::npos);
+  REQUIRE(results != std::string::npos);
+  REQUIRE(appendix != std::string::npos);
+  REQUIRE(lcurve != std::string::npos);
+  CHECK(measurement < verdict);
+  CHECK(verdict < results);
+  CHECK(results < appendix);
+  CHECK(appendix < lcurve);
+  CHECK_THAT(h, Catch::Contains("M1 &lt;hall 2&gt;"));
+  CHECK_THAT(h, Catch::Contains("@media print"));
+}

@@ -200,8 +200,9 @@ std::vector<pid_t> processes_with(const std::vector<std::string>& needles) {
 
 namespace {
 
-/// Every file of a whole set (and of its nested sets): ends with a newline, a CSV parses and
-/// carries the set's run id.
+/// Every file of a whole set (and of its nested sets): a text file ends with a newline (the
+/// report's PNG figures and PDF are binary), a CSV parses and carries the id of the set's run or
+/// of a run that extended it (the report errsep-scan adds to its set, io/staged_directory.hpp).
 void check_set_files(const fs::path& dir, const io::ResultSetCheck& c, FolderVerdict& v) {
   for (const auto& f : c.files) {
     if (!f.empty() && f.back() == '/') {
@@ -213,7 +214,8 @@ void check_set_files(const fs::path& dir, const io::ResultSetCheck& c, FolderVer
     const fs::path p = dir / f;
     if (!fs::exists(p)) continue;  // the manifest check names it
     const std::string bytes = slurp(p);
-    if (bytes.empty() || bytes.back() != '\n') {
+    const bool binary = p.extension() == ".png" || p.extension() == ".pdf";
+    if (bytes.empty() || (!binary && bytes.back() != '\n')) {
       v.torn = true;
       v.why += p.string() + ": does not end with a newline; ";
       continue;
@@ -231,7 +233,7 @@ void check_set_files(const fs::path& dir, const io::ResultSetCheck& c, FolderVer
       continue;
     }
     const auto id = t.meta("run_id");
-    if (id != std::optional<std::string>(c.run_id)) {
+    if (!id || std::find(c.run_ids.begin(), c.run_ids.end(), *id) == c.run_ids.end()) {
       v.mixed = true;
       v.why += p.string() + ": run_id " + id.value_or("(none)") + ", the set's " + c.run_id + "; ";
     }

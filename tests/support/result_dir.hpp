@@ -1,15 +1,18 @@
 #pragma once
 // Writes result directories in the formats errsep-separate / errsep-simulate --out produce
-// (motion.csv, reference.csv, lcurve.csv, residuals.csv, refine.csv) and a displacement-method
-// grid CSV, from closed-form profiles, so the report tests do not depend on the solvers.
+// (motion.csv, reference.csv, lcurve.csv, residuals.csv, refine_steps.csv) and a
+// displacement-method grid CSV, from closed-form profiles, so the report tests do not depend on the
+// solvers.
 #include <cmath>
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <random>
 #include <string>
 #include <vector>
 
 #include "errsep/io/csv.hpp"
+#include "errsep/io/refine_report.hpp"
 
 namespace errsep::test {
 
@@ -109,11 +112,29 @@ inline void write_four_sensor_result(const std::filesystem::path& dir, ResultDir
     io::write_csv(dir / "residuals.csv", t);
   }
   if (spec.refine) {
+    // A refine step table as io::refine_csv writes it (errsep-refine): the base step, then a gain
+    // step with three parameters; no truth (errors nan).
     io::CsvTable t;
-    t.add_column("step", {1, 2, 3});
-    t.add_column("lambda", {0.02, 0.015, 0.0123});
-    t.add_column("residual_rms_um", {0.31, 0.27, 0.26});
-    io::write_csv(dir / "refine.csv", t);
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    t.set_meta("format", "errsep refine steps");
+    t.set_meta("model", "zhao2019-eq1+gain");
+    t.set_meta("stop_reason", "no significant candidate");
+    t.set_meta("residual_white", "true");
+    t.set_meta("model_complete", "true");
+    t.set_meta("lambda_before", "0.02 (reml)");
+    t.set_meta("lambda_after", "0.0123 (reml)");
+    t.set_meta("step0_effect", "zhao2019-eq1");
+    t.set_meta("step1_effect", "gain");
+    t.set_meta("step1_verdict", "applied: the gain changes S by 0.4 um");
+    for (int j = 0; j < 3; ++j)
+      t.set_meta("step1_parameter" + std::to_string(j), "g" + std::to_string(j + 2));
+    t.columns = io::refine_csv_columns();
+    t.rows.push_back(
+        {0, nan, nan, nan, nan, nan, nan, 0.31, 0.001, nan, nan, nan, nan, nan, nan, nan});
+    for (int j = 0; j < 3; ++j)
+      t.rows.push_back({1, double(j), j == 1 ? 0.05 : 0.001, 0.002, 212.0, 1e-9, 0.31, 0.26, 0.4,
+                        nan, nan, nan, nan, nan, nan, 1});
+    io::write_csv(dir / "refine_steps.csv", t);
   }
 }
 

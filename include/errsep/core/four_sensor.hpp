@@ -36,6 +36,8 @@ enum class LambdaRule {
 const char* to_string(LambdaRule r);
 /// The strings of to_string ("ls" is accepted for least_squares).
 std::optional<LambdaRule> lambda_rule_from_string(std::string_view s);
+/// Every rule's to_string, for option lists and messages.
+std::vector<std::string> lambda_rule_names();
 
 /// Which system is solved.
 enum class Estimator {

@@ -18,7 +18,9 @@
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 #include <optional>
+#include <string>
 #include <string_view>
+#include <vector>
 
 #include "errsep/core/four_sensor_config.hpp"
 
@@ -66,6 +68,8 @@ enum class CurvatureGauge {
 /// "reference" | "sensor_stage" | "paper_eq12": the names the apps and the machine config use.
 const char* to_string(CurvatureGauge g);
 std::optional<CurvatureGauge> curvature_gauge_from_string(std::string_view s);
+/// Every gauge's to_string, for option lists and messages.
+std::vector<std::string> curvature_gauge_names();
 
 /// How the 4 data rows of each slide position are weighted.
 enum class RowWeighting {

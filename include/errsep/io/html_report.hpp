@@ -18,10 +18,17 @@ struct HtmlTable {
 struct HtmlFigure {
   std::string caption;
   std::filesystem::path image;  ///< .png (embedded as base64) or .svg (inlined)
+  bool appendix = false;        ///< a diagnostic (L-curve, residuals): shown in the appendix
 };
 
 struct HtmlReport {
   std::string title;
+  /// The measurement as a report for a customer states it, in order: date and time, machine,
+  /// axis, operator, instrument and sensor, temperature, software, standard, tolerance ...
+  /// ("not stated" where the inputs did not say).
+  std::vector<std::pair<std::string, std::string>> measurement;
+  /// The conformance statement when a tolerance is given (e.g. "PASS: ..."); empty = none.
+  std::string verdict;
   std::string raw_data_file;  ///< the raw scan the results came from ("unknown" if not known)
   std::string result_dir;
   std::vector<std::pair<std::string, std::string>> configuration;  ///< metadata, in order

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "errsep/core/compensation.hpp"
+#include "errsep/core/four_sensor.hpp"
 #include "errsep/core/four_sensor_config.hpp"
 #include "errsep/core/machine_axes.hpp"
 #include "errsep/io/cnc/compensation_export.hpp"
@@ -138,6 +139,39 @@ struct RefineConfig {
   double alpha = 0.01;   ///< family-wise significance of one step (RefineOptions::alpha)
 };
 
+/// The four-sensor separation's settings ([separation], optional): one vocabulary for
+/// errsep-scan, errsep-separate, errsep-refine and the daemon (their command-line options override
+/// it).  Names as core's to_string of each enum: gauge = "reference" | "sensor_stage" |
+/// "paper_eq12", lambda_rule = "reml" | "gcv" | "lcurve" | "discrepancy" | "fixed" |
+/// "least_squares".
+struct SeparationConfig {
+  core::CurvatureGauge gauge = core::CurvatureGauge::reference_without_curvature;
+  /// Unset: the gauge's own (core::options_for_gauge: REML for the exact gauge, the paper's
+  /// L-curve for the others).
+  std::optional<core::LambdaRule> lambda_rule;
+  /// λ range of the L-curve grid (lambda_rule lcurve and discrepancy); 0 = automatic (the bound
+  /// of σ_max(A) and 8 decades below it).  REML and GCV search a range relative to σ_max.
+  double lambda_min = 0, lambda_max = 0;
+  double fixed_lambda = 0;  ///< lambda_rule fixed
+  int threads = 1;          ///< threads of the λ search (the result does not depend on them)
+  bool is_valid(std::string* why) const;
+  /// The separation's options: core::options_for_gauge(gauge) with the settings above.
+  core::FourSensorOptions options() const;
+};
+
+/// What the customer's report states beyond the data ([report], optional; io/scan_report.hpp).
+/// Empty / unset: "not stated" in the report.
+struct ReportConfig {
+  std::string machine;                  ///< e.g. "DMU 50 #3, hall 2" (default: [mqtt] machine)
+  std::string operator_name;            ///< key `operator`
+  std::string instrument;               ///< e.g. "four-sensor rig, probe GT2-P12"
+  std::optional<double> temperature_c;  ///< environment temperature during scans, °C
+  /// Straightness tolerance (minimum zone of S): the report gives a pass/fail verdict (default:
+  /// [mqtt] straightness_tolerance_um when > 0).
+  std::optional<double> straightness_tolerance_um;
+  bool pdf = true;  ///< errsep-scan prints the report to PDF too (headless Chromium)
+};
+
 /// Publishing to the plant's MQTT broker ([mqtt], optional; service/plant_publisher.hpp).  The
 /// topic tree of one machine is <topic_prefix>/<machine>/{status, scan/<scan id>, alarm,
 /// cmd/scan, cmd/scan/reply}; every payload is JSON valid against schema/mqtt-messages.schema.json.
@@ -214,6 +248,9 @@ struct SimulatorConfig {
   ProfileSpec gamma_urad;                  ///< tilt error γ(x), µrad
   ProfileSpec f_um;                        ///< reference surface f(x)
   std::array<double, 4> e_um{0, 0, 0, 0};  ///< zero-adjustment values e_1..e_4 (e_1 = 0)
+  /// Gain of each configuration's readings, undeclared to the separation (a fault to find with
+  /// the refine step, core/effect_gain.hpp): configuration i reads gain_i · (f + S + O_i γ + e_i).
+  std::array<double, 4> gain{1, 1, 1, 1};
   // displacement method (Haramiishi 2024, section 2.1)
   ProfileSpec w_um;  ///< workpiece profile w(x)
   ProfileSpec r_um;  ///< reference piece profile r(x)
@@ -242,7 +279,9 @@ struct MachineConfig {
   /// scan.slide_start_mm.
   core::MachineAxes axes;
   CompensationConfig compensation;
+  SeparationConfig separation;
   RefineConfig refine;
+  ReportConfig report;
   SimulatorConfig simulator;
   std::optional<MqttConfig> mqtt;  ///< [mqtt]: publish to a broker (absent: do not)
 

@@ -27,7 +27,9 @@ struct Series {
   std::string title;
   std::vector<double> x, y;
   std::vector<double> band;
-  bool points = false;  ///< draw points instead of a line
+  bool points = false;   ///< draw points instead of a line
+  bool dashed = false;   ///< a thin dashed line (reference lines, zone limits)
+  std::string colour{};  ///< "#rrggbb"; empty = the next colour of the palette
 };
 
 struct LinePlot {

@@ -2,9 +2,11 @@
 // The refinement loop's step table (core/refine.hpp) as CSV (one row per parameter of each step,
 // step-level figures repeated; effect names and the model in metadata) and as readable text.
 #include <string>
+#include <vector>
 
 #include "errsep/core/refine.hpp"
 #include "errsep/io/csv.hpp"
+#include "errsep/io/html_report.hpp"
 
 namespace errsep::io {
 
@@ -14,6 +16,8 @@ namespace errsep::io {
 /// "step<k>_effect" and "step<k>_parameter<j>" names, "lambda_before" / "lambda_after" (the λ of
 /// the separations of the raw and the corrected readings, see lambda_summary).
 CsvTable refine_csv(const core::RefineResult& r);
+/// The columns of refine_csv, in order.
+const std::vector<std::string>& refine_csv_columns();
 
 /// "λ (rule)" or "λ (rule, fallback)" of a separation, e.g. "0.3481 (lcurve)" or
 /// "9.033e-07 (lcurve, no_regularisation)".
@@ -22,5 +26,11 @@ std::string lambda_summary(const core::FourSensorResult& sep);
 /// The step table, the λ of the separations before and after, the final candidate scores and the
 /// whiteness verdict as text.
 std::string format_refine_text(const core::RefineResult& r);
+
+/// A refine_steps.csv (refine_csv) read back as a readable table for a report: one row per step
+/// with the effect, its parameters (value ± u, k = 1), F and p, the residual RMS before -> after,
+/// the errors against the truth before -> after where the run had one, and the verdict.  Throws
+/// CsvError naming `file` when a column or a step's metadata is missing.
+HtmlTable refine_steps_table(const CsvTable& steps, const std::filesystem::path& file);
 
 }  // namespace errsep::io

@@ -8,21 +8,26 @@
 //                  straightness_direction (default Y)
 //   reference.csv  x_mm, f_um [, u_f_um]                                         (optional)
 //   lcurve.csv     lambda, residual_norm, solution_norm, curvature; "# lambda_chosen", "#
-//   lambda_rule" residuals.csv  x_mm, config, residual_um (optional) refine.csv     free-form
-//   numeric columns, rendered as a table                 (optional) a grid CSV     x_mm, y_mm, w_um
+//   lambda_rule"
+//   residuals.csv  x_mm, config, residual_um (optional)
+//   refine_steps.csv or refine/refine_steps.csv   the refine step table (io/refine_report.hpp),
+//                  rendered with each step's residual and errors before -> after (optional)
+//   raw.csv        the raw scan: its metadata gives the date and time and the sensors (optional)
+//   a grid CSV     x_mm, y_mm, w_um
 //   [, m_um | m_w_um] [, u_w_um]  (displacement method; found
 //                  by its columns, or given as ScanReportOptions::grid_csv)
 //   or, without motion.csv and grid, a one-axis displacement result
 //                  x_mm, m_um, w_um [, r_um, u_m_um, u_w_um] (m: table motion error, EZX default)
 // At least one of them must be present.
 //
-// Outputs in DIR: evaluation.csv (one row, ISO 230-1 symbols in the column names; an expanded
-// uncertainty that is not known is an empty field, read back with CsvReadOptions::allow_empty),
-// evaluation.txt, plots/*.png|svg|gp|dat, report.html, compensation/* (every CNC format of
-// io/cnc/, in machine coordinates, and accuracy.csv).  DIR is a result set
-// (io/staged_directory.hpp): it is refused when its manifest says it is not whole, raw scans in it
-// are read with the plausibility checks, and the outputs join the set, which is committed anew
-// whole (outputs of an earlier report are replaced, never mixed with these).
+// Outputs in DIR (or DIR/<output_subdir>, e.g. OUT/report/ for errsep-scan): evaluation.csv (one
+// row, ISO 230-1 symbols in the column names; an expanded uncertainty that is not known is an empty
+// field, read back with CsvReadOptions::allow_empty), evaluation.txt, plots/*.png|svg|gp|dat,
+// report.html, compensation/* (every CNC format of io/cnc/, in machine coordinates, and
+// accuracy.csv).  DIR is a result set (io/staged_directory.hpp): it is refused when its manifest
+// says it is not whole, raw scans in it are read with the plausibility checks, and the outputs join
+// the set, which is committed anew whole (outputs of an earlier report are replaced, never mixed
+// with these).
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -32,9 +37,21 @@
 #include "errsep/core/iso230.hpp"
 #include "errsep/core/machine_axes.hpp"
 #include "errsep/io/cnc/compensation_export.hpp"
+#include "errsep/io/pdf_print.hpp"
 #include "errsep/io/plots.hpp"
 
 namespace errsep::io {
+
+/// What a report for a customer states beyond the data (empty / nullopt: "not stated").
+struct ReportParticulars {
+  std::string machine;                  ///< e.g. "DMU 50 #3, Hall 2"
+  std::string operator_name;            ///< who measured
+  std::string instrument;               ///< e.g. "errsep four-sensor rig, Keyence GT2 probe"
+  std::optional<double> temperature_c;  ///< environment temperature during the scan, °C
+  /// Tolerance of the straightness of S (minimum zone, ISO 230-1): a verdict is given when set.
+  std::optional<double> straightness_tolerance_um;
+  bool is_valid(std::string* why) const;
+};
 
 struct ScanReportOptions {
   core::EvaluationOptions evaluation;
@@ -60,6 +77,14 @@ struct ScanReportOptions {
   /// The daemon's results store: adds the straightness trend over its scans (trend.csv and a
   /// section of evaluation.txt; io/straightness_trend.hpp).  Empty = none.
   std::filesystem::path trend_results_dir;
+  /// Sub-folder of DIR that receives every output ("report": errsep-scan's OUT/report/); empty =
+  /// DIR itself (errsep-report's default).
+  std::string output_subdir;
+  ReportParticulars particulars;
+  /// Also print report.html to report.pdf (headless Chromium, io/pdf_print.hpp); when Chromium
+  /// is absent or fails, the HTML stands alone and ScanReportResult::pdf_skipped says why.
+  bool pdf = false;
+  PdfOptions pdf_print;
   bool is_valid(std::string* why) const;
 };
 
@@ -67,7 +92,11 @@ struct ScanReportResult {
   std::vector<std::filesystem::path> written;
   /// Temporaries of interrupted errsep runs removed beside and in DIR (io::describe_swept).
   std::vector<std::filesystem::path> swept;
-  std::string text;  ///< evaluation.txt
+  std::string text;            ///< evaluation.txt
+  std::filesystem::path html;  ///< report.html where it now is
+  std::filesystem::path pdf;   ///< report.pdf where it now is; empty when none was made
+  std::string pdf_skipped;     ///< why no PDF was made (empty when one was, or none was asked)
+  std::string verdict;         ///< the conformance statement, empty without a tolerance
   std::vector<std::string> warnings;
   bool four_sensor = false, grid = false;
   /// One line per compensation table (points, range, interpolation error against U); empty
@@ -83,5 +112,10 @@ ScanReportResult write_scan_report(const std::filesystem::path& dir,
 /// "12.34 ± 0.56" with U rounded to two significant digits and the value to the same decimal
 /// place (GUM 7.2.6); without U ("—" for U <= 0) the value with 4 significant digits.
 std::string format_value_with_uncertainty(double value, double expanded_uncertainty);
+
+/// Conformance with an upper tolerance (ISO 14253-1 decision rule, the uncertainty counts against
+/// the one who claims): "PASS" when value + U <= tolerance, "FAIL" when value - U > tolerance,
+/// otherwise "NOT PROVEN" (the interval straddles the tolerance, or U is not known: U <= 0).
+std::string conformance_verdict(double value, double expanded_uncertainty, double tolerance);
 
 }  // namespace errsep::io

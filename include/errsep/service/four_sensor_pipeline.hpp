@@ -40,8 +40,9 @@ struct FourSensorPipelineOptions {
   bool is_valid(std::string* why = nullptr) const;
 };
 
-/// The options a machine config gives ([refine] enabled and alpha) for the named gauge
-/// (core::curvature_gauge_from_string); throws std::invalid_argument naming an unknown gauge.
+/// The options a machine config gives ([separation]; [refine] enabled and alpha); a non-empty
+/// `gauge` (core::curvature_gauge_from_string, the command line's) overrides [separation] gauge.
+/// Throws std::invalid_argument naming an unknown gauge.
 FourSensorPipelineOptions pipeline_options(const io::MachineConfig& cfg, const std::string& gauge);
 
 /// What the pipeline did.
