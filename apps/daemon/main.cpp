@@ -5,12 +5,16 @@
 // config between scans, SIGTERM stops the stage, writes what was measured and exits.  With an
 // [mqtt] table it also publishes every scan to the plant's broker, store and forward
 // (service/plant_publisher.hpp; [mqtt] is read at start only: a change needs a restart).
+// After each scan's result folder is committed it makes the report in results/<stem>/report/,
+// as errsep-scan does (service/scan_report_job.hpp; --no-report skips it): on the main loop,
+// never on a sampling thread; a report that fails is logged and loses none of the scan's files.
 #include <CLI/CLI.hpp>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <memory>
 
@@ -22,6 +26,7 @@
 #include "errsep/io/unit_dropin.hpp"
 #include "errsep/service/four_sensor_pipeline.hpp"
 #include "errsep/service/plant_publisher.hpp"
+#include "errsep/service/scan_report_job.hpp"
 #include "errsep/version.hpp"
 
 namespace {
@@ -47,7 +52,7 @@ int main(int argc, char** argv) {
   double schedule_s = 0;
   int check_ms = 500, stop_timeout_ms = 5000, gpio_debounce_ms = 20, checkpoint_ms = 1000;
   double min_free_mb = 1.0;
-  bool no_separate = false, no_register_map = false, print_dropin = false;
+  bool no_separate = false, no_register_map = false, print_dropin = false, no_report = false;
   app.add_option("-c,--config", config_path, "machine config (TOML); re-read on SIGHUP")
       ->required()
       ->check(CLI::ExistingFile);
@@ -97,6 +102,9 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
   app.add_flag("--no-separate", no_separate, "write raw data only (no four-sensor result)");
+  app.add_flag("--no-report", no_report,
+               "make no report after a scan (results/<stem>/report/: evaluation, figures, HTML, "
+               "PDF per [report] pdf, compensation tables; errsep-report makes it later)");
   app.add_flag("--print-unit-dropin", print_dropin,
                "print the systemd drop-in that lets the unit reach the Modbus TCP hosts of the "
                "config and the register map's address (the unit allows loopback only), and exit");
@@ -127,6 +135,9 @@ int main(int argc, char** argv) {
     // The result of each scan: the same folder as errsep-scan's, from the same pipeline, with the
     // settings ([refine]) of the config the backend was last built from.
     auto pipeline = std::make_shared<errsep::service::FourSensorPipelineOptions>();
+    // The report after each scan, with the settings of the same config ([report], [compensation],
+    // [axes]).
+    auto report = std::make_shared<errsep::io::ScanReportOptions>();
     opts.write_result_set = [pipeline](const errsep::io::RawFourSensorScan& raw,
                                        const std::filesystem::path& dir) {
       const auto r = errsep::service::FourSensorPipeline(*pipeline).write_result_set(
@@ -138,8 +149,8 @@ int main(int argc, char** argv) {
     };
 
     // Reads the file again on every call: SIGHUP picks up an edited config.
-    auto factory = [config_path, device_port,
-                    pipeline]() -> std::unique_ptr<errsep::acq::ScanBackend> {
+    auto factory = [config_path, device_port, pipeline,
+                    report]() -> std::unique_ptr<errsep::acq::ScanBackend> {
       errsep::io::MachineConfig cfg = errsep::io::load_machine_config(config_path);
       if (device_port > 0) errsep::io::apply_simulator_port(cfg, device_port);
       for (const auto& b : cfg.buses)
@@ -147,6 +158,7 @@ int main(int argc, char** argv) {
           throw std::runtime_error(config_path + ": bus '" + b.name +
                                    "' has port 0: give --device-port (the simulator's port)");
       *pipeline = errsep::service::pipeline_options(cfg, "");  // [separation], as errsep-scan
+      *report = errsep::service::result_report_options(cfg);
       return std::make_unique<errsep::drivers::DeviceScanBackend>(std::move(cfg));
     };
     // A bad config is an error at start (exit non-zero, message names file:line); later, on
@@ -156,6 +168,7 @@ int main(int argc, char** argv) {
     // Plant broker: the publisher thread is fed from the results store through the disk queue,
     // after each scan's files are committed, never from the sampling threads.
     std::unique_ptr<errsep::service::PlantPublisher> publisher;
+    std::function<void(std::uint64_t, const std::string&)> publish;
     errsep::acq::Daemon* daemon_ptr = nullptr;  // set before the publisher starts
     if (const auto mqtt = errsep::io::load_machine_config(config_path).mqtt) {
       errsep::service::PlantPublisherOptions po;
@@ -180,8 +193,8 @@ int main(int argc, char** argv) {
           return r;
         };
       publisher = std::make_unique<errsep::service::PlantPublisher>(po, status, command);
-      opts.on_scan_committed = [p = publisher.get(), dir = opts.results.dir](
-                                   std::uint64_t id, const std::string& stem) {
+      publish = [p = publisher.get(), dir = opts.results.dir](std::uint64_t id,
+                                                              const std::string& stem) {
         p->scan_committed(dir, stem, id);
       };
       std::cerr << "<6>mqtt: publishing to " << mqtt->host << ":" << mqtt->port << " under "
@@ -189,6 +202,15 @@ int main(int argc, char** argv) {
                 << (mqtt->commands ? ", commands on " + mqtt->topic_root() + "/cmd/scan" : "")
                 << "\n";
     }
+
+    // Once a scan's files are on disk (and for each result recovered at start): queued for the
+    // broker first (quick), then its report (seconds; on the main loop, which the sampling
+    // threads never wait for).
+    opts.on_scan_committed = [publish, report, no_report, dir = opts.results.dir](
+                                 std::uint64_t id, const std::string& stem) {
+      if (publish) publish(id, stem);
+      if (!no_report) errsep::service::write_result_report_logged(dir / stem, *report, std::cerr);
+    };
 
     const errsep::acq::SdNotifier notifier;
     if (!notifier.error().empty()) std::cerr << "<4>" << notifier.error() << "\n";

@@ -392,9 +392,7 @@ int main(int argc, char** argv) {
       std::cout << line << "\n";
     // The report, from the result set now in place: a report that fails loses no result.
     if (summary && !no_report) {
-      io::ScanReportOptions ro = service::report_options_from_config(cfg);
-      ro.output_subdir = "report";
-      ro.pdf = ro.pdf && !no_pdf;
+      const io::ScanReportOptions ro = service::result_report_options(cfg, !no_pdf);
       std::cout << "report: evaluating " << out.string() << " into " << (out / "report").string()
                 << "/ (figures, HTML" << (ro.pdf ? ", PDF" : "") << ", compensation tables)\n";
       try {

@@ -22,6 +22,43 @@ io::ScanReportOptions report_options_from_config(const io::MachineConfig& cfg) {
   return o;
 }
 
+io::ScanReportOptions result_report_options(const io::MachineConfig& cfg, bool pdf) {
+  io::ScanReportOptions o = report_options_from_config(cfg);
+  o.output_subdir = kResultReportSubdir;
+  o.pdf = o.pdf && pdf;
+  return o;
+}
+
+bool write_result_report_logged(const std::filesystem::path& dir, const io::ScanReportOptions& ro,
+                                std::ostream& log) {
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir, ec)) return false;
+  const std::string name = dir.filename().string();
+  // Each line in one write: other threads (the register map, the publisher) log to the same
+  // stream, and the journal takes a line's priority from its start.
+  const auto line = [&log](const std::string& l) { log << (l + "\n") << std::flush; };
+  try {
+    const io::ScanReportResult r = io::write_scan_report(dir, ro);
+    if (const std::string swept = io::describe_swept(r.swept); !swept.empty())
+      line("<4>" + name + ": report: " + swept);
+    for (const auto& w : r.warnings)
+      line("<4>" + name + ": report: " + w);
+    std::string done = "<6>" + name + ": report: " + r.html.string();
+    if (!r.pdf.empty())
+      done += ", " + r.pdf.string();
+    else if (!r.pdf_skipped.empty())
+      done += " (PDF skipped: " + r.pdf_skipped + ")";
+    if (!r.verdict.empty()) done += "; conformance: " + r.verdict;
+    line(done);
+    return true;
+  } catch (const std::exception& e) {
+    line("<3>" + name + ": the report failed: " + e.what() + "; the scan's results are kept in " +
+         dir.string() + " (errsep-report " + dir.string() + " --subdir " + kResultReportSubdir +
+         " makes the report again)");
+    return false;
+  }
+}
+
 void print_report_outcome(const io::ScanReportResult& r, const std::filesystem::path& dir,
                           std::ostream& out, std::ostream& err) {
   if (const std::string swept = io::describe_swept(r.swept); !swept.empty()) out << swept << "\n";

@@ -6,8 +6,11 @@
 // manifest) with the same CSV columns; the daemon's raw file, in its store and in its folder,
 // must carry every metadata line errsep-scan's raw file carries (the sampler's counters: missed
 // periods, overruns, jitter, the real-time set-up; the store's file all but run_id, which names a
-// result set's run), because both scans are acq::run_scan's; and
-// errsep-report must read both folders.
+// result set's run), because both scans are acq::run_scan's; both folders hold the report made
+// after the scan (report/: the same file names, evaluation.csv and report.html among them, the
+// same evaluation.csv columns; issue 17 item 4), the daemon's journal says where it is; and
+// errsep-report must read both folders.  The PDF per [report] pdf where Chromium exists, off
+// where it does not (the report then says why it has none, in both folders alike).
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <csignal>
@@ -62,6 +65,9 @@ TEST_CASE("the daemon and errsep-scan write the same result folder, errsep-repor
   for (int bus = 0; bus < 2; ++bus)
     test::replace_once(toml, "port = 0\n", "port = " + std::to_string(rig.devsim.port) + "\n");
   toml += "\n[refine]\nenabled = true\n";
+  const bool chromium = fs::exists("/usr/bin/chromium");
+  // The rig's machine makes no PDF; this test prints one where Chromium exists.
+  if (chromium) test::replace_once(toml, "pdf = false", "pdf = true");
   rig.config = rig.tmp / "machine.toml";
   std::ofstream(rig.config) << toml;
 
@@ -100,6 +106,31 @@ TEST_CASE("the daemon and errsep-scan write the same result folder, errsep-repor
     CHECK(daemon_files.count(f) == 1);
   CHECK(io::check_result_set(daemon_dir).whole());
   CHECK(io::check_result_set(scan_dir).whole());
+  // The report after the scan, in both folders: the same file names under report/, the
+  // evaluation and the HTML report among them (the PDF too where Chromium printed it).
+  const auto under_report = [](const std::set<std::string>& files) {
+    std::set<std::string> sub;
+    for (const auto& f : files)
+      if (f.rfind("report/", 0) == 0) sub.insert(f);
+    return sub;
+  };
+  const auto daemon_report = under_report(daemon_files);
+  CHECK(daemon_report == under_report(scan_files));
+  for (const char* f : {"report/evaluation.csv", "report/evaluation.txt", "report/report.html"}) {
+    INFO(f);
+    CHECK(daemon_report.count(f) == 1);
+  }
+  if (chromium) CHECK(daemon_report.count("report/report.pdf") == 1);
+  CHECK(header_of(daemon_dir / "report/evaluation.csv") ==
+        header_of(scan_dir / "report/evaluation.csv"));
+  CHECK_FALSE(header_of(daemon_dir / "report/evaluation.csv").empty());
+  {
+    const std::string logs = rig.logs();
+    INFO(logs);
+    CHECK(logs.find("<6>" + daemon_dir.filename().string() + ": report: ") != std::string::npos);
+    CHECK(logs.find("the report failed") == std::string::npos);
+  }
+
   // The same columns in every CSV.
   int csvs = 0;
   for (const auto& f : scan_files)
