@@ -14,31 +14,13 @@
 #include "errsep/core/four_sensor_simulation.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/staged_directory.hpp"
+#include "support/raw_scan_cases.hpp"
 #include "support/support.hpp"
 
 using namespace errsep;
 namespace fs = std::filesystem;
 
 namespace {
-
-/// A complete raw scan of a random smooth slideway (several harmonics, random phases and
-/// amplitudes per seed), noise on each reading.
-io::RawFourSensorScan simulated_raw(std::uint64_t seed) {
-  const core::FourSensorConfig cfg;
-  core::FourSensorSimOptions so;
-  so.sigma_um = 0.1;
-  so.seed = seed;
-  const auto sim = core::simulate_four_sensor(cfg, core::random_smooth_truth(cfg, seed), so);
-  io::RawFourSensorScan raw;
-  raw.complete = true;
-  raw.geometry = cfg;
-  raw.x_mm.assign(sim.x_mm.data(), sim.x_mm.data() + sim.x_mm.size());
-  for (std::size_t j = 0; j < 4; ++j)
-    for (Eigen::Index n = 0; n < sim.m_um.rows(); ++n)
-      raw.m_um[j].push_back(sim.m_um(n, static_cast<Eigen::Index>(j)));
-  raw.metadata = {{"scan_id", std::to_string(seed)}};
-  return raw;
-}
 
 std::set<std::string> files_in(const fs::path& dir) {
   std::set<std::string> out;
@@ -54,7 +36,7 @@ TEST_CASE("write_result_set: errsep-scan's files as one whole set, the separatio
   const service::FourSensorPipeline pipeline({});
   const fs::path out = tmp / "scan";
   for (std::uint64_t seed : {3u, 4u}) {  // the second replaces the first whole
-    const auto raw = simulated_raw(seed);
+    const auto raw = test::simulated_raw(seed);
     const auto r = pipeline.write_result_set(raw, out, "test");
     INFO("seed " << seed << ": " << r.error);
     REQUIRE(r.error.empty());
@@ -79,7 +61,7 @@ TEST_CASE("write_result_set: errsep-scan's files as one whole set, the separatio
 
 TEST_CASE("write_result_set: a separation that fails keeps the raw scan alone and says why") {
   test::TempDir tmp;
-  auto raw = simulated_raw(5);
+  auto raw = test::simulated_raw(5);
   raw.m_um[2][7] = std::numeric_limits<double>::quiet_NaN();  // not separable
   const auto r = service::FourSensorPipeline({}).write_result_set(raw, tmp / "scan", "test");
   CHECK_FALSE(r.separation);

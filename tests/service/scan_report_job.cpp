@@ -12,9 +12,9 @@
 #include <sstream>
 #include <string>
 
-#include "errsep/core/four_sensor_simulation.hpp"
 #include "errsep/io/staged_directory.hpp"
 #include "errsep/service/four_sensor_pipeline.hpp"
+#include "support/raw_scan_cases.hpp"
 #include "support/support.hpp"
 
 using namespace errsep;
@@ -24,19 +24,8 @@ namespace {
 
 /// A result set as the daemon writes it, of a random smooth slideway with noise on each reading.
 void write_result_set(const fs::path& dir, std::uint64_t seed) {
-  const core::FourSensorConfig cfg;
-  core::FourSensorSimOptions so;
-  so.sigma_um = 0.1;
-  so.seed = seed;
-  const auto sim = core::simulate_four_sensor(cfg, core::random_smooth_truth(cfg, seed), so);
-  io::RawFourSensorScan raw;
-  raw.complete = true;
-  raw.geometry = cfg;
-  raw.x_mm.assign(sim.x_mm.data(), sim.x_mm.data() + sim.x_mm.size());
-  for (std::size_t j = 0; j < 4; ++j)
-    for (Eigen::Index n = 0; n < sim.m_um.rows(); ++n)
-      raw.m_um[j].push_back(sim.m_um(n, static_cast<Eigen::Index>(j)));
-  const auto r = service::FourSensorPipeline({}).write_result_set(raw, dir, "test");
+  const auto r =
+      service::FourSensorPipeline({}).write_result_set(test::simulated_raw(seed), dir, "test");
   REQUIRE(r.separation);
 }
 
