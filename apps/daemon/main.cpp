@@ -1,13 +1,14 @@
 // errsep-daemon: errsep as a service.  Waits for a trigger (Modbus coil of its register map, a
 // rising edge on the machine config's [gpio] start_line, a schedule), runs the configured
-// four-sensor scan and writes raw data and results durably to the results directory.  Runs in the
-// foreground under systemd (Type=notify; see config/errsep.service); SIGHUP reloads the machine
-// config between scans, SIGTERM stops the stage, writes what was measured and exits.  With an
-// [mqtt] table it also publishes every scan to the plant's broker, store and forward
-// (service/plant_publisher.hpp; [mqtt] is read at start only: a change needs a restart).
-// After each scan's result folder is committed it makes the report in results/<stem>/report/,
-// as errsep-scan does (service/scan_report_job.hpp; --no-report skips it): on the main loop,
-// never on a sampling thread; a report that fails is logged and loses none of the scan's files.
+// four-sensor or displacement scan ([scan] method) and writes raw data and results durably to the
+// results directory.  Runs in the foreground under systemd (Type=notify; see
+// config/errsep.service); SIGHUP reloads the machine config between scans, SIGTERM stops the stage,
+// writes what was measured and exits.  With an [mqtt] table it also publishes every scan to the
+// plant's broker, store and forward (service/plant_publisher.hpp; [mqtt] is read at start only: a
+// change needs a restart). After each scan's result folder is committed it makes the report in
+// results/<stem>/report/, as errsep-scan does (service/scan_report_job.hpp; --no-report skips it):
+// on the main loop, never on a sampling thread; a report that fails is logged and loses none of the
+// scan's files.
 #include <CLI/CLI.hpp>
 #include <csignal>
 #include <cstdio>
@@ -24,6 +25,7 @@
 #include "errsep/drivers/daemon_register_server.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/unit_dropin.hpp"
+#include "errsep/service/displacement_pipeline.hpp"
 #include "errsep/service/four_sensor_pipeline.hpp"
 #include "errsep/service/plant_publisher.hpp"
 #include "errsep/service/scan_report_job.hpp"
@@ -145,6 +147,15 @@ int main(int argc, char** argv) {
       if (!r.separation) throw std::runtime_error(r.error);
       for (const auto& w : r.warnings)
         std::cerr << "<4>" << dir.filename().string() << ": " << w << "\n";
+      return *r.separation;
+    };
+
+    // A displacement scan ([scan] method = "displacement"): its pipeline, as errsep-scan's.
+    opts.write_displacement_result_set = [](const errsep::io::RawDisplacementScan& raw,
+                                            const std::filesystem::path& dir) {
+      const auto r = errsep::service::DisplacementPipeline({}).write_result_set(
+          raw, dir, std::string("errsep-daemon ") + errsep::kVersion);
+      if (!r.separation) throw std::runtime_error(r.error);
       return *r.separation;
     };
 

@@ -1,0 +1,128 @@
+// errsep-daemon with [scan] method = "displacement" (issue 17: the displacement scan through the
+// same pipeline in errsep-scan and the daemon): the daemon's scan, triggered through its register
+// map, writes the result folder errsep-scan writes for the same machine (raw_displacement.csv,
+// displacement.csv, displacement_residuals.csv, report/ with the same file names and the same CSV
+// columns), both whole result sets that errsep-report reads; the register map shows the
+// straightness of m(x) with its U.  Then the report removed from the daemon's folder (a kill
+// between the commit of the results and the report) is made again at the daemon's next start,
+// and the journal says so.
+#include <catch2/catch.hpp>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <string>
+
+#include "errsep/io/csv.hpp"
+#include "errsep/io/staged_directory.hpp"
+#include "support/daemon_rig.hpp"
+
+using namespace errsep;
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+
+namespace {
+
+std::set<std::string> files_under(const fs::path& dir) {
+  std::set<std::string> out;
+  for (const auto& e : fs::recursive_directory_iterator(dir))
+    if (e.is_regular_file()) out.insert(fs::relative(e.path(), dir).generic_string());
+  return out;
+}
+
+/// The header line of an errsep CSV (the first line that is not a '#' metadata line).
+std::string header_of(const fs::path& csv) {
+  std::ifstream in(csv);
+  std::string line;
+  while (std::getline(in, line))
+    if (!line.empty() && line[0] != '#') return line;
+  return {};
+}
+
+/// The shipped simulator config as a displacement machine: quick stages, K = 5, no PDF.
+fs::path write_config(const fs::path& dir) {
+  std::string t = test::read_file(test::source_dir() / "config" / "simulator.toml");
+  test::replace_once(t, "method = \"four_sensor\"", "method = \"displacement\"");
+  test::replace_once(t, "averages = 100", "averages = 5");
+  for (const std::string from : {"speed_mm_s = 200.0", "speed_mm_s = 100.0"})
+    for (auto pos = t.find(from); pos != std::string::npos; pos = t.find(from, pos))
+      t.replace(pos, from.size(), "speed_mm_s = 2000.0");
+  t += "\n[report]\npdf = false\n";
+  const fs::path p = dir / "machine.toml";
+  std::ofstream(p) << t;
+  return p;
+}
+
+}  // namespace
+
+TEST_CASE(
+    "displacement: the daemon writes errsep-scan's folder, a lost report is remade at start") {
+  test::DaemonRig rig;
+  rig.config = write_config(rig.tmp.path());
+  rig.devsim.start(rig.config, rig.tmp / "devsim.log");
+  rig.start_daemon();
+  REQUIRE(rig.notify->wait_for("READY=1", 15s));
+  std::string out;
+  REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1, &out) == 0);
+  const auto r = rig.wait_regs(
+      [](const std::vector<long>& x) { return x[test::reg_last_scan_id] == 1 && x[0] == 1; }, 60s);
+  REQUIRE(r.size() == test::kRegisterCount);
+  REQUIRE(r[test::reg_last_outcome] == 1);  // complete
+  // The straightness of the table motion error m(x), with its U.
+  const double mz = test::nm_registers_um(r, test::reg_straightness_hi);
+  const double mz_U = test::nm_registers_um(r, test::reg_straightness_U_hi);
+  CHECK((std::isfinite(mz) && mz > 0));
+  CHECK((std::isfinite(mz_U) && mz_U > 0));
+  const auto store_raw = rig.find_file(1, "raw");
+  REQUIRE(store_raw);
+  REQUIRE(rig.find_file(1, "result"));
+  const std::string name = store_raw->filename().string();
+  const fs::path daemon_dir =
+      rig.results / name.substr(0, name.size() - std::string(".raw.csv").size());
+  REQUIRE(fs::is_directory(daemon_dir));
+  rig.daemon->signal(SIGTERM);
+  REQUIRE(rig.daemon->wait(10s));
+
+  const fs::path scan_dir = rig.tmp / "scan";
+  std::string scan_out;
+  const int rc =
+      test::run_command(test::app_path("scan").string() + " --config " + rig.config.string() +
+                            " --out " + scan_dir.string() + " --devsim " +
+                            test::app_path("devsim").string() + " --settle-ms 0 --no-mqtt",
+                        &scan_out);
+  INFO(scan_out);
+  REQUIRE(rc == 0);
+
+  const auto daemon_files = files_under(daemon_dir), scan_files = files_under(scan_dir);
+  CHECK(daemon_files == scan_files);
+  for (const char* f : {"raw_displacement.csv", "displacement.csv", "displacement_residuals.csv",
+                        "report/evaluation.csv", "report/evaluation.txt", "report/report.html"}) {
+    INFO(f);
+    CHECK(daemon_files.count(f) == 1);
+  }
+  CHECK(io::check_result_set(daemon_dir).whole());
+  CHECK(io::check_result_set(scan_dir).whole());
+  int csvs = 0;
+  for (const auto& f : scan_files)
+    if (f.size() > 4 && f.substr(f.size() - 4) == ".csv" && daemon_files.count(f)) {
+      INFO(f);
+      CHECK(header_of(daemon_dir / f) == header_of(scan_dir / f));
+      CHECK_FALSE(header_of(scan_dir / f).empty());
+      ++csvs;
+    }
+  CHECK(csvs >= 4);
+  // The daemon's result carries its uncertainty and its source, as errsep-scan's.
+  const auto t = io::read_csv(daemon_dir / "displacement.csv");
+  CHECK(t.find_column("u_w_um"));
+  CHECK(t.meta("source") ==
+        std::optional<std::string>((daemon_dir / "raw_displacement.csv").string()));
+  for (const fs::path& dir : {daemon_dir, scan_dir}) {
+    std::string rep;
+    const int rrc = test::run_command(
+        test::app_path("report").string() + " " + dir.string() + " --no-plots", &rep);
+    INFO(dir.string() << "\n" << rep);
+    CHECK(rrc == 0);
+  }
+}
