@@ -175,6 +175,9 @@ int main(int argc, char** argv) {
     // A bad config is an error at start (exit non-zero, message names file:line); later, on
     // SIGHUP, the old config is kept.
     factory();
+    // Reports lost to a stop between a scan's commit and its report are made now, before the
+    // daemon takes triggers (a few seconds each).
+    if (!no_report) errsep::service::remake_missing_reports(opts.results.dir, *report, std::cerr);
 
     // Plant broker: the publisher thread is fed from the results store through the disk queue,
     // after each scan's files are committed, never from the sampling threads.

@@ -3,9 +3,9 @@
 // map, writes the result folder errsep-scan writes for the same machine (raw_displacement.csv,
 // displacement.csv, displacement_residuals.csv, report/ with the same file names and the same CSV
 // columns), both whole result sets that errsep-report reads; the register map shows the
-// straightness of m(x) with its U.  Then the report removed from the daemon's folder (a kill
-// between the commit of the results and the report) is made again at the daemon's next start,
-// and the journal says so.
+// straightness of m(x) with its U.  Then a folder committed without its report (what a kill
+// between the commit of the results and the report leaves; made here with --no-report) gets its
+// report at the daemon's next start, and the journal says so.
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
@@ -125,4 +125,45 @@ TEST_CASE(
     INFO(dir.string() << "\n" << rep);
     CHECK(rrc == 0);
   }
+
+  // A report lost to a stop between the commit of a scan's results and its report: the daemon
+  // with --no-report leaves exactly that folder (results committed, no report/).
+  rig.start_daemon({"--no-report"});
+  REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1, &out) == 0);
+  const auto r2 = rig.wait_regs(
+      [](const std::vector<long>& x) { return x[test::reg_last_scan_id] == 2 && x[0] == 1; }, 60s);
+  REQUIRE(r2.size() == test::kRegisterCount);
+  REQUIRE(r2[test::reg_last_outcome] == 1);
+  const auto raw2 = rig.find_file(2, "raw");
+  REQUIRE(raw2);
+  const std::string name2 = raw2->filename().string();
+  const fs::path dir2 =
+      rig.results / name2.substr(0, name2.size() - std::string(".raw.csv").size());
+  REQUIRE(fs::exists(dir2 / "displacement.csv"));
+  REQUIRE_FALSE(fs::exists(dir2 / "report"));
+  const auto before = files_under(dir2);
+  rig.daemon->signal(SIGTERM);
+  REQUIRE(rig.daemon->wait(10s));
+
+  // The next start makes it (before the register map listens), says so, and keeps the scan's
+  // files; the folder with its report already is left alone.
+  const auto first_report_time = fs::last_write_time(daemon_dir / "report" / "report.html");
+  rig.start_daemon();
+  CHECK(fs::exists(dir2 / "report" / "report.html"));
+  CHECK(fs::exists(dir2 / "report" / "evaluation.csv"));
+  CHECK(io::check_result_set(dir2).whole());
+  const auto after = files_under(dir2);
+  for (const auto& f : before) {
+    INFO(f);
+    CHECK(after.count(f) == 1);
+  }
+  CHECK(fs::last_write_time(daemon_dir / "report" / "report.html") == first_report_time);
+  const std::string logs = rig.logs();
+  INFO(logs);
+  CHECK(logs.find("<5>" + dir2.filename().string() + ": report missing") != std::string::npos);
+  CHECK(logs.find("<6>" + dir2.filename().string() + ": report: ") != std::string::npos);
+  CHECK(logs.find("<5>" + daemon_dir.filename().string() + ": report missing") ==
+        std::string::npos);
+  rig.daemon->signal(SIGTERM);
+  CHECK(rig.daemon->wait(10s));
 }
