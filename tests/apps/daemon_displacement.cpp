@@ -18,37 +18,21 @@
 #include "errsep/io/csv.hpp"
 #include "errsep/io/staged_directory.hpp"
 #include "support/daemon_rig.hpp"
+#include "support/result_files.hpp"
 
 using namespace errsep;
 using namespace std::chrono_literals;
 namespace fs = std::filesystem;
+using errsep::test::files_under;
+using errsep::test::header_of;
 
 namespace {
 
-std::set<std::string> files_under(const fs::path& dir) {
-  std::set<std::string> out;
-  for (const auto& e : fs::recursive_directory_iterator(dir))
-    if (e.is_regular_file()) out.insert(fs::relative(e.path(), dir).generic_string());
-  return out;
-}
-
-/// The header line of an errsep CSV (the first line that is not a '#' metadata line).
-std::string header_of(const fs::path& csv) {
-  std::ifstream in(csv);
-  std::string line;
-  while (std::getline(in, line))
-    if (!line.empty() && line[0] != '#') return line;
-  return {};
-}
-
 /// The shipped simulator config as a displacement machine: quick stages, K = 5, no PDF.
 fs::path write_config(const fs::path& dir) {
-  std::string t = test::read_file(test::source_dir() / "config" / "simulator.toml");
+  std::string t = test::quick_simulator_config();
   test::replace_once(t, "method = \"four_sensor\"", "method = \"displacement\"");
   test::replace_once(t, "averages = 100", "averages = 5");
-  for (const std::string from : {"speed_mm_s = 200.0", "speed_mm_s = 100.0"})
-    for (auto pos = t.find(from); pos != std::string::npos; pos = t.find(from, pos))
-      t.replace(pos, from.size(), "speed_mm_s = 2000.0");
   t += "\n[report]\npdf = false\n";
   const fs::path p = dir / "machine.toml";
   std::ofstream(p) << t;
@@ -129,6 +113,9 @@ TEST_CASE(
   // A report lost to a stop between the commit of a scan's results and its report: the daemon
   // with --no-report leaves exactly that folder (results committed, no report/).
   rig.start_daemon({"--no-report"});
+  // Idle (READY=1 of the first start is still among the notify socket's messages).
+  REQUIRE(rig.wait_regs([](const std::vector<long>& x) { return x[0] == 1; }, 15s).size() ==
+          test::kRegisterCount);
   REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1, &out) == 0);
   const auto r2 = rig.wait_regs(
       [](const std::vector<long>& x) { return x[test::reg_last_scan_id] == 2 && x[0] == 1; }, 60s);

@@ -10,6 +10,7 @@
 
 #include "errsep/io/csv.hpp"
 #include "errsep/io/staged_directory.hpp"
+#include "support/result_files.hpp"
 #include "support/support.hpp"
 
 using namespace errsep;
@@ -20,14 +21,10 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// The embedded default config with faster stages, as tests/apps/scan_end_to_end.
+// The embedded default config with faster stages.
 fs::path write_test_config(const TempDir& dir) {
-  std::string t = test::read_file(test::source_dir() / "config" / "simulator.toml");
-  for (const std::string from : {"speed_mm_s = 200.0", "speed_mm_s = 100.0"})
-    for (auto pos = t.find(from); pos != std::string::npos; pos = t.find(from, pos))
-      t.replace(pos, from.size(), "speed_mm_s = 2000.0");
   const auto path = dir / "machine.toml";
-  std::ofstream(path) << t;
+  std::ofstream(path) << test::quick_simulator_config();
   return path;
 }
 
