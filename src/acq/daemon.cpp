@@ -697,7 +697,7 @@ Daemon::ResultFigures Daemon::write_result(
   result_file_metadata(t, stem, meta, raw_file,
                        static_cast<bool>(opts_.write_displacement_result_set));
   t.set_meta("solver", r.estimate.brief_report());
-  t.set_meta("sigma_um", fmt(r.sigma_um, 6));
+  t.set_meta("sigma_hat_um", fmt(r.sigma_um, 6));  // the key the scan summaries read
   t.set_meta("sigma_source", r.sigma_source);
   // ISO 230-1 straightness of the table motion error m(x) (Haramiishi 2024 Eq. 2), about both
   // reference lines; U (k = 2) from the joint estimate's u(m) when it has one, else none (NaN).
