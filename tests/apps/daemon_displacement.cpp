@@ -154,3 +154,19 @@ TEST_CASE(
   rig.daemon->signal(SIGTERM);
   CHECK(rig.daemon->wait(10s));
 }
+
+TEST_CASE("displacement: [scan] method = \"both\" is refused at start, naming the key") {
+  test::TempDir dir;
+  std::string t = test::quick_simulator_config();
+  test::replace_once(t, "method = \"four_sensor\"", "method = \"both\"");
+  const fs::path cfg = dir / "machine.toml";
+  std::ofstream(cfg) << t;
+  std::string out;
+  const int rc = test::run_command(test::app_path("daemon").string() + " --config " + cfg.string() +
+                                       " --results-dir " + (dir / "results").string() +
+                                       " --device-port 1 --no-register-map",
+                                   &out);
+  INFO(out);
+  CHECK(rc == 1);
+  CHECK_THAT(out, Catch::Contains("scan.method: 'both'"));
+}
