@@ -21,7 +21,7 @@ class TableReader {
 
   [[noreturn]] void fail(const std::string& key, const std::string& problem,
                          const toml::node* n = nullptr) const {
-    throw BudgetConfigError(file_, n ? line_of(*n) : line_of(t_), full(key), problem);
+    throw ConfigError(file_, n ? line_of(*n) : line_of(t_), full(key), problem);
   }
   std::string full(const std::string& key) const {
     return prefix_.empty() ? key : key.empty() ? prefix_ : prefix_ + "." + key;
@@ -84,7 +84,7 @@ class TableReader {
   void reject_unknown() const {
     for (const auto& [k, v] : t_)
       if (!used_.count(std::string(k.str())))
-        throw BudgetConfigError(file_, line_of(v), full(std::string(k.str())), "unknown key");
+        throw ConfigError(file_, line_of(v), full(std::string(k.str())), "unknown key");
   }
 
  private:
@@ -128,7 +128,7 @@ core::BudgetSpec build(const toml::table& root, const std::string& file) {
     for (const auto& [k, v] : t) {
       const std::string name(k.str());
       if (!v.is_table())
-        throw BudgetConfigError(file, line_of(v), "coefficients." + name, "expected a table");
+        throw ConfigError(file, line_of(v), "coefficients." + name, "expected a table");
       TableReader cr(*v.as_table(), file, "coefficients." + name);
       core::ExpansionCoefficient c;
       c.name = name;
@@ -144,7 +144,7 @@ core::BudgetSpec build(const toml::table& root, const std::string& file) {
     for (const auto& [k, v] : t) {
       const std::string name(k.str());
       if (!v.is_table())
-        throw BudgetConfigError(file, line_of(v), "components." + name, "expected a table");
+        throw ConfigError(file, line_of(v), "components." + name, "expected a table");
       TableReader cr(*v.as_table(), file, "components." + name);
       core::ThermalComponent c;
       c.name = name;
@@ -223,33 +223,26 @@ core::BudgetSpec build(const toml::table& root, const std::string& file) {
   }
   r.reject_unknown();
   std::string why;
-  if (!spec.thermal.is_valid(&why)) throw BudgetConfigError(file, 0, "", why);
+  if (!spec.thermal.is_valid(&why)) throw ConfigError(file, 0, "", why);
   return spec;
 }
 
 }  // namespace
-
-BudgetConfigError::BudgetConfigError(const std::string& file, int line, const std::string& key,
-                                     const std::string& problem)
-    : std::runtime_error(file + (line > 0 ? ":" + std::to_string(line) : std::string()) + ": " +
-                         (key.empty() ? std::string() : key + ": ") + problem),
-      key_(key),
-      line_(line) {}
 
 core::BudgetSpec parse_budget_config(const std::string& toml_text, const std::string& name) {
   toml::table root;
   try {
     root = toml::parse(toml_text, name);
   } catch (const toml::parse_error& e) {
-    throw BudgetConfigError(name, static_cast<int>(e.source().begin.line), "",
-                            std::string(e.description()));
+    throw ConfigError(name, static_cast<int>(e.source().begin.line), "",
+                      std::string(e.description()));
   }
   return build(root, name);
 }
 
 core::BudgetSpec read_budget_config(const std::filesystem::path& file) {
   std::ifstream in(file);
-  if (!in) throw BudgetConfigError(file.string(), 0, "", "cannot open the budget config file");
+  if (!in) throw ConfigError(file.string(), 0, "", "cannot open the budget config file");
   std::ostringstream ss;
   ss << in.rdbuf();
   return parse_budget_config(ss.str(), file.string());

@@ -13,13 +13,6 @@
 
 namespace errsep::io {
 
-ConfigError::ConfigError(const std::string& file, int line, const std::string& key,
-                         const std::string& problem)
-    : std::runtime_error(file + (line > 0 ? ":" + std::to_string(line) : std::string()) + ": " +
-                         (key.empty() ? std::string() : key + ": ") + problem),
-      key_(key),
-      line_(line) {}
-
 double ProfileSpec::eval(double x_mm) const noexcept {
   constexpr double kTwoPi = 6.283185307179586;
   double v = offset + slope_per_mm * x_mm + quadratic_per_mm2 * x_mm * x_mm;
