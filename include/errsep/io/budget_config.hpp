@@ -19,28 +19,16 @@
 #include <string>
 
 #include "errsep/core/uncertainty_budget.hpp"
+#include "errsep/io/config_error.hpp"
 
 namespace errsep::io {
 
-/// A problem in a budget config.  what() = "file:line: key: problem" (line 0 if unknown).
-class BudgetConfigError : public std::runtime_error {
- public:
-  BudgetConfigError(const std::string& file, int line, const std::string& key,
-                    const std::string& problem);
-  const std::string& key() const noexcept { return key_; }
-  int line() const noexcept { return line_; }
-
- private:
-  std::string key_;
-  int line_;
-};
-
-/// Parses TOML text; `name` is used in error messages as the file name.  Throws BudgetConfigError
-/// on a syntax error, a missing or unknown key, a value of the wrong type, or a spec that
-/// core::evaluate_budget would reject (unknown component, coefficient or loop).
+/// Parses TOML text; `name` is used in error messages as the file name.  Throws ConfigError
+/// (config_error.hpp) on a syntax error, a missing or unknown key, a value of the wrong type, or a
+/// spec that core::evaluate_budget would reject (unknown component, coefficient or loop).
 core::BudgetSpec parse_budget_config(const std::string& toml_text, const std::string& name);
 
-/// Reads and parses a file.  Throws BudgetConfigError (also when the file cannot be opened).
+/// Reads and parses a file.  Throws ConfigError (also when the file cannot be opened).
 core::BudgetSpec read_budget_config(const std::filesystem::path& file);
 
 }  // namespace errsep::io

@@ -22,22 +22,10 @@
 #include "errsep/core/four_sensor_config.hpp"
 #include "errsep/core/machine_axes.hpp"
 #include "errsep/io/cnc/compensation_export.hpp"
+#include "errsep/io/config_error.hpp"
 #include "errsep/io/register_spec.hpp"
 
 namespace errsep::io {
-
-/// A problem in a config file.  what() = "file:line: key: problem".
-class ConfigError : public std::runtime_error {
- public:
-  ConfigError(const std::string& file, int line, const std::string& key,
-              const std::string& problem);
-  const std::string& key() const noexcept { return key_; }
-  int line() const noexcept { return line_; }
-
- private:
-  std::string key_;
-  int line_;
-};
 
 enum class BusKind { tcp, rtu };
 enum class Parity { none, even, odd };
