@@ -59,13 +59,10 @@ TEST_CASE(
   const double mz_U = test::nm_registers_um(r, test::reg_straightness_U_hi);
   CHECK((std::isfinite(mz) && mz > 0));
   CHECK((std::isfinite(mz_U) && mz_U > 0));
-  const auto store_raw = rig.find_file(1, "raw");
-  REQUIRE(store_raw);
   REQUIRE(rig.find_file(1, "result"));
-  const std::string name = store_raw->filename().string();
-  const fs::path daemon_dir =
-      rig.results / name.substr(0, name.size() - std::string(".raw.csv").size());
-  REQUIRE(fs::is_directory(daemon_dir));
+  const auto folder = rig.result_folder(1);
+  REQUIRE(folder);
+  const fs::path daemon_dir = *folder;
   rig.daemon->signal(SIGTERM);
   REQUIRE(rig.daemon->wait(10s));
 
@@ -121,11 +118,9 @@ TEST_CASE(
       [](const std::vector<long>& x) { return x[test::reg_last_scan_id] == 2 && x[0] == 1; }, 60s);
   REQUIRE(r2.size() == test::kRegisterCount);
   REQUIRE(r2[test::reg_last_outcome] == 1);
-  const auto raw2 = rig.find_file(2, "raw");
-  REQUIRE(raw2);
-  const std::string name2 = raw2->filename().string();
-  const fs::path dir2 =
-      rig.results / name2.substr(0, name2.size() - std::string(".raw.csv").size());
+  const auto folder2 = rig.result_folder(2);
+  REQUIRE(folder2);
+  const fs::path dir2 = *folder2;
   REQUIRE(fs::exists(dir2 / "displacement.csv"));
   REQUIRE_FALSE(fs::exists(dir2 / "report"));
   const auto before = files_under(dir2);

@@ -68,10 +68,9 @@ TEST_CASE("the daemon and errsep-scan write the same result folder, errsep-repor
   const auto store_raw = rig.find_file(1, "raw");
   REQUIRE(store_raw);
   REQUIRE(rig.find_file(1, "result"));
-  const std::string name = store_raw->filename().string();
-  const fs::path daemon_dir =
-      rig.results / name.substr(0, name.size() - std::string(".raw.csv").size());
-  REQUIRE(fs::is_directory(daemon_dir));
+  const auto folder = rig.result_folder(1);
+  REQUIRE(folder);
+  const fs::path daemon_dir = *folder;
   rig.daemon->signal(SIGTERM);
   REQUIRE(rig.daemon->wait(10s));
 
