@@ -163,5 +163,6 @@ TEST_CASE("displacement: [scan] method = \"both\" is refused at start, naming th
                                    &out);
   INFO(out);
   CHECK(rc == 1);
-  CHECK_THAT(out, Catch::Contains("scan.method: 'both'"));
+  CHECK_THAT(out,
+             Catch::Contains("scan.method: 'both': the daemon runs one kind of scan per trigger"));
 }
