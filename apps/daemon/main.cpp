@@ -1,13 +1,14 @@
 // errsep-daemon: errsep as a service.  Waits for a trigger (Modbus coil of its register map, a
 // rising edge on the machine config's [gpio] start_line, a schedule), runs the configured
-// four-sensor scan and writes raw data and results durably to the results directory.  Runs in the
-// foreground under systemd (Type=notify; see config/errsep.service); SIGHUP reloads the machine
-// config between scans, SIGTERM stops the stage, writes what was measured and exits.  With an
-// [mqtt] table it also publishes every scan to the plant's broker, store and forward
-// (service/plant_publisher.hpp; [mqtt] is read at start only: a change needs a restart).
-// After each scan's result folder is committed it makes the report in results/<stem>/report/,
-// as errsep-scan does (service/scan_report_job.hpp; --no-report skips it): on the main loop,
-// never on a sampling thread; a report that fails is logged and loses none of the scan's files.
+// four-sensor or displacement scan ([scan] method) and writes raw data and results durably to the
+// results directory.  Runs in the foreground under systemd (Type=notify; see
+// config/errsep.service); SIGHUP reloads the machine config between scans, SIGTERM stops the stage,
+// writes what was measured and exits.  With an [mqtt] table it also publishes every scan to the
+// plant's broker, store and forward (service/plant_publisher.hpp; [mqtt] is read at start only: a
+// change needs a restart). After each scan's result folder is committed it makes the report in
+// results/<stem>/report/, as errsep-scan does (service/scan_report_job.hpp; --no-report skips it):
+// on the main loop, never on a sampling thread; a report that fails is logged and loses none of the
+// scan's files.
 #include <CLI/CLI.hpp>
 #include <csignal>
 #include <cstdio>
@@ -24,6 +25,7 @@
 #include "errsep/drivers/daemon_register_server.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/unit_dropin.hpp"
+#include "errsep/service/displacement_pipeline.hpp"
 #include "errsep/service/four_sensor_pipeline.hpp"
 #include "errsep/service/plant_publisher.hpp"
 #include "errsep/service/scan_report_job.hpp"
@@ -148,6 +150,15 @@ int main(int argc, char** argv) {
       return *r.separation;
     };
 
+    // A displacement scan ([scan] method = "displacement"): its pipeline, as errsep-scan's.
+    opts.write_displacement_result_set = [](const errsep::io::RawDisplacementScan& raw,
+                                            const std::filesystem::path& dir) {
+      const auto r = errsep::service::DisplacementPipeline({}).write_result_set(
+          raw, dir, std::string("errsep-daemon ") + errsep::kVersion);
+      if (!r.separation) throw std::runtime_error(r.error);
+      return *r.separation;
+    };
+
     // Reads the file again on every call: SIGHUP picks up an edited config.
     auto factory = [config_path, device_port, pipeline,
                     report]() -> std::unique_ptr<errsep::acq::ScanBackend> {
@@ -164,6 +175,9 @@ int main(int argc, char** argv) {
     // A bad config is an error at start (exit non-zero, message names file:line); later, on
     // SIGHUP, the old config is kept.
     factory();
+    // Reports lost to a stop between a scan's commit and its report are made now, before the
+    // daemon takes triggers (a few seconds each).
+    if (!no_report) errsep::service::remake_missing_reports(opts.results.dir, *report, std::cerr);
 
     // Plant broker: the publisher thread is fed from the results store through the disk queue,
     // after each scan's files are committed, never from the sampling threads.

@@ -3,8 +3,9 @@
 //   errsep-scan --config config/simulator.toml --out out/demo
 // Writes OUT/raw.csv (four-sensor: x_mm,m1_um..m4_um,t1_s..t4_s) or OUT/raw_displacement.csv,
 // then the result files of the separation (four-sensor: motion.csv, reference.csv, lcurve.csv,
-// residuals.csv, summary.txt).  --refine (or [refine] enabled = true in the config) also runs the
-// refine step of errsep-refine on the four-sensor scan and writes its files to OUT/refine/
+// residuals.csv, summary.txt; displacement: displacement.csv with u, displacement_residuals.csv,
+// service/displacement_pipeline.hpp).  --refine (or [refine] enabled = true in the config) also
+// runs the refine step of errsep-refine on the four-sensor scan and writes its files to OUT/refine/
 // (io/refine_run.hpp). --verify-with TABLE: the scan after a compensation table was loaded
 // (the embedded simulator applies it itself), compared with the first scan and the residual the
 // table predicts (OUT/verification.txt, .csv; io/verification_report.hpp).  OUT is one result
@@ -34,7 +35,6 @@
 
 #include "errsep/acq/scan_runner.hpp"
 #include "errsep/core/compensation_verification.hpp"
-#include "errsep/core/displacement_method.hpp"
 #include "errsep/core/four_sensor.hpp"
 #include "errsep/drivers/device_factory.hpp"
 #include "errsep/drivers/scan_devices.hpp"
@@ -47,6 +47,7 @@
 #include "errsep/io/results_store.hpp"
 #include "errsep/io/staged_directory.hpp"
 #include "errsep/io/verification_report.hpp"
+#include "errsep/service/displacement_pipeline.hpp"
 #include "errsep/service/four_sensor_pipeline.hpp"
 #include "errsep/service/plant_publisher.hpp"
 #include "errsep/service/scan_report_job.hpp"
@@ -130,19 +131,6 @@ void verify(const core::FourSensorResult& res, const io::MachineConfig& cfg, con
   std::cout << io::verification_text(r, info)
             << "verification: " << (shown_out / "verification.txt").string() << ", "
             << (shown_out / "verification.csv").string() << "\n";
-}
-
-void separate_displacement(const io::RawDisplacementScan& raw) {
-  core::DisplacementOptions o;
-  o.sample_interval_mm = raw.x_mm.size() > 1 ? raw.x_mm[1] - raw.x_mm[0] : raw.d_mm;
-  o.displacement_mm = raw.d_mm;
-  auto vec = [](const std::vector<double>& v) {
-    return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()));
-  };
-  const auto res = core::separate_displacement(vec(raw.s1_scan1_um), vec(raw.s2_scan1_um),
-                                               vec(raw.s2_scan2_um), o);
-  std::cout << "separation (displacement method): " << res.brief_report() << "\n"
-            << "  (errsep-separate-displacement writes the profile files from the raw CSV)\n";
 }
 
 }  // namespace
@@ -254,6 +242,7 @@ int main(int argc, char** argv) {
     const fs::path work = stage.dir();
     std::vector<std::string> written;
     std::optional<io::ScanSummary> summary;  // published once the set is in place
+    bool report_due = false;                 // a separation's results are in the set
 
     // The embedded default: no machine, start the device simulator and talk to it.
     std::unique_ptr<drivers::SimulatorProcess> sim;
@@ -368,8 +357,15 @@ int main(int argc, char** argv) {
             summary->files.push_back("refine/refine_report.txt");
           }
         } else {
-          separate_displacement(*res.displacement);
+          // The displacement pipeline (service/displacement_pipeline.hpp), as errsep-daemon and
+          // errsep-separate-displacement run it: the joint estimate with its u, the residuals.
+          const auto run = service::DisplacementPipeline({}).separate(
+              work, work / raw_name, raw_file.string(), stage.run_id());
+          std::cout << "separation (displacement method): " << run.brief_report() << "\n";
+          written.push_back("results: " + out.string() + "/ (" + service::kDisplacementResultCsv +
+                            ", " + service::kDisplacementResidualsCsv + ")");
         }
+        report_due = true;
       } catch (const std::exception& e) {
         // The measurements are kept: the set holds the raw files alone (no result is better than
         // some of them), and the error is reported.
@@ -381,6 +377,7 @@ int main(int argc, char** argv) {
             written.end());
         std::cerr << "errsep-scan: separation failed: " << e.what() << "; the raw data is kept\n";
         summary.reset();
+        report_due = false;
         exit_code = 1;
         break;
       }
@@ -391,7 +388,7 @@ int main(int argc, char** argv) {
     for (const auto& line : written)
       std::cout << line << "\n";
     // The report, from the result set now in place: a report that fails loses no result.
-    if (summary && !no_report) {
+    if (report_due && !no_report) {
       const io::ScanReportOptions ro = service::result_report_options(cfg, !no_pdf);
       std::cout << "report: evaluating " << out.string() << " into " << (out / "report").string()
                 << "/ (figures, HTML" << (ro.pdf ? ", PDF" : "") << ", compensation tables)\n";
@@ -403,9 +400,6 @@ int main(int argc, char** argv) {
                   << " --subdir report makes the report again)\n";
         exit_code = 4;
       }
-    } else if (!no_report && exit_code == 0 && !no_separate) {
-      std::cout << "report: none (the displacement scan's profiles are written by "
-                   "errsep-separate-displacement; errsep-report reads them)\n";
     }
     // Store and forward: the result is on disk first, then its summary goes to the queue.
     if (summary && cfg.mqtt && !no_mqtt) publish_summary(*cfg.mqtt, *summary, out, mqtt_wait_s);

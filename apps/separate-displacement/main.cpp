@@ -20,6 +20,7 @@
 #include "errsep/core/two_axis_yaw.hpp"
 #include "errsep/io/displacement_csv.hpp"
 #include "errsep/io/staged_directory.hpp"
+#include "errsep/service/displacement_pipeline.hpp"
 #include "errsep/version.hpp"
 
 namespace {
@@ -86,19 +87,6 @@ std::string fmt(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.4g", v);
   return buf;
-}
-
-/// The residual verdict in a result file's metadata.
-void residual_meta(errsep::io::CsvTable& t, const errsep::core::DisplacementResiduals& r,
-                   const std::string& path) {
-  t.set_meta("residuals", path);
-  std::string v = r.families.empty() ? std::string("nothing redundant to test")
-                                     : (r.white ? std::string("white") : std::string("NOT white"));
-  for (const auto& f : r.families)
-    if (f.dof > 0)
-      v += "; " + std::string(errsep::core::to_string(f.kind)) + " sigma_hat " + fmt(f.sigma_um) +
-           " um (dof " + std::to_string(f.dof) + "), whiteness p " + fmt(f.whiteness.p_value);
-  t.set_meta("residual_verdict", v);
 }
 
 }  // namespace
@@ -235,56 +223,23 @@ int main(int argc, char** argv) {
         !swept.empty())
       std::cout << swept << "\n";
     if (one->parsed()) {
-      const std::string& input = inputs.front();
+      // The displacement pipeline (service/displacement_pipeline.hpp), as errsep-scan and
+      // errsep-daemon run it on a displacement scan.
+      errsep::service::DisplacementPipelineOptions po;
+      po.displacement_mm = d_mm;
+      po.initial_um = r0_um;
+      po.chain_join = chain_join_from(chain);
+      po.displacement_sigma_mm = d_sigma_mm;
+      po.reading_sigma_um = reading_sigma_um;
+      po.residuals = ropt;
       std::vector<errsep::io::OneAxisInput> all;
-      for (const auto& file : inputs) {
+      for (const auto& file : inputs)
         all.push_back(errsep::io::read_one_axis_csv(file));
-        const auto& a = all.back();
-        if (!same_axis(a.x_mm, all.front().x_mm))
-          throw std::invalid_argument(file + ": the x positions differ from those of " + input +
-                                      " (repeated runs must share the grid)");
-        if (a.d_mm && all.front().d_mm &&
-            std::abs(*a.d_mm - *all.front().d_mm) > 1e-9 * std::max(1.0, *a.d_mm))
-          throw std::invalid_argument(file + ": d_mm " + std::to_string(*a.d_mm) +
-                                      " differs from " + input + "'s " +
-                                      std::to_string(*all.front().d_mm));
-      }
-      const auto& in = all.front();
-      errsep::core::DisplacementOptions o;
-      o.sample_interval_mm = in.dx_mm;
-      if (d_mm && in.d_mm && std::abs(*d_mm - *in.d_mm) > 1e-9 * std::max(1.0, *d_mm))
-        throw std::invalid_argument(input + ": --d-mm " + std::to_string(*d_mm) +
-                                    " contradicts the file's d_mm " + std::to_string(*in.d_mm));
-      o.displacement_mm = d_mm ? *d_mm : in.d_mm.value_or(in.dx_mm);
-      o.initial_um = r0_um;
-      o.chain_join = chain_join_from(chain);
-      o.displacement_sigma_mm = d_sigma_mm;
-      if (reading_sigma_um) o.reading_sigma_um = *reading_sigma_um;
-      std::string why;
-      if (!o.is_valid(&why)) throw std::invalid_argument(input + ": " + why);
-      std::vector<errsep::core::OneAxisRun> runs;
-      for (const auto& a : all)
-        runs.push_back({a.s1_1_um, a.s2_1_um, a.s2_2_um, a.s1_2_um});
-      const auto mean = errsep::core::mean_of_runs(runs);
-      const auto joint = errsep::core::separate_displacement_joint(mean.s1_1_um, mean.s2_1_um,
-                                                                   mean.s2_2_um, mean.s1_2_um, o);
-      const auto& res = joint.estimate;
-      const auto resid = errsep::core::displacement_residuals_one_axis(in.x_mm, runs, ropt);
       const std::string rpath = residuals_path(output, residuals_out);
-      auto table = errsep::io::one_axis_result_csv(in.x_mm, joint);
-      if (runs.size() > 1) table.set_meta("runs", std::to_string(runs.size()) + " (mean)");
-      residual_meta(table, resid, rpath);
-      const auto rtable = errsep::io::displacement_residuals_csv(resid, false);
-      errsep::io::write_csv(rpath, rtable);
-      errsep::io::write_csv(output, table);
-      std::cout << res.brief_report() << "\n"
-                << (joint.u_w_um.size()
-                        ? "u(w) " + fmt(joint.u_w_um.minCoeff()) + ".." +
-                              fmt(joint.u_w_um.maxCoeff()) + " um, sigma " + fmt(joint.sigma_um) +
-                              " um (" + joint.sigma_source + ")"
-                        : "no uncertainty: " + joint.sigma_source)
-                << "\ngauge: " << joint.gauge << "\n"
-                << resid.brief_report() << "\nwrote " << output << " and " << rpath << "\n";
+      const auto res = errsep::service::DisplacementPipeline(po).compute(all, inputs, rpath);
+      errsep::io::write_csv(rpath, res.residual_table);
+      errsep::io::write_csv(output, res.profile);
+      std::cout << res.brief_report() << "\nwrote " << output << " and " << rpath << "\n";
     } else if (two->parsed()) {
       const std::string& input = inputs.front();
       std::vector<errsep::io::TwoAxisInput> all;
@@ -353,7 +308,7 @@ int main(int argc, char** argv) {
       const std::string rpath = residuals_path(output, residuals_out);
       auto table = errsep::io::two_axis_result_csv(scan, res);
       if (runs.size() > 1) table.set_meta("runs", std::to_string(runs.size()) + " (mean)");
-      residual_meta(table, resid, rpath);
+      errsep::service::set_residual_metadata(table, resid, rpath);
       if (yres) {
         const auto& y = *yres;
         std::string v = y.yaw_added ? "significant, scans corrected (w_um is corrected)"

@@ -50,6 +50,30 @@ void prepend_metadata(std::vector<std::pair<std::string, std::string>>& md,
   md.insert(md.begin(), daemon_md.begin(), daemon_md.end());
 }
 
+/// A complete raw record the daemon can separate: a four-sensor one needs its geometry.
+bool separable(const io::RawFourSensorScan& raw) {
+  return raw.geometry.has_value();
+}
+bool separable(const io::RawDisplacementScan&) {
+  return true;
+}
+
+/// Readings measured so far (finite cells) of a raw record.
+std::size_t measured_cells(const io::RawFourSensorScan& raw) {
+  std::size_t n = 0;
+  for (const auto& col : raw.m_um)
+    for (double v : col)
+      n += std::isfinite(v) ? 1 : 0;
+  return n;
+}
+std::size_t measured_cells(const io::RawDisplacementScan& raw) {
+  std::size_t n = 0;
+  for (const auto* col : {&raw.s1_scan1_um, &raw.s2_scan1_um, &raw.s1_scan2_um, &raw.s2_scan2_um})
+    for (double v : *col)
+      n += std::isfinite(v) ? 1 : 0;
+  return n;
+}
+
 }  // namespace
 
 const char* to_string(DaemonState s) noexcept {
@@ -142,12 +166,37 @@ void ScanContext::begin(io::RawFourSensorScan layout) {
   heartbeat();
 }
 
+void ScanContext::begin(io::RawDisplacementScan layout) {
+  std::lock_guard<std::mutex> lock(mu_);
+  const std::size_t k = layout.x_mm.size();
+  constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  for (auto* v :
+       {&layout.s1_scan1_um, &layout.s2_scan1_um, &layout.s1_scan2_um, &layout.s2_scan2_um})
+    v->assign(k, kNaN);
+  layout.t_scan1_s.emplace(k, kNaN);
+  layout.t_scan2_s.emplace(k, kNaN);
+  layout.complete = false;
+  disp_ = std::move(layout);
+  total_.store(static_cast<std::uint32_t>(4 * k));
+  done_.store(0);
+  heartbeat();
+}
+
 void ScanContext::record(int config, std::size_t n, double m_um, double t_s) {
   {
     std::lock_guard<std::mutex> lock(mu_);
-    if (config < 0 || config > 3 || n >= raw_.x_mm.size()) return;
-    raw_.m_um[static_cast<std::size_t>(config)][n] = m_um;
-    (*raw_.t_s)[static_cast<std::size_t>(config)][n] = t_s;
+    if (disp_) {
+      if (config < 0 || config > 3 || n >= disp_->x_mm.size()) return;
+      // acq::ScanHooks::cell's columns: s1 and s2 of scan 1, then of scan 2.
+      std::vector<double>* cols[4] = {&disp_->s1_scan1_um, &disp_->s2_scan1_um, &disp_->s1_scan2_um,
+                                      &disp_->s2_scan2_um};
+      (*cols[config])[n] = m_um;
+      (*(config < 2 ? disp_->t_scan1_s : disp_->t_scan2_s))[n] = t_s;
+    } else {
+      if (config < 0 || config > 3 || n >= raw_.x_mm.size()) return;
+      raw_.m_um[static_cast<std::size_t>(config)][n] = m_um;
+      (*raw_.t_s)[static_cast<std::size_t>(config)][n] = t_s;
+    }
   }
   done_.fetch_add(1);
   heartbeat();
@@ -163,9 +212,25 @@ void ScanContext::finish(io::RawFourSensorScan raw) {
   raw_ = std::move(raw);
 }
 
+void ScanContext::finish(io::RawDisplacementScan raw) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (!disp_ || raw.x_mm.size() != disp_->x_mm.size()) return;
+  disp_ = std::move(raw);
+}
+
 io::RawFourSensorScan ScanContext::snapshot() const {
   std::lock_guard<std::mutex> lock(mu_);
   return raw_;
+}
+
+bool ScanContext::displacement() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return disp_.has_value();
+}
+
+io::RawDisplacementScan ScanContext::displacement_snapshot() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return disp_ ? *disp_ : io::RawDisplacementScan{};
 }
 
 // --- options ---------------------------------------------------------------------------------
@@ -499,21 +564,26 @@ void Daemon::write_checkpoint() {
   next_checkpoint_ = t0 + opts_.checkpoint_interval;
   // The copy is taken under the context's mutex, which the scan worker holds only to store one
   // point: the sampling threads never see it.
-  io::RawFourSensorScan raw = ctx_->snapshot();
+  // Either kind of raw record, as its own CSV table.
+  const auto checkpoint_of = [this](auto raw, std::size_t* measured) {
+    *measured = measured_cells(raw);
+    if (raw.x_mm.empty() || *measured == 0 || *measured == checkpoint_points_)
+      return std::optional<io::CsvTable>();
+    raw.complete = false;
+    auto meta = scan_metadata("in_progress",
+                              "checkpoint of a running scan: if this file is still here and "
+                              "named raw-incomplete, the daemon stopped before the scan ended");
+    meta.emplace_back("points_measured",
+                      std::to_string(*measured) + "/" + std::to_string(ctx_->points_total()));
+    prepend_metadata(raw.metadata, meta);
+    return std::optional<io::CsvTable>(io::to_csv_table(raw));
+  };
   std::size_t measured = 0;
-  for (const auto& col : raw.m_um)
-    for (double v : col)
-      measured += std::isfinite(v) ? 1 : 0;
-  if (raw.x_mm.empty() || measured == 0 || measured == checkpoint_points_) return;
-  raw.complete = false;
-  auto meta = scan_metadata("in_progress",
-                            "checkpoint of a running scan: if this file is still here and named "
-                            "raw-incomplete, the daemon stopped before the scan ended");
-  meta.emplace_back("points_measured",
-                    std::to_string(measured) + "/" + std::to_string(ctx_->points_total()));
-  prepend_metadata(raw.metadata, meta);
+  const auto table = ctx_->displacement() ? checkpoint_of(ctx_->displacement_snapshot(), &measured)
+                                          : checkpoint_of(ctx_->snapshot(), &measured);
+  if (!table) return;
   try {
-    store_.write(scan_stem_, "raw-incomplete", io::format_csv(io::to_csv_table(raw), 12));
+    store_.write(scan_stem_, "raw-incomplete", io::format_csv(*table, 12));
     checkpoint_points_ = static_cast<std::uint32_t>(measured);
     checkpoint_on_disk_ = true;
   } catch (const std::exception& e) {
@@ -546,19 +616,7 @@ Daemon::ResultFigures Daemon::write_result(
   }
   io::CsvTable t;
   t.set_meta("format", "errsep four-sensor result");
-  if (opts_.write_result_set) t.set_meta("result_dir", stem);
-  for (const auto& [k, v] : meta)
-    t.set_meta(k, v);
-  t.set_meta("raw_file", std::filesystem::path(raw_file).filename().string());
-  {
-    // The raw file this result is of, by content: the store's reader (recover_results) and any
-    // consumer can tell a result from its raw file's run from one that is not.
-    const auto [bytes, crc] = io::file_size_and_crc32(raw_file);
-    char hex[16];
-    std::snprintf(hex, sizeof hex, "%08x", crc);
-    t.set_meta("raw_bytes", std::to_string(bytes));
-    t.set_meta("raw_crc32", hex);
-  }
+  result_file_metadata(t, stem, meta, raw_file, static_cast<bool>(opts_.write_result_set));
   t.set_meta("solver", r.brief_report());
   t.set_meta("lambda", fmt(r.lambda, 6));
   t.set_meta("sigma_hat_um", fmt(r.sigma_um, 6));
@@ -601,6 +659,75 @@ Daemon::ResultFigures Daemon::write_result(
   return out;
 }
 
+void Daemon::result_file_metadata(io::CsvTable& t, const std::string& stem,
+                                  const std::vector<std::pair<std::string, std::string>>& meta,
+                                  const std::string& raw_file, bool result_dir) const {
+  if (result_dir) t.set_meta("result_dir", stem);
+  for (const auto& [k, v] : meta)
+    t.set_meta(k, v);
+  t.set_meta("raw_file", std::filesystem::path(raw_file).filename().string());
+  // The raw file this result is of, by content: the store's reader (recover_results) and any
+  // consumer can tell a result from its raw file's run from one that is not.
+  const auto [bytes, crc] = io::file_size_and_crc32(raw_file);
+  char hex[16];
+  std::snprintf(hex, sizeof hex, "%08x", crc);
+  t.set_meta("raw_bytes", std::to_string(bytes));
+  t.set_meta("raw_crc32", hex);
+}
+
+Daemon::ResultFigures Daemon::write_result(
+    const std::string& stem, const io::RawDisplacementScan& raw,
+    const std::vector<std::pair<std::string, std::string>>& meta, const std::string& raw_file) {
+  core::OneAxisJointResult r;
+  if (opts_.write_displacement_result_set) {
+    // The scan's result folder, as errsep-scan writes it, whole before this file (as above).
+    r = opts_.write_displacement_result_set(raw, store_.dir() / stem);
+  } else {
+    const auto vec = [](const std::vector<double>& v) {
+      return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()));
+    };
+    core::DisplacementOptions o;
+    o.sample_interval_mm = raw.x_mm.size() > 1 ? raw.x_mm[1] - raw.x_mm[0] : raw.d_mm;
+    o.displacement_mm = raw.d_mm;
+    r = core::separate_displacement_joint(vec(raw.s1_scan1_um), vec(raw.s2_scan1_um),
+                                          vec(raw.s2_scan2_um), vec(raw.s1_scan2_um), o);
+  }
+  io::CsvTable t;
+  t.set_meta("format", "errsep displacement result");
+  result_file_metadata(t, stem, meta, raw_file,
+                       static_cast<bool>(opts_.write_displacement_result_set));
+  t.set_meta("solver", r.estimate.brief_report());
+  t.set_meta("sigma_hat_um", fmt(r.sigma_um, 6));  // the key the scan summaries read
+  t.set_meta("sigma_source", r.sigma_source);
+  // ISO 230-1 straightness of the table motion error m(x) (Haramiishi 2024 Eq. 2), about both
+  // reference lines; U (k = 2) from the joint estimate's u(m) when it has one, else none (NaN).
+  const std::vector<double> x(raw.x_mm.begin(), raw.x_mm.end());
+  const std::vector<double> m(r.estimate.m_um.data(),
+                              r.estimate.m_um.data() + r.estimate.m_um.size());
+  const std::vector<double> um(r.u_m_um.data(), r.u_m_um.data() + r.u_m_um.size());
+  const auto mz = core::evaluate_straightness(x, m, um, core::ReferenceLine::minimum_zone);
+  const auto ls = core::evaluate_straightness(x, m, um, core::ReferenceLine::least_squares);
+  const double kNaN = std::numeric_limits<double>::quiet_NaN();
+  const double mz_U = um.empty() ? kNaN : mz.uncertainty.expanded;
+  t.set_meta("straightness_of", "m(x), the table motion error");
+  t.set_meta("straightness_minimum_zone_um", fmt(mz.straightness_um, 6));
+  t.set_meta("straightness_minimum_zone_U_um", fmt(mz_U, 6));
+  t.set_meta("straightness_least_squares_um", fmt(ls.straightness_um, 6));
+  t.set_meta("straightness_least_squares_U_um",
+             fmt(um.empty() ? kNaN : ls.uncertainty.expanded, 6));
+  t.add_column("x_mm", x);
+  t.add_column("m_um", m);
+  t.add_column("w_um", std::vector<double>(r.estimate.w_um.data(),
+                                           r.estimate.w_um.data() + r.estimate.w_um.size()));
+  if (!um.empty()) t.add_column("u_m_um", um);
+  ResultFigures out;
+  out.file = store_.write(stem, "result", io::format_csv(t, 10)).string();
+  out.minimum_zone_um = mz.straightness_um;
+  out.minimum_zone_U_um = mz_U;
+  out.least_squares_um = ls.straightness_um;
+  return out;
+}
+
 int Daemon::recover_results() {
   // A complete raw file is the scan: the result is computed from it alone.  The daemon stopped
   // (SIGKILL, power cut) between writing the one and the other; the result is made now, with
@@ -630,9 +757,8 @@ int Daemon::recover_results() {
                           "): made again from the raw file");
       }
     }
-    try {
-      const io::RawFourSensorScan raw = io::read_raw_four_sensor_csv(raw_path);
-      if (!raw.geometry) throw std::runtime_error("no scan geometry in its metadata");
+    // Either kind of raw scan (its "# format:" line says which).
+    const auto recover = [&](const auto& raw) {
       std::vector<std::pair<std::string, std::string>> meta;
       for (const char* key : {"scan_id", "trigger", "started_utc", "ended_utc", "outcome",
                               "outcome_reason", "points_measured"})
@@ -645,6 +771,16 @@ int Daemon::recover_results() {
                         f.file);
       ++made;
       if (const auto id = raw.meta("scan_id")) scan_committed(std::stoull(*id), stem);
+    };
+    try {
+      const io::CsvTable head = io::read_csv(raw_path, {.allow_non_finite = true, .min_rows = 0});
+      if (head.meta("format").value_or("").find("displacement") != std::string::npos) {
+        recover(io::read_raw_displacement_csv(raw_path));
+      } else {
+        const io::RawFourSensorScan raw = io::read_raw_four_sensor_csv(raw_path);
+        if (!raw.geometry) throw std::runtime_error("no scan geometry in its metadata");
+        recover(raw);
+      }
     } catch (const std::exception& e) {
       log(kErr, "result of " + raw_path.filename().string() +
                     " is missing and could not be made: " + e.what());
@@ -653,8 +789,9 @@ int Daemon::recover_results() {
   return made;
 }
 
-void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd& end) {
-  io::RawFourSensorScan raw = raw_in;
+template <class Raw>
+void Daemon::write_scan_files(const Raw& raw_in, const ScanEnd& end) {
+  Raw raw = raw_in;
   raw.complete = end.outcome == ScanOutcome::complete;
   const std::uint64_t id = ctx_->scan_id();
   auto meta = scan_metadata(to_string(end.outcome), end.message);
@@ -682,7 +819,7 @@ void Daemon::write_scan_files(const io::RawFourSensorScan& raw_in, const ScanEnd
       }
     }
     checkpoint_on_disk_ = false;
-    if (raw.complete && opts_.separate && raw.geometry) {
+    if (raw.complete && opts_.separate && separable(raw)) {
       try {
         const ResultFigures f = write_result(scan_stem_, raw, meta, last_file);
         last_file = f.file;
@@ -745,7 +882,10 @@ void Daemon::finish_scan(bool stopping) {
   if (stopping && end.outcome == ScanOutcome::complete &&
       ctx_->points_done() < ctx_->points_total())
     end.outcome = ScanOutcome::stopped;
-  write_scan_files(ctx_->snapshot(), end);
+  if (ctx_->displacement())
+    write_scan_files(ctx_->displacement_snapshot(), end);
+  else
+    write_scan_files(ctx_->snapshot(), end);
   const std::uint64_t id = ctx_->scan_id();
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -965,8 +1105,11 @@ int Daemon::run() {
                     " ms; writing the raw data measured so far (the stages got no stop command "
                     "from the daemon: the hung worker holds the devices)");
       set_lamp(false);
-      write_scan_files(ctx_->snapshot(),
-                       {ScanOutcome::stopped, "SIGTERM; worker did not stop in time"});
+      const ScanEnd stopped{ScanOutcome::stopped, "SIGTERM; worker did not stop in time"};
+      if (ctx_->displacement())
+        write_scan_files(ctx_->displacement_snapshot(), stopped);
+      else
+        write_scan_files(ctx_->snapshot(), stopped);
       worker_.detach();
       worker_left_behind_ = true;
       backend_free = false;

@@ -22,10 +22,27 @@ using acq::ScanOutcome;
 
 DeviceScanBackend::DeviceScanBackend(io::MachineConfig cfg) : cfg_(std::move(cfg)) {
   const auto& sc = cfg_.scan;
-  if (sc.method != io::ScanMethod::four_sensor)
-    config_error(
-        cfg_, "scan.method",
-        std::string("'") + io::to_string(sc.method) + "': the daemon runs four_sensor scans only");
+  if (sc.method == io::ScanMethod::both)
+    config_error(cfg_, "scan.method",
+                 "'both': the daemon runs one kind of scan per trigger: four_sensor or "
+                 "displacement");
+  if (sc.method == io::ScanMethod::displacement) {
+    // The scan's devices (sensors, stages) are checked by drivers::scan_devices when it runs;
+    // what a scan needs is checked here, at start, with the key that is wrong.
+    std::string why;
+    if (!acq::scan_options_from_config(cfg_, acq::ScanKind::displacement).is_valid(&why))
+      config_error(cfg_, "scan", why);
+    for (const auto* name : {&sc.workpiece_sensor, &sc.reference_sensor})
+      if (!cfg_.find_sensor(*name))
+        config_error(
+            cfg_, name == &sc.workpiece_sensor ? "scan.workpiece_sensor" : "scan.reference_sensor",
+            "no [[sensor]] named '" + *name + "'");
+    for (const auto* name : {&sc.slide_stage, &sc.reference_stage})
+      if (!cfg_.find_stage(*name))
+        config_error(cfg_, name == &sc.slide_stage ? "scan.slide_stage" : "scan.reference_stage",
+                     "no [[stage]] named '" + *name + "'");
+    return;
+  }
   std::string why;
   if (!sc.geometry.is_valid(&why)) config_error(cfg_, "scan", why);
   if (sc.geometry.positions() < 2)
@@ -68,7 +85,9 @@ bool DeviceScanBackend::check(std::string* why) {
     if (why) *why = "stage " + slide->name() + ": drive fault";
     return false;
   }
-  ModbusSensor* s = dev_->sensor(cfg_.scan.sensors.front());
+  const bool displacement = cfg_.scan.method == io::ScanMethod::displacement;
+  ModbusSensor* s =
+      dev_->sensor(displacement ? cfg_.scan.workpiece_sensor : cfg_.scan.sensors.front());
   std::uint16_t words[4] = {};
   st = s->bus().read(s->config().reg, words);
   if (st != IoStatus::ok) {
@@ -95,10 +114,16 @@ acq::StartInput DeviceScanBackend::start_input() {
 std::string DeviceScanBackend::describe() const {
   std::ostringstream os;
   os << "machine config " << cfg_.source.string() << ": " << cfg_.buses.size() << " buses, "
-     << cfg_.sensors.size() << " sensors, " << cfg_.stages.size() << " stages; scan "
-     << (cfg_.scan.single_sensor ? "one sensor on the sensor stage" : "four fixed probes")
-     << ", N = " << cfg_.scan.geometry.N << ", " << cfg_.scan.geometry.positions()
-     << " positions, K = " << cfg_.scan.averages;
+     << cfg_.sensors.size() << " sensors, " << cfg_.stages.size() << " stages; scan ";
+  if (cfg_.scan.method == io::ScanMethod::displacement)
+    os << "displacement method (Haramiishi 2024), "
+       << acq::scan_options_from_config(cfg_, acq::ScanKind::displacement).displacement_points
+       << " positions, d = " << cfg_.scan.d_mm << " mm";
+  else
+    os << (cfg_.scan.single_sensor ? "one sensor on the sensor stage" : "four fixed probes")
+       << ", N = " << cfg_.scan.geometry.N << ", " << cfg_.scan.geometry.positions()
+       << " positions";
+  os << ", K = " << cfg_.scan.averages;
   if (cfg_.gpio && cfg_.gpio->start_line >= 0)
     os << "; GPIO start input " << cfg_.gpio->chip << " line " << cfg_.gpio->start_line;
   return os.str();
@@ -109,22 +134,34 @@ ScanEnd DeviceScanBackend::run_scan(acq::ScanContext& ctx) {
   // The scan loop is errsep-scan's (acq::run_scan): the same point retries, read-error budget,
   // window time-out and sampler counters.  This is the wiring into the daemon's ScanContext:
   // each measured cell goes there at once, so the main loop's checkpoints keep it.
-  const auto kind = acq::ScanKind::four_sensor;
+  const auto kind = cfg_.scan.method == io::ScanMethod::displacement ? acq::ScanKind::displacement
+                                                                     : acq::ScanKind::four_sensor;
   const acq::ScanOptions opts = acq::scan_options_from_config(cfg_, kind);
   const acq::ScanDevices devices = scan_devices(*dev_, cfg_, kind);
   const std::vector<std::pair<std::string, std::string>> config_md = {
       {"config", cfg_.source.string()}};
 
-  io::RawFourSensorScan layout;  // what a checkpoint holds before the scan's own record
-  layout.geometry = opts.geometry;
-  for (int n = 0; n < opts.geometry.positions(); ++n)
-    layout.x_mm.push_back(n * opts.geometry.dx_mm);
-  layout.metadata = config_md;
-  layout.metadata.insert(layout.metadata.end(), opts.range_metadata.begin(),
+  // What a checkpoint holds before the scan's own record.
+  auto layout_metadata = config_md;
+  layout_metadata.insert(layout_metadata.end(), opts.range_metadata.begin(),
                          opts.range_metadata.end());
   for (auto& kv : io::machine_axes_metadata(cfg_.axes))  // where the scan runs, machine coords
-    layout.metadata.push_back(std::move(kv));
-  ctx.begin(layout);
+    layout_metadata.push_back(std::move(kv));
+  if (kind == acq::ScanKind::displacement) {
+    io::RawDisplacementScan layout;  // positions as acq::run_scan's: x_k = k·d
+    layout.d_mm = opts.d_mm;
+    for (int k = 0; k < opts.displacement_points; ++k)
+      layout.x_mm.push_back(k * opts.d_mm);
+    layout.metadata = layout_metadata;
+    ctx.begin(std::move(layout));
+  } else {
+    io::RawFourSensorScan layout;
+    layout.geometry = opts.geometry;
+    for (int n = 0; n < opts.geometry.positions(); ++n)
+      layout.x_mm.push_back(n * opts.geometry.dx_mm);
+    layout.metadata = layout_metadata;
+    ctx.begin(std::move(layout));
+  }
 
   acq::ScanHooks hooks;
   hooks.abort = &ctx.abort_flag();
@@ -137,6 +174,10 @@ ScanEnd DeviceScanBackend::run_scan(acq::ScanContext& ctx) {
     res.four_sensor->metadata.insert(res.four_sensor->metadata.begin(), config_md.begin(),
                                      config_md.end());
     ctx.finish(std::move(*res.four_sensor));  // with the sampler's counters
+  } else if (res.displacement) {
+    res.displacement->metadata.insert(res.displacement->metadata.begin(), config_md.begin(),
+                                      config_md.end());
+    ctx.finish(std::move(*res.displacement));
   }
   switch (res.outcome) {
     case acq::ScanRunOutcome::complete:

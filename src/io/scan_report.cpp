@@ -800,9 +800,10 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
           (dir / "raw.csv").string() + " --out DIR (or errsep-scan without --no-separate)";
     if (fs::exists(dir / "raw_displacement.csv"))
       hint +=
-          "; it holds a raw displacement scan (raw_displacement.csv): errsep-scan does not "
-          "write its profiles; run errsep-separate-displacement on it, then errsep-report on "
-          "its output";
+          "; it holds a raw displacement scan (raw_displacement.csv) but no separation "
+          "(displacement.csv): run errsep-separate-displacement one-axis -i " +
+          (dir / "raw_displacement.csv").string() + " -o " + (dir / "displacement.csv").string() +
+          " (or errsep-scan without --no-separate)";
     throw std::runtime_error(
         dir.string() +
         ": no result errsep-report can read: no motion.csv (four-sensor result of errsep-scan, "

@@ -1,5 +1,8 @@
 #include "errsep/service/scan_report_job.hpp"
 
+#include <algorithm>
+#include <vector>
+
 #include "errsep/io/staged_directory.hpp"
 
 namespace errsep::service {
@@ -57,6 +60,30 @@ bool write_result_report_logged(const std::filesystem::path& dir, const io::Scan
          " makes the report again)");
     return false;
   }
+}
+
+int remake_missing_reports(const std::filesystem::path& results_dir,
+                           const io::ScanReportOptions& ro, std::ostream& log) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!fs::is_directory(results_dir, ec)) return 0;
+  std::vector<fs::path> dirs;
+  for (const auto& e : fs::directory_iterator(results_dir, ec))
+    if (e.is_directory(ec)) dirs.push_back(e.path());
+  std::sort(dirs.begin(), dirs.end());  // store stems sort by time
+  int made = 0;
+  for (const fs::path& dir : dirs) {
+    if (fs::exists(dir / kResultReportSubdir, ec)) continue;
+    if (!fs::exists(dir / "motion.csv", ec) && !fs::exists(dir / "displacement.csv", ec)) continue;
+    const io::ResultSetCheck check = io::check_result_set(dir);
+    if (!check.has_manifest || check.kind != "scan" || !check.whole()) continue;
+    log << ("<5>" + dir.filename().string() +
+            ": report missing (the daemon stopped after the scan's results were committed, "
+            "before its report): making it now\n")
+        << std::flush;
+    if (write_result_report_logged(dir, ro, log)) ++made;
+  }
+  return made;
 }
 
 void print_report_outcome(const io::ScanReportResult& r, const std::filesystem::path& dir,

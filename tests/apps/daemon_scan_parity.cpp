@@ -22,29 +22,15 @@
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/staged_directory.hpp"
 #include "support/daemon_rig.hpp"
+#include "support/result_files.hpp"
 
 using namespace errsep;
 using namespace std::chrono_literals;
+using errsep::test::files_under;
+using errsep::test::header_of;
 namespace fs = std::filesystem;
 
 namespace {
-
-/// Every file under `dir`, as paths relative to it (sorted).
-std::set<std::string> files_under(const fs::path& dir) {
-  std::set<std::string> out;
-  for (const auto& e : fs::recursive_directory_iterator(dir))
-    if (e.is_regular_file()) out.insert(fs::relative(e.path(), dir).generic_string());
-  return out;
-}
-
-/// The header line of an errsep CSV (the first line that is not a '#' metadata line).
-std::string header_of(const fs::path& csv) {
-  std::ifstream in(csv);
-  std::string line;
-  while (std::getline(in, line))
-    if (!line.empty() && line[0] != '#') return line;
-  return {};
-}
 
 std::set<std::string> metadata_keys(const io::RawFourSensorScan& raw) {
   std::set<std::string> keys;
@@ -82,10 +68,9 @@ TEST_CASE("the daemon and errsep-scan write the same result folder, errsep-repor
   const auto store_raw = rig.find_file(1, "raw");
   REQUIRE(store_raw);
   REQUIRE(rig.find_file(1, "result"));
-  const std::string name = store_raw->filename().string();
-  const fs::path daemon_dir =
-      rig.results / name.substr(0, name.size() - std::string(".raw.csv").size());
-  REQUIRE(fs::is_directory(daemon_dir));
+  const auto folder = rig.result_folder(1);
+  REQUIRE(folder);
+  const fs::path daemon_dir = *folder;
   rig.daemon->signal(SIGTERM);
   REQUIRE(rig.daemon->wait(10s));
 

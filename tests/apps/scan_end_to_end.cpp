@@ -16,6 +16,7 @@
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "support/controller_tables.hpp"
+#include "support/result_files.hpp"
 #include "support/support.hpp"
 
 using namespace errsep;
@@ -30,14 +31,10 @@ namespace {
 // the default curvature gauge assumes (a quadratic part of e is not identifiable from the data,
 // see core/four_sensor_system.hpp), the same values as core::zhao2019_example1.
 std::filesystem::path write_test_config(const TempDir& dir) {
-  std::string t = test::read_file(test::source_dir() / "config" / "simulator.toml");
+  std::string t = test::quick_simulator_config();
   test::replace_once(t, "N = 69", "N = 40");
   // The shipped config already uses them; the test fails if that changes.
   REQUIRE(t.find("e_um = [0.0, 0.49, 0.92, 0.07]") != std::string::npos);
-  for (const std::string from : {"speed_mm_s = 200.0", "speed_mm_s = 100.0"}) {
-    for (auto pos = t.find(from); pos != std::string::npos; pos = t.find(from, pos))
-      t.replace(pos, from.size(), "speed_mm_s = 2000.0");
-  }
   const auto path = dir / "machine.toml";
   std::ofstream(path) << t;
   return path;

@@ -284,6 +284,15 @@ std::optional<std::filesystem::path> DaemonRig::find_file(std::uint64_t id,
   return std::nullopt;
 }
 
+std::optional<std::filesystem::path> DaemonRig::result_folder(std::uint64_t id) const {
+  const auto raw = find_file(id, "raw");
+  if (!raw) return std::nullopt;
+  const auto f = io::parse_store_name(*raw);
+  const auto dir = results / f->stem;
+  if (!std::filesystem::is_directory(dir)) return std::nullopt;
+  return dir;
+}
+
 namespace {
 
 std::string slurp_file(const std::filesystem::path& p) {

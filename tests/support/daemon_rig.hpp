@@ -110,6 +110,8 @@ struct DaemonRig {
   std::vector<long> wait_regs(Pred pred, std::chrono::milliseconds timeout);
   /// Every store file of scan `id` ("<stem>.<kind>.csv"), by kind.
   std::optional<std::filesystem::path> find_file(std::uint64_t id, const std::string& kind) const;
+  /// The result folder of scan `id` (results/<stem>/ beside its complete raw file), if there.
+  std::optional<std::filesystem::path> result_folder(std::uint64_t id) const;
   /// Contents of the daemon's and devsim's stderr logs, for failure messages.
   std::string logs() const;
   /// Prints logs() to stderr when a REQUIRE failed (an exception leaves the test).

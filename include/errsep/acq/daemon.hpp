@@ -50,6 +50,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <utility>
@@ -57,6 +58,7 @@
 
 #include "errsep/acq/digital_io.hpp"
 #include "errsep/acq/sd_notify.hpp"
+#include "errsep/core/displacement_joint.hpp"
 #include "errsep/core/four_sensor.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/results_store.hpp"
@@ -109,7 +111,11 @@ class ScanContext {
 
   /// Backend: the layout of the scan (x_mm, geometry, metadata; m_um all NaN) before measuring.
   void begin(io::RawFourSensorScan layout);
-  /// Backend: one measured point of configuration `config` (0..3) at position index `n`.
+  /// Backend: the layout of a displacement scan (x_mm, d_mm, metadata; readings NaN).
+  void begin(io::RawDisplacementScan layout);
+  /// Backend: one measured point of configuration `config` (0..3) at position index `n`; for a
+  /// displacement scan `config` is acq::ScanHooks::cell's column (0 s1 scan 1, 1 s2 scan 1,
+  /// 2 s1 scan 2, 3 s2 scan 2).
   void record(int config, std::size_t n, double m_um, double t_s);
   /// Backend: proof of life while waiting (a move, a settle time).
   void heartbeat() noexcept;
@@ -117,9 +123,13 @@ class ScanContext {
   /// sampler's counters in its metadata), replacing the points recorded one by one.  Ignored when
   /// its positions differ from begin()'s layout.
   void finish(io::RawFourSensorScan raw);
+  void finish(io::RawDisplacementScan raw);
 
+  /// True after begin(RawDisplacementScan).
+  bool displacement() const;
   /// The raw data measured so far (complete = false).
   io::RawFourSensorScan snapshot() const;
+  io::RawDisplacementScan displacement_snapshot() const;
   std::uint32_t points_done() const noexcept { return done_.load(); }
   std::uint32_t points_total() const noexcept { return total_.load(); }
   /// CLOCK_MONOTONIC ns of the last record() or heartbeat().
@@ -130,6 +140,7 @@ class ScanContext {
   const std::atomic<bool>& abort_;
   mutable std::mutex mu_;
   io::RawFourSensorScan raw_;
+  std::optional<io::RawDisplacementScan> disp_;  ///< a displacement scan's record
   std::atomic<std::uint32_t> done_{0}, total_{0};
   std::atomic<std::int64_t> progress_ns_{0};
 };
@@ -209,6 +220,12 @@ struct DaemonOptions {
   std::function<core::FourSensorResult(const io::RawFourSensorScan& raw,
                                        const std::filesystem::path& dir)>
       write_result_set;
+  /// The same for a displacement scan (machine config [scan] method = "displacement"):
+  /// errsep-daemon sets it to service::DisplacementPipeline.  Empty: the joint estimate with
+  /// core's default options, the result file alone.
+  std::function<core::OneAxisJointResult(const io::RawDisplacementScan& raw,
+                                         const std::filesystem::path& dir)>
+      write_displacement_result_set;
   /// Called on the main loop once a scan's files are on disk (each finished scan, and each
   /// result recovered at start), with its scan id and store stem: e.g. queue it for the plant's
   /// broker (service/plant_publisher.hpp).  Exceptions are logged, never stop the daemon.
@@ -269,7 +286,9 @@ class Daemon {
   bool try_open();
   void start_scan(TriggerSource src);
   void finish_scan(bool stopping);
-  void write_scan_files(const io::RawFourSensorScan& raw, const ScanEnd& end);
+  /// The raw file (raw, or raw-incomplete), then the result of a complete scan.
+  template <class Raw>
+  void write_scan_files(const Raw& raw, const ScanEnd& end);
   struct ResultFigures {
     std::string file;
     double minimum_zone_um = 0, minimum_zone_U_um = 0, least_squares_um = 0;
@@ -279,6 +298,14 @@ class Daemon {
   ResultFigures write_result(const std::string& stem, const io::RawFourSensorScan& raw,
                              const std::vector<std::pair<std::string, std::string>>& meta,
                              const std::string& raw_file);
+  /// A displacement scan's: the joint estimate; the figures are of the table motion error m(x).
+  ResultFigures write_result(const std::string& stem, const io::RawDisplacementScan& raw,
+                             const std::vector<std::pair<std::string, std::string>>& meta,
+                             const std::string& raw_file);
+  /// The result file's metadata both kinds share: the scan's, the raw file's size and CRC.
+  void result_file_metadata(io::CsvTable& t, const std::string& stem,
+                            const std::vector<std::pair<std::string, std::string>>& meta,
+                            const std::string& raw_file, bool result_dir) const;
   /// At start: the result of every complete raw file that has none (a stop between the two).
   int recover_results();
   void scan_committed(std::uint64_t scan_id, const std::string& stem);

@@ -9,7 +9,10 @@
 // Scan order (Zhao 2019, one sensor on a sensor stage): for each of the four configurations the
 // sensor stage moves to sensor_stage_origin_mm + offset_i, then the slide visits x_0..x_p; with
 // four fixed probes (single_sensor = false) the slide visits each x_n once and all four are
-// averaged together.  Only scan.method = "four_sensor" is run by the daemon.
+// averaged together.  scan.method = "displacement" (Haramiishi 2024): the reference piece at its
+// origin, then displaced by d, the slide over the displacement points each time; the cells go to
+// the ScanContext as acq::ScanHooks::cell numbers them.  "both" is refused at start (one kind of
+// scan per trigger).
 //
 // GPIO: when the config has [gpio] with start_line >= 0, that line (opened with the other devices
 // by Devices::configure) is the daemon's start input: a rising edge starts a scan; output_line,
@@ -25,9 +28,9 @@ namespace errsep::drivers {
 
 class DeviceScanBackend final : public acq::ScanBackend {
  public:
-  /// Checks the config can be scanned by the daemon (four_sensor method, valid geometry, the
-  /// scan's stages and sensors present); throws std::runtime_error naming the config file and
-  /// key otherwise.  No I/O.
+  /// Checks the config can be scanned by the daemon (four_sensor or displacement method, valid
+  /// geometry, the scan's stages and sensors present); throws std::runtime_error naming the config
+  /// file and key otherwise.  No I/O.
   explicit DeviceScanBackend(io::MachineConfig cfg);
   ~DeviceScanBackend() override;
 

@@ -33,6 +33,14 @@ io::ScanReportOptions result_report_options(const io::MachineConfig& cfg, bool p
 bool write_result_report_logged(const std::filesystem::path& dir, const io::ScanReportOptions& ro,
                                 std::ostream& log);
 
+/// errsep-daemon at start-up: each result folder in `results_dir` (a whole result set of kind
+/// "scan" holding a separation: motion.csv or displacement.csv) without its report/ -- the daemon
+/// was stopped after the folder was committed and before its report was made -- gets the report
+/// now (write_result_report_logged), with a <5> journal line saying why.  Returns how many
+/// reports were made.  Never throws for a folder: what fails is logged.
+int remake_missing_reports(const std::filesystem::path& results_dir,
+                           const io::ScanReportOptions& ro, std::ostream& log);
+
 /// Prints the evaluation, the warnings (to `err`), the compensation tables, where report.html and
 /// report.pdf are (or why no PDF was made) and how to open the report.
 void print_report_outcome(const io::ScanReportResult& r, const std::filesystem::path& dir,

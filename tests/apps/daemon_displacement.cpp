@@ -1,0 +1,168 @@
+// errsep-daemon with [scan] method = "displacement" (issue 17: the displacement scan through the
+// same pipeline in errsep-scan and the daemon): the daemon's scan, triggered through its register
+// map, writes the result folder errsep-scan writes for the same machine (raw_displacement.csv,
+// displacement.csv, displacement_residuals.csv, report/ with the same file names and the same CSV
+// columns), both whole result sets that errsep-report reads; the register map shows the
+// straightness of m(x) with its U.  Then a folder committed without its report (what a kill
+// between the commit of the results and the report leaves; made here with --no-report) gets its
+// report at the daemon's next start, and the journal says so.
+#include <catch2/catch.hpp>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <string>
+
+#include "errsep/io/csv.hpp"
+#include "errsep/io/staged_directory.hpp"
+#include "support/daemon_rig.hpp"
+#include "support/result_files.hpp"
+
+using namespace errsep;
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+using errsep::test::files_under;
+using errsep::test::header_of;
+
+namespace {
+
+/// The shipped simulator config as a displacement machine: quick stages, K = 5, no PDF.
+fs::path write_config(const fs::path& dir) {
+  std::string t = test::quick_simulator_config();
+  test::replace_once(t, "method = \"four_sensor\"", "method = \"displacement\"");
+  test::replace_once(t, "averages = 100", "averages = 5");
+  t += "\n[report]\npdf = false\n";
+  const fs::path p = dir / "machine.toml";
+  std::ofstream(p) << t;
+  return p;
+}
+
+}  // namespace
+
+TEST_CASE(
+    "displacement: the daemon writes errsep-scan's folder, a lost report is remade at start") {
+  test::DaemonRig rig;
+  rig.config = write_config(rig.tmp.path());
+  rig.devsim.start(rig.config, rig.tmp / "devsim.log");
+  rig.start_daemon();
+  REQUIRE(rig.notify->wait_for("READY=1", 15s));
+  std::string out;
+  REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1, &out) == 0);
+  const auto r = rig.wait_regs(
+      [](const std::vector<long>& x) { return x[test::reg_last_scan_id] == 1 && x[0] == 1; }, 60s);
+  REQUIRE(r.size() == test::kRegisterCount);
+  REQUIRE(r[test::reg_last_outcome] == 1);  // complete
+  // The straightness of the table motion error m(x), with its U.
+  const double mz = test::nm_registers_um(r, test::reg_straightness_hi);
+  const double mz_U = test::nm_registers_um(r, test::reg_straightness_U_hi);
+  CHECK((std::isfinite(mz) && mz > 0));
+  CHECK((std::isfinite(mz_U) && mz_U > 0));
+  REQUIRE(rig.find_file(1, "result"));
+  const auto folder = rig.result_folder(1);
+  REQUIRE(folder);
+  const fs::path daemon_dir = *folder;
+  rig.daemon->signal(SIGTERM);
+  REQUIRE(rig.daemon->wait(10s));
+
+  const fs::path scan_dir = rig.tmp / "scan";
+  std::string scan_out;
+  const int rc =
+      test::run_command(test::app_path("scan").string() + " --config " + rig.config.string() +
+                            " --out " + scan_dir.string() + " --devsim " +
+                            test::app_path("devsim").string() + " --settle-ms 0 --no-mqtt",
+                        &scan_out);
+  INFO(scan_out);
+  REQUIRE(rc == 0);
+
+  const auto daemon_files = files_under(daemon_dir), scan_files = files_under(scan_dir);
+  CHECK(daemon_files == scan_files);
+  for (const char* f : {"raw_displacement.csv", "displacement.csv", "displacement_residuals.csv",
+                        "report/evaluation.csv", "report/evaluation.txt", "report/report.html"}) {
+    INFO(f);
+    CHECK(daemon_files.count(f) == 1);
+  }
+  CHECK(io::check_result_set(daemon_dir).whole());
+  CHECK(io::check_result_set(scan_dir).whole());
+  int csvs = 0;
+  for (const auto& f : scan_files)
+    if (f.size() > 4 && f.substr(f.size() - 4) == ".csv" && daemon_files.count(f)) {
+      INFO(f);
+      CHECK(header_of(daemon_dir / f) == header_of(scan_dir / f));
+      CHECK_FALSE(header_of(scan_dir / f).empty());
+      ++csvs;
+    }
+  CHECK(csvs >= 4);
+  // The daemon's result carries its uncertainty and its source, as errsep-scan's.
+  const auto t = io::read_csv(daemon_dir / "displacement.csv");
+  CHECK(t.find_column("u_w_um"));
+  CHECK(t.meta("source") ==
+        std::optional<std::string>((daemon_dir / "raw_displacement.csv").string()));
+  for (const fs::path& dir : {daemon_dir, scan_dir}) {
+    std::string rep;
+    const int rrc = test::run_command(
+        test::app_path("report").string() + " " + dir.string() + " --no-plots", &rep);
+    INFO(dir.string() << "\n" << rep);
+    CHECK(rrc == 0);
+  }
+
+  // A report lost to a stop between the commit of a scan's results and its report: the daemon
+  // with --no-report leaves exactly that folder (results committed, no report/).
+  rig.start_daemon({"--no-report"});
+  // Idle (READY=1 of the first start is still among the notify socket's messages).
+  REQUIRE(rig.wait_regs([](const std::vector<long>& x) { return x[0] == 1; }, 15s).size() ==
+          test::kRegisterCount);
+  REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1, &out) == 0);
+  const auto r2 = rig.wait_regs(
+      [](const std::vector<long>& x) { return x[test::reg_last_scan_id] == 2 && x[0] == 1; }, 60s);
+  REQUIRE(r2.size() == test::kRegisterCount);
+  REQUIRE(r2[test::reg_last_outcome] == 1);
+  const auto folder2 = rig.result_folder(2);
+  REQUIRE(folder2);
+  const fs::path dir2 = *folder2;
+  REQUIRE(fs::exists(dir2 / "displacement.csv"));
+  REQUIRE_FALSE(fs::exists(dir2 / "report"));
+  const auto before = files_under(dir2);
+  rig.daemon->signal(SIGTERM);
+  REQUIRE(rig.daemon->wait(10s));
+
+  // The next start makes it (before the register map listens), says so, and keeps the scan's
+  // files; the folder with its report already is left alone.
+  const auto first_report_time = fs::last_write_time(daemon_dir / "report" / "report.html");
+  rig.start_daemon();
+  CHECK(fs::exists(dir2 / "report" / "report.html"));
+  CHECK(fs::exists(dir2 / "report" / "evaluation.csv"));
+  CHECK(io::check_result_set(dir2).whole());
+  const auto after = files_under(dir2);
+  for (const auto& f : before) {
+    INFO(f);
+    CHECK(after.count(f) == 1);
+  }
+  CHECK(fs::last_write_time(daemon_dir / "report" / "report.html") == first_report_time);
+  const std::string logs = rig.logs();
+  INFO(logs);
+  CHECK(logs.find("<5>" + dir2.filename().string() + ": report missing") != std::string::npos);
+  CHECK(logs.find("<6>" + dir2.filename().string() + ": report: ") != std::string::npos);
+  CHECK(logs.find("<5>" + daemon_dir.filename().string() + ": report missing") ==
+        std::string::npos);
+  rig.daemon->signal(SIGTERM);
+  CHECK(rig.daemon->wait(10s));
+}
+
+TEST_CASE("displacement: [scan] method = \"both\" is refused at start, naming the key") {
+  test::TempDir dir;
+  std::string t = test::quick_simulator_config();
+  test::replace_once(t, "method = \"four_sensor\"", "method = \"both\"");
+  const fs::path cfg = dir / "machine.toml";
+  std::ofstream(cfg) << t;
+  std::string out;
+  const int rc = test::run_command(test::app_path("daemon").string() + " --config " + cfg.string() +
+                                       " --results-dir " + (dir / "results").string() +
+                                       " --device-port 1 --no-register-map",
+                                   &out);
+  INFO(out);
+  CHECK(rc == 1);
+  CHECK_THAT(out,
+             Catch::Contains("scan.method: 'both': the daemon runs one kind of scan per trigger"));
+}
