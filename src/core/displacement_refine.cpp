@@ -83,6 +83,71 @@ std::string family_hint(const std::string& family, bool s0_repeat) {
   return "its scan differences are absorbed by the joint model";
 }
 
+/// The residual columns P·E of an effect (and, in *diff, the scan differences E).
+Eigen::MatrixXd residual_columns(const DisplacementEffect& e, const TwoAxisScan& zero,
+                                 const TwoAxisScanOrder& order, Eigen::MatrixXd* diff = nullptr) {
+  const auto k = static_cast<Eigen::Index>(e.parameters.size());
+  Eigen::MatrixXd d(scan_differences(zero).size(), k);
+  for (Eigen::Index j = 0; j < k; ++j) {
+    TwoAxisScan u = zero;
+    add_disturbance(u, e.unit(j), order);
+    d.col(j) = scan_differences(u);
+  }
+  if (diff) *diff = d;
+  project(d, zero.s1_1_um.rows(), zero.s1_1_um.cols());
+  return d;
+}
+
+/// Fills the effect's residual columns, sensitivities and identifiability.
+void complete_effect(DisplacementEffect& e, const TwoAxisScan& zero, const TwoAxisScanOrder& order,
+                     const TwoAxisOptions& separation, double tolerance) {
+  const auto k = static_cast<Eigen::Index>(e.parameters.size());
+  const Eigen::Index N = zero.s1_1_um.size();
+  Eigen::MatrixXd diff;
+  e.residual_columns = residual_columns(e, zero, order, &diff);
+  for (int r = 0; r < 2; ++r) {
+    e.d_w[r].resize(N, k);
+    e.d_m_w[r].resize(N, k);
+  }
+  for (Eigen::Index j = 0; j < k; ++j) {
+    TwoAxisScan u = zero;
+    add_disturbance(u, e.unit(j), order);
+    for (int r = 0; r < 2; ++r) {
+      TwoAxisOptions so = separation;
+      so.rotation = r ? RotationCorrection::on : RotationCorrection::off;
+      so.displacement_sigma_mm = 0;
+      const TwoAxisResult sep = separate_two_axis(u, so);
+      e.d_w[r].col(j) = -flatten(sep.w_um);
+      e.d_m_w[r].col(j) = -flatten(sep.m_w_um);
+    }
+  }
+  // Identifiability: residual columns scaled by their difference column's norm.
+  Eigen::VectorXd scale(k);
+  bool zero_column = false;
+  for (Eigen::Index j = 0; j < k; ++j) {
+    const double n = diff.col(j).norm();
+    zero_column = zero_column || !(n > 0);
+    scale(j) = n > 0 ? 1.0 / n : 0.0;
+  }
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(e.residual_columns * scale.asDiagonal());
+  e.relative_singular_value = zero_column ? 0.0 : svd.singularValues().minCoeff();
+  e.identifiable = e.relative_singular_value > tolerance;
+}
+
+/// Sensor 0; the reference X sensors 1, 2; the reference Y sensors 3, 4.
+const std::vector<std::vector<int>> kSensorGroups = {{0}, {1, 2}, {3, 4}};
+
+std::string group_name(const std::vector<int>& g) {
+  if (g.size() == 1) return "sensor " + std::to_string(g[0]);
+  return "sensors " + std::to_string(g.front()) + "-" + std::to_string(g.back());
+}
+
+std::string thermal_name(double tau_s) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "thermal (tau = %.0f s)", tau_s);
+  return buf;
+}
+
 }  // namespace
 
 bool DisplacementRefineOptions::is_valid(std::string* why) const {
@@ -147,62 +212,30 @@ DisplacementEffectLibrary make_displacement_effect_library(const Eigen::VectorXd
     e.family = e.name = "drift";
     for (const auto& s : sensors)
       e.parameters.push_back("v" + s + "_um_per_s");
+    e.groups = kSensorGroups;
     fx.push_back(e);
   }
   for (const double m : o.thermal_tau_scans) {
     DisplacementEffect e;
     e.family = "thermal";
     e.tau_s = m * scan_s;
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "thermal (tau = %.0f s)", e.tau_s);
-    e.name = buf;
+    e.name = thermal_name(e.tau_s);
     for (const auto& s : sensors)
       e.parameters.push_back("a" + s + "_um");
+    e.groups = kSensorGroups;
     fx.push_back(e);
   }
   {
     DisplacementEffect e;
     e.family = e.name = "tilt";
     e.parameters = {"tilt_x_urad", "tilt_y_urad"};
+    e.groups = {{0, 1}};
     fx.push_back(e);
   }
 
   const TwoAxisScan zero = zero_scan(x_mm, y_mm, s0_repeat);
-  const Eigen::Index N = zero.s1_1_um.size();
-  for (auto& e : fx) {
-    const auto k = static_cast<Eigen::Index>(e.parameters.size());
-    Eigen::MatrixXd diff(scan_differences(zero).size(), k);
-    for (int r = 0; r < 2; ++r) {
-      e.d_w[r].resize(N, k);
-      e.d_m_w[r].resize(N, k);
-    }
-    for (Eigen::Index j = 0; j < k; ++j) {
-      TwoAxisScan u = zero;
-      add_disturbance(u, e.unit(j), order);
-      diff.col(j) = scan_differences(u);
-      for (int r = 0; r < 2; ++r) {
-        TwoAxisOptions so = separation;
-        so.rotation = r ? RotationCorrection::on : RotationCorrection::off;
-        so.displacement_sigma_mm = 0;
-        const TwoAxisResult sep = separate_two_axis(u, so);
-        e.d_w[r].col(j) = -flatten(sep.w_um);
-        e.d_m_w[r].col(j) = -flatten(sep.m_w_um);
-      }
-    }
-    e.residual_columns = diff;
-    project(e.residual_columns, lib.nx, lib.ny);
-    // Identifiability: residual columns scaled by their difference column's norm.
-    Eigen::VectorXd scale(k);
-    bool zero_column = false;
-    for (Eigen::Index j = 0; j < k; ++j) {
-      const double n = diff.col(j).norm();
-      zero_column = zero_column || !(n > 0);
-      scale(j) = n > 0 ? 1.0 / n : 0.0;
-    }
-    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(e.residual_columns * scale.asDiagonal());
-    e.relative_singular_value = zero_column ? 0.0 : svd.singularValues().minCoeff();
-    e.identifiable = e.relative_singular_value > o.identifiable_tolerance;
-  }
+  for (auto& e : fx)
+    complete_effect(e, zero, order, separation, o.identifiable_tolerance);
   // Families none of whose variants the plan identifies, said once.
   for (const auto& e : fx) {
     bool any = false, first = true;
@@ -274,65 +307,116 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
   const Eigen::VectorXd y = wt.cwiseProduct(res);
   int dof0 = 2 * lib.nx * (lib.ny - 1) + 2 * lib.ny * (lib.nx - 1);
   if (lib.s0_repeat) dof0 += static_cast<int>(N) - 1;
-  auto columns = [&](const std::vector<std::size_t>& idx) {
+  auto columns = [&](const std::vector<const DisplacementEffect*>& fx) {
     Eigen::Index k = 0;
-    for (const auto i : idx)
-      k += lib.effects[i].residual_columns.cols();
+    for (const auto* e : fx)
+      k += e->residual_columns.cols();
     Eigen::MatrixXd X(y.size(), k);
     k = 0;
-    for (const auto i : idx) {
-      const auto& c = lib.effects[i].residual_columns;
-      X.middleCols(k, c.cols()) = wt.asDiagonal() * c;
-      k += c.cols();
+    for (const auto* e : fx) {
+      X.middleCols(k, e->residual_columns.cols()) = wt.asDiagonal() * e->residual_columns;
+      k += e->residual_columns.cols();
     }
     return X;
   };
+  auto pointers = [](const std::vector<DisplacementEffect>& v) {
+    std::vector<const DisplacementEffect*> p;
+    for (const auto& e : v)
+      p.push_back(&e);
+    return p;
+  };
+  const TwoAxisScan zero = zero_scan(scan.x_mm, scan.y_mm, lib.s0_repeat);
 
-  // Forward selection (one variant per family).
-  std::vector<std::size_t> taken;
+  // Forward selection (one variant per family).  Ranked by p, then (p underflowing to 0 for
+  // strong effects) by F.
+  std::vector<DisplacementEffect> chosen;
   std::vector<double> taken_F, taken_p;
   for (;;) {
-    const Eigen::MatrixXd Xt = columns(taken);
-    const double rss_t = least_squares(Xt, y).rss;
+    const auto taken = pointers(chosen);
+    const double rss_t = least_squares(columns(taken), y).rss;
     int tried = 0;
     double best_p = 2, best_F = 0;
-    std::size_t best = 0;
-    for (std::size_t i = 0; i < lib.effects.size(); ++i) {
-      const auto& e = lib.effects[i];
+    const DisplacementEffect* best = nullptr;
+    for (const auto& e : lib.effects) {
       bool family_taken = false;
-      for (const auto t : taken)
-        family_taken = family_taken || lib.effects[t].family == e.family;
+      for (const auto* t : taken)
+        family_taken = family_taken || t->family == e.family;
       if (family_taken || !e.identifiable) continue;
       ++tried;
-      auto idx = taken;
-      idx.push_back(i);
-      const Eigen::MatrixXd X = columns(idx);
+      auto fx = taken;
+      fx.push_back(&e);
+      const Eigen::MatrixXd X = columns(fx);
       const double rss = least_squares(X, y).rss;
       const int kc = static_cast<int>(e.residual_columns.cols());
       const int dof = dof0 - static_cast<int>(X.cols());
       if (dof <= 0 || !(rss > 0)) continue;
       const double F = ((rss_t - rss) / kc) / (rss / dof);
       const double p = f_test_p_value(F, kc, dof);
-      if (p < best_p) {
+      if (p < best_p || (p == best_p && F > best_F)) {
         best_p = p;
         best_F = F;
-        best = i;
+        best = &e;
       }
     }
-    if (tried == 0 || best_p > 1) break;
+    if (tried == 0 || best == nullptr) break;
     const double p_adj = std::min(1.0, best_p * tried);  // Bonferroni over the variants tried
     if (!(p_adj < o.alpha)) break;
-    taken.push_back(best);
+    chosen.push_back(*best);
     taken_F.push_back(best_F);
     taken_p.push_back(p_adj);
   }
 
+  // The thermal time constant between the grid's neighbours of the chosen variant: golden
+  // section on log τ of the residual sum of squares with every chosen effect in the fit.
+  for (auto& e : chosen) {
+    if (e.family != "thermal") continue;
+    double lo = e.tau_s, hi = e.tau_s;
+    for (const auto& f : lib.effects)
+      if (f.family == "thermal") {
+        if (f.tau_s < e.tau_s && (lo == e.tau_s || f.tau_s > lo)) lo = f.tau_s;
+        if (f.tau_s > e.tau_s && (hi == e.tau_s || f.tau_s < hi)) hi = f.tau_s;
+      }
+    if (lo == e.tau_s) lo = e.tau_s / 1.5;
+    if (hi == e.tau_s) hi = e.tau_s * 1.5;
+    DisplacementEffect trial = e;
+    auto rss_at = [&](double log_tau) {
+      trial.tau_s = std::exp(log_tau);
+      trial.residual_columns = residual_columns(trial, zero, lib.order);
+      auto fx = pointers(chosen);
+      for (auto*& q : fx)
+        if (q == &e) q = &trial;
+      return least_squares(columns(fx), y).rss;
+    };
+    const double g = 0.5 * (std::sqrt(5.0) - 1.0);
+    double a = std::log(lo), b = std::log(hi);
+    double c = b - g * (b - a), d = a + g * (b - a);
+    double fc = rss_at(c), fd = rss_at(d);
+    for (int it = 0; it < 14; ++it) {
+      if (fc < fd) {
+        b = d;
+        d = c;
+        fd = fc;
+        c = b - g * (b - a);
+        fc = rss_at(c);
+      } else {
+        a = c;
+        c = d;
+        fc = fd;
+        d = a + g * (b - a);
+        fd = rss_at(d);
+      }
+    }
+    e.tau_s = std::exp(0.5 * (a + b));
+    e.name = thermal_name(e.tau_s);
+    complete_effect(e, zero, lib.order, separation, o.identifiable_tolerance);
+  }
+
   out.refined = out.base;
-  if (taken.empty()) {
+  if (chosen.empty()) {
     // Nothing taken: the refined result is the separation (rotation as decided on the data).
     return out;
   }
-  const Eigen::MatrixXd X = columns(taken);
+  const Eigen::MatrixXd X = columns(pointers(chosen));
   const LsFit fit = least_squares(X, y);
   const auto K = X.cols();
   out.sigma_scale = fit.rss / (dof0 - K);
@@ -344,41 +428,52 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
   std::vector<bool> applied(static_cast<std::size_t>(K), false);
   DisplacementDisturbance correction;
   Eigen::Index c0 = 0;
-  for (std::size_t t = 0; t < taken.size(); ++t) {
-    const auto& e = lib.effects[taken[t]];
+  for (std::size_t t = 0; t < chosen.size(); ++t) {
+    const auto& e = chosen[t];
     const auto k = e.residual_columns.cols();
     Dw.middleCols(c0, k) = e.d_w[rot];
     Dm.middleCols(c0, k) = e.d_m_w[rot];
-    // The gauge (the constant of w and m_w) removed for the decision.
-    const Eigen::MatrixXd gw = e.d_w[rot].rowwise() - e.d_w[rot].colwise().mean();
-    const Eigen::MatrixXd gm = e.d_m_w[rot].rowwise() - e.d_m_w[rot].colwise().mean();
-    DisplacementRefineStep st;
-    st.effect = e.name;
-    st.names = e.parameters;
-    st.value = fit.beta.segment(c0, k);
-    const Eigen::MatrixXd ck = cov.block(c0, c0, k, k);
-    st.u = ck.diagonal().cwiseMax(0.0).cwiseSqrt();
-    st.F = taken_F[t];
-    st.p_value = taken_p[t];
-    st.decision =
-        decide_step(st.value, ck, {{"w", "um", gw, u_w0}, {"m_w", "um", gm, u_m0}}, o.decision);
-    st.applied = st.decision.apply;
-    st.line = describe_decision(e.name, e.parameters, st.value, st.u, st.decision);
-    if (st.applied) {
-      for (Eigen::Index j = 0; j < k; ++j) {
-        applied[static_cast<std::size_t>(c0 + j)] = true;
-        const DisplacementDisturbance u = e.unit(j);
-        const double v = -st.value(j);
-        for (int s = 0; s < 5; ++s) {
-          correction.drift_um_per_s[s] += v * u.drift_um_per_s[s];
-          correction.thermal_um[s] += v * u.thermal_um[s];
-        }
-        correction.tilt_x_urad += v * u.tilt_x_urad;
-        correction.tilt_y_urad += v * u.tilt_y_urad;
-        if (e.family == "thermal") correction.thermal_tau_s = e.tau_s;
+    // Each group of parameters decided on its own block (a reference piece read along the
+    // raster's slow axis may be well determined while the other is not).
+    for (const auto& grp : e.groups) {
+      const auto kg = static_cast<Eigen::Index>(grp.size());
+      Eigen::MatrixXd gw(N, kg), gm(N, kg), ck(kg, kg);
+      DisplacementRefineStep st;
+      st.effect = e.name + (e.groups.size() > 1 ? ", " + group_name(grp) : std::string());
+      st.value.resize(kg);
+      for (Eigen::Index a = 0; a < kg; ++a) {
+        const Eigen::Index ia = grp[static_cast<std::size_t>(a)];
+        st.names.push_back(e.parameters[static_cast<std::size_t>(ia)]);
+        st.value(a) = fit.beta(c0 + ia);
+        // The gauge (the constant of w and m_w) removed for the decision.
+        gw.col(a) = e.d_w[rot].col(ia).array() - e.d_w[rot].col(ia).mean();
+        gm.col(a) = e.d_m_w[rot].col(ia).array() - e.d_m_w[rot].col(ia).mean();
+        for (Eigen::Index b = 0; b < kg; ++b)
+          ck(a, b) = cov(c0 + ia, c0 + grp[static_cast<std::size_t>(b)]);
       }
+      st.u = ck.diagonal().cwiseMax(0.0).cwiseSqrt();
+      st.F = taken_F[t];
+      st.p_value = taken_p[t];
+      st.decision =
+          decide_step(st.value, ck, {{"w", "um", gw, u_w0}, {"m_w", "um", gm, u_m0}}, o.decision);
+      st.applied = st.decision.apply;
+      st.line = describe_decision(st.effect, st.names, st.value, st.u, st.decision);
+      if (st.applied) {
+        for (const int ia : grp) {
+          applied[static_cast<std::size_t>(c0 + ia)] = true;
+          const DisplacementDisturbance u = e.unit(ia);
+          const double v = -fit.beta(c0 + ia);
+          for (int s = 0; s < 5; ++s) {
+            correction.drift_um_per_s[s] += v * u.drift_um_per_s[s];
+            correction.thermal_um[s] += v * u.thermal_um[s];
+          }
+          correction.tilt_x_urad += v * u.tilt_x_urad;
+          correction.tilt_y_urad += v * u.tilt_y_urad;
+          if (e.family == "thermal") correction.thermal_tau_s = e.tau_s;
+        }
+      }
+      out.steps.push_back(std::move(st));
     }
-    out.steps.push_back(std::move(st));
     c0 += k;
   }
   if (out.applied_any()) {

@@ -56,17 +56,17 @@ DisplacementDisturbance random_disturbance(Effect e, double sigma, std::uint64_t
       break;
     case Effect::thermal:
       for (auto& a : d.thermal_um)
-        a = sign_size(rng, 20.0 * sigma);
+        a = sign_size(rng, 3.0 * sigma);
       d.thermal_tau_s = scan_s * std::exp(std::uniform_real_distribution<double>(
                                      std::log(0.3), std::log(3.0))(rng));
       break;
     case Effect::tilt:
-      d.tilt_x_urad = sign_size(rng, 200.0 * sigma);
-      d.tilt_y_urad = sign_size(rng, 200.0 * sigma);
+      d.tilt_x_urad = sign_size(rng, 50.0 * sigma);
+      d.tilt_y_urad = sign_size(rng, 50.0 * sigma);
       break;
     case Effect::drift:
       for (auto& v : d.drift_um_per_s)
-        v = sign_size(rng, 0.01 * sigma);
+        v = sign_size(rng, 0.002 * sigma);
       break;
   }
   return d;
@@ -241,4 +241,38 @@ TEST_CASE("displacement refine: the closing-the-loop table, sigma 0.05/0.1/0.2 u
   std::printf("coverage of the refined u_w (2u), clean and identifiable cells: %.3f\n", cover);
   CHECK(cover >= 0.90);
   CHECK(cover <= 0.99);
+}
+
+TEST_CASE("debug drift", "[.debug]") {
+  const Plan plan = make_plan(true);
+  for (int s = 0; s < 4; ++s) {
+    const double sigma = 0.1;
+    const std::uint64_t seed = 9000 + s;
+    TwoAxisSimOptions so;
+    so.nx = so.ny = kN;
+    so.eddy_sensor.noise_sigma_um = sigma;
+    so.contact_sensor.noise_sigma_um = 1.8 * sigma;
+    so.record_s0_scan2 = true;
+    so.timing.sample_period_s = 1.0;
+    so.timing.pause_between_scans_s = kPauseS;
+    so.reverse_scan2 = true;
+    so.disturbance = random_disturbance(Effect::drift, sigma, seed);
+    so.seed = seed;
+    const auto truth = random_two_axis_truth(seed, 0.0);
+    const auto sim = simulate_two_axis(truth, so);
+    TwoAxisOptions o;
+    o.rotation = RotationCorrection::off;
+    const auto r = refine_two_axis(sim.scan, o, plan.lib);
+    std::printf("truth v: %g %g %g %g %g\n%s", so.disturbance.drift_um_per_s[0],
+                so.disturbance.drift_um_per_s[1], so.disturbance.drift_um_per_s[2],
+                so.disturbance.drift_um_per_s[3], so.disturbance.drift_um_per_s[4],
+                r.brief_report().c_str());
+    for (const auto& st : r.steps) {
+      for (const auto& q : st.decision.quantities)
+        std::printf("   %s: change %.3f added_u %.3f bias %.3f ratio %.3f ubase %.3f\n",
+                    q.name.c_str(), q.rms_change, q.rms_added_u, q.rms_bias,
+                    q.expected_mse_ratio, q.rms_u_base);
+      std::printf("   reason: %s\n", st.decision.reason.c_str());
+    }
+  }
 }

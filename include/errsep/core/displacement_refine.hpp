@@ -33,8 +33,12 @@
 // (thermal once, the variant of its τ grid that fits best) is tested by the F-test of its columns
 // added to those taken, with a Bonferroni correction over the variants tried; the best one below
 // α is taken.  Then every taken effect is decided by decide_step on its parameters' block of the
-// joint fit, quantities w and m_w (gauge: their constant removed): applied, or detected and its
-// fitted size added to u.
+// joint fit, one group of sensors at a time (sensor 0; reference X, sensors 1-2; reference Y,
+// sensors 3-4), quantities w and m_w (gauge: their constant removed): applied, or detected and
+// its fitted size added to u.  Why per group: with the raster x fastest, a reference Y track's
+// groups (columns) are read within n_x samples, so a drift of sensors 3-4 is seen only through
+// its fast part, while what it does to w comes from its slow part (the column means, absorbed by
+// r_y): in the backward plan sensors 1-2 drift rates are determined ~25x better than 3-4's.
 #include <Eigen/Core>
 #include <string>
 #include <vector>
@@ -48,7 +52,7 @@ namespace errsep::core {
 struct DisplacementRefineOptions {
   double alpha = 0.01;  ///< significance of a step's F-test (after Bonferroni)
   /// Time constants tried for the thermal drift, as multiples of one scan's duration.
-  std::vector<double> thermal_tau_scans = {0.25, 0.5, 1.0, 2.0, 4.0};
+  std::vector<double> thermal_tau_scans = {0.2, 0.3, 0.45, 0.7, 1.0, 1.5, 2.2, 3.3, 5.0};
   /// An effect is identifiable when the smallest singular value of its residual columns, relative
   /// to that of its scan-difference columns, is above this.
   double identifiable_tolerance = 1e-3;
@@ -58,9 +62,11 @@ struct DisplacementRefineOptions {
 
 /// One effect of the library on one grid and scan order.
 struct DisplacementEffect {
-  std::string family;                                          ///< "drift", "thermal", "tilt"
-  std::string name;                                            ///< e.g. "thermal (tau = 312 s)"
-  std::vector<std::string> parameters;                         ///< e.g. "a0_um" … "a4_um"
+  std::string family;                   ///< "drift", "thermal", "tilt"
+  std::string name;                     ///< e.g. "thermal (tau = 312 s)"
+  std::vector<std::string> parameters;  ///< e.g. "a0_um" … "a4_um"
+  /// Parameter groups decided on their own (drift and thermal: sensor 0, sensors 1-2, 3-4).
+  std::vector<std::vector<int>> groups;
   DisplacementDisturbance unit(Eigen::Index parameter) const;  ///< one unit parameter
   double tau_s = 0;                                            ///< thermal only
   Eigen::MatrixXd residual_columns;  ///< P·E: residual rows (see library) × parameters, µm
