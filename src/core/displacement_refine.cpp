@@ -137,7 +137,9 @@ void complete_effect(DisplacementEffect& e, const TwoAxisScan& zero, const TwoAx
 /// Sensor 0; the reference X sensors 1, 2; the reference Y sensors 3, 4.
 const std::vector<std::vector<int>> kSensorGroups = {{0}, {1, 2}, {3, 4}};
 
-std::string group_name(const std::vector<int>& g) {
+/// "sensor 0", "sensors 1-2" (thermal's dtau_s, index 5, is in every group and not named).
+std::string group_name(std::vector<int> g) {
+  std::erase_if(g, [](int i) { return i >= 5; });
   if (g.size() == 1) return "sensor " + std::to_string(g[0]);
   return "sensors " + std::to_string(g.front()) + "-" + std::to_string(g.back());
 }
@@ -172,6 +174,7 @@ bool DisplacementRefineOptions::is_valid(std::string* why) const {
 DisplacementDisturbance DisplacementEffect::unit(Eigen::Index k) const {
   DisplacementDisturbance d;
   const auto s = static_cast<std::size_t>(k);
+  if (k >= 5) return d;  // thermal's dtau_s: not a unit disturbance (see refine_two_axis)
   if (family == "drift") d.drift_um_per_s[s] = 1.0;
   if (family == "thermal") {
     d.thermal_um[s] = 1.0;
@@ -409,6 +412,43 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
     e.tau_s = std::exp(0.5 * (a + b));
     e.name = thermal_name(e.tau_s);
     complete_effect(e, zero, lib.order, separation, o.identifiable_tolerance);
+    // τ is estimated too, and the amplitudes trade with it (a long τ's slope is what no scan
+    // difference sees): a Gauss–Newton column dtau_s, Σ â_k ∂E_k/∂τ by central differences, in
+    // the fit and in every group's decision, so that the decision carries τ's uncertainty.
+    const LsFit f0 = least_squares(columns(pointers(chosen)), y);
+    Eigen::Index off = 0;
+    for (const auto& other : chosen) {
+      if (&other == &e) break;
+      off += other.residual_columns.cols();
+    }
+    DisplacementDisturbance hi_d, lo_d;
+    const double h = 1e-3 * e.tau_s;
+    for (int k = 0; k < 5; ++k)
+      hi_d.thermal_um[static_cast<std::size_t>(k)] = lo_d.thermal_um[static_cast<std::size_t>(k)] =
+          f0.beta(off + k);
+    hi_d.thermal_tau_s = e.tau_s + h;
+    lo_d.thermal_tau_s = e.tau_s - h;
+    TwoAxisScan s_hi = zero, s_lo = zero;
+    add_disturbance(s_hi, hi_d, lib.order);
+    add_disturbance(s_lo, lo_d, lib.order);
+    Eigen::VectorXd col = (scan_differences(s_hi) - scan_differences(s_lo)) / (2 * h);
+    project(col, lib.nx, lib.ny);
+    const auto k = e.residual_columns.cols();
+    e.residual_columns.conservativeResize(Eigen::NoChange, k + 1);
+    e.residual_columns.col(k) = col;
+    for (int r = 0; r < 2; ++r) {
+      TwoAxisOptions so = separation;
+      so.rotation = r ? RotationCorrection::on : RotationCorrection::off;
+      so.displacement_sigma_mm = 0;
+      const TwoAxisResult sh = separate_two_axis(s_hi, so), sl = separate_two_axis(s_lo, so);
+      e.d_w[r].conservativeResize(Eigen::NoChange, k + 1);
+      e.d_m_w[r].conservativeResize(Eigen::NoChange, k + 1);
+      e.d_w[r].col(k) = -flatten(sh.w_um - sl.w_um) / (2 * h);
+      e.d_m_w[r].col(k) = -flatten(sh.m_w_um - sl.m_w_um) / (2 * h);
+    }
+    e.parameters.push_back("dtau_s");
+    for (auto& grp : e.groups)
+      grp.push_back(static_cast<int>(k));
   }
 
   out.refined = out.base;
@@ -419,6 +459,28 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
   const Eigen::MatrixXd X = columns(pointers(chosen));
   const LsFit fit = least_squares(X, y);
   const auto K = X.cols();
+  // The values applied: the fit at τ̂ without the dtau_s column (a Gauss–Newton direction for the
+  // decision's covariance, not a step: a τ̂ at the edge of its bracket can leave dtau_s far from
+  // 0, and amplitudes conditioned on it would not match the readings corrected at τ̂).
+  Eigen::VectorXd applied_value = fit.beta;
+  {
+    std::vector<Eigen::Index> keep;
+    Eigen::Index c = 0;
+    for (const auto& e : chosen)
+      for (const auto& nm : e.parameters) {
+        if (nm != "dtau_s") keep.push_back(c);
+        ++c;
+      }
+    if (static_cast<Eigen::Index>(keep.size()) < K) {
+      Eigen::MatrixXd X0(X.rows(), static_cast<Eigen::Index>(keep.size()));
+      for (std::size_t j = 0; j < keep.size(); ++j)
+        X0.col(static_cast<Eigen::Index>(j)) = X.col(keep[j]);
+      const LsFit f0 = least_squares(X0, y);
+      applied_value.setZero();
+      for (std::size_t j = 0; j < keep.size(); ++j)
+        applied_value(keep[j]) = f0.beta(static_cast<Eigen::Index>(j));
+    }
+  }
   out.sigma_scale = fit.rss / (dof0 - K);
   const Eigen::MatrixXd cov =
       out.sigma_scale * (X.transpose() * X).completeOrthogonalDecomposition().pseudoInverse();
@@ -461,15 +523,17 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
       if (st.applied) {
         for (const int ia : grp) {
           applied[static_cast<std::size_t>(c0 + ia)] = true;
+          if (e.family == "thermal" && ia >= 5) continue;  // dtau_s: set with τ below
           const DisplacementDisturbance u = e.unit(ia);
-          const double v = -fit.beta(c0 + ia);
+          const double v = -applied_value(c0 + ia);
           for (int s = 0; s < 5; ++s) {
             correction.drift_um_per_s[s] += v * u.drift_um_per_s[s];
             correction.thermal_um[s] += v * u.thermal_um[s];
           }
           correction.tilt_x_urad += v * u.tilt_x_urad;
           correction.tilt_y_urad += v * u.tilt_y_urad;
-          if (e.family == "thermal") correction.thermal_tau_s = e.tau_s;
+          if (e.family == "thermal")
+            correction.thermal_tau_s = e.tau_s;  // τ̂ (dtau_s is ≈ 0 there; a linearisation)
         }
       }
       out.steps.push_back(std::move(st));
