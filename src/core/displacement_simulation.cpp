@@ -127,6 +127,7 @@ bool TwoAxisSimOptions::is_valid(std::string* why) const {
   std::string sub;
   if (!contact_sensor.is_valid(&sub)) return fail("contact_sensor." + sub);
   if (!eddy_sensor.is_valid(&sub)) return fail("eddy_sensor." + sub);
+  if (!disturbance.is_valid(&sub)) return fail(sub);
   return true;
 }
 
@@ -179,10 +180,10 @@ TwoAxisSimData simulate_two_axis(const TwoAxisTruth& tr, const TwoAxisSimOptions
   const double ay =
       opts.displacement_y_mm + opts.displacement_bias_mm + rng.normal(opts.displacement_sigma_mm);
   // Scan 2 (Eqs. 16-19).
-  const double t0 = nx * ny * T + opts.timing.pause_between_scans_s;
+  const TwoAxisScanOrder order{T, opts.timing.pause_between_scans_s, opts.reverse_scan2};
   for (int j = 0; j < ny; ++j)
     for (int i = 0; i < nx; ++i) {
-      const double x = s.x_mm(i), y = s.y_mm(j), t = t0 + (j * nx + i) * T;
+      const double x = s.x_mm(i), y = s.y_mm(j), t = order.time_s(2, i, j, nx, ny);
       s.s1_2_um(i, j) = tr.r1x_um(x + ax) + m1(i, j) + de * t + rng.normal(se);
       s.s2_2_um(i, j) = tr.r2x_um(x + ax) + m2(i, j) + de * t + rng.normal(se);
       s.s3_2_um(i, j) = tr.r3y_um(y + ay) + m3(i, j) + de * t + rng.normal(se);
@@ -192,10 +193,11 @@ TwoAxisSimData simulate_two_axis(const TwoAxisTruth& tr, const TwoAxisSimOptions
     s.s0_2_um.resize(nx, ny);
     for (int j = 0; j < ny; ++j)
       for (int i = 0; i < nx; ++i) {
-        const double t = t0 + (j * nx + i) * T;
+        const double t = order.time_s(2, i, j, nx, ny);
         s.s0_2_um(i, j) = d.w_um(i, j) + d.m_w_um(i, j) + dc * t + rng.normal(sc);
       }
   }
+  add_disturbance(s, opts.disturbance, order);
   return d;
 }
 

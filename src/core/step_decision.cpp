@@ -1,5 +1,7 @@
 #include "errsep/core/step_decision.hpp"
 
+#include <boost/math/distributions/fisher_f.hpp>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -119,6 +121,12 @@ Eigen::VectorXd refined_uncertainty(const Eigen::VectorXd& u_sep, const Eigen::M
   const Eigen::VectorXd var = (Da * cov).cwiseProduct(Da).rowwise().sum();
   const Eigen::VectorXd bias = D * mask_l.cwiseProduct(p);
   return (u_sep.array().square() + var.array().max(0.0) + bias.array().square()).sqrt();
+}
+
+double f_test_p_value(double F, int k, int dof) {
+  if (k <= 0 || dof <= 0 || !(F > 0)) return 1.0;
+  const boost::math::fisher_f_distribution<double> dist(k, dof);
+  return boost::math::cdf(boost::math::complement(dist, F));
 }
 
 std::string describe_decision(const std::string& effect, const std::vector<std::string>& names,

@@ -14,6 +14,7 @@
 #include <functional>
 #include <string>
 
+#include "errsep/core/displacement_effects.hpp"
 #include "errsep/core/two_axis_displacement.hpp"
 
 namespace errsep::core {
@@ -102,6 +103,10 @@ struct TwoAxisSimOptions {
   std::uint64_t seed = 1;
   /// Also read sensor 0 during scan 2 (TwoAxisScan::s0_2_um), drawn after every other reading.
   bool record_s0_scan2 = false;
+  /// Scan 2 runs the raster backwards (TwoAxisScanOrder); the drift above follows its times.
+  bool reverse_scan2 = false;
+  /// Undeclared effects (displacement_effects.hpp) added after every draw: they change no draw.
+  DisplacementDisturbance disturbance;
   bool is_valid(std::string* why = nullptr) const;
 };
 

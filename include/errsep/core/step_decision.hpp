@@ -89,6 +89,10 @@ Eigen::VectorXd refined_uncertainty(const Eigen::VectorXd& u_sep, const Eigen::M
                                     const Eigen::MatrixXd& cov, const Eigen::VectorXd& p,
                                     const std::vector<bool>& applied);
 
+/// Upper-tail p-value of an F statistic with (k, dof) degrees of freedom: the significance of k
+/// columns added to a least-squares fit that leaves dof.  1 when k, dof or F is not positive.
+double f_test_p_value(double F, int k, int dof);
+
 /// One line for a report, e.g. "gain detected (g3 = 0.023 +- 0.055): not applied, adds 0.41 um
 /// to u_S (rms, in quadrature)" or "pe1 applied (dD2_mm = …): S changed by 0.8 um rms, u_S +0.02".
 std::string describe_decision(const std::string& effect, const std::vector<std::string>& names,

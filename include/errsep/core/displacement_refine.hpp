@@ -1,0 +1,128 @@
+#pragma once
+// Closing the loop for the two-axis displacement method (issue 16 item 4): the redundancy of the
+// joint estimate (displacement_joint.hpp, displacement_residuals.hpp) drives the selection of the
+// effects its model lacks (displacement_effects.hpp), and a step is taken only when it lowers the
+// expected error of what the user gets, by the same rule as the four-sensor loop
+// (step_decision.hpp).
+//
+// The redundant equations.  Per grid point the joint model leaves only the scan difference
+// D_k = S k_2 − S k_1 of each reference sensor to test (the sum is taken by the motion, free per
+// point): D_k = r_k(a + d) − r_k(a) repeats on every row (sensors 1, 2) or column (3, 4), so its
+// residual is D_k minus its mean over the row/column group; sensor 0 read in both scans adds
+// D_0 = S0_2 − S0_1 = offset + noise (one group).  These residuals are an orthogonal projection P
+// of the readings, and the separation is linear in the readings, so an effect with parameters q
+// and unit readings E (one TwoAxisScan per parameter) enters as
+//   residual columns   P·E                    (what the redundancy sees of it)
+//   sensitivities      D = −sep(E)            (what applying the correction changes in w, m_w)
+// and the fit of q to the residuals is a weighted least-squares problem of a few columns
+// (weights 1/(√2 σ̂) per sensor kind, σ̂ of the separation).  Its estimate is independent of the
+// separation's (P is orthogonal to what the separation uses), so the refined u is
+// refined_uncertainty(u_sep, D, C, q̂, applied).  P·E and D depend only on the grid, the scan
+// order and the separation's options: the library computes them once (no data), and with them
+// which effects the plan can identify at all (the smallest singular value of P·E relative to E).
+//
+// What the paper's plan (scan 2 runs the raster as scan 1) identifies: thermal drift (not linear
+// in time: the scan difference varies from row to row) and a table tilt between the scans (only
+// through sensor 0's repeat).  It cannot identify a linear drift of any sensor (the scan
+// difference is the same constant at every point: absorbed by r's slope and by sensor 0's
+// offset), nor an error of the traverse d or a yaw between the scans (functions of the piece's
+// coordinate alone: absorbed by r; the traverse's u is in the separation's).  Running scan 2
+// backwards (TwoAxisScanOrder::reverse_scan2) makes linear drift identifiable.
+//
+// Selection, forward (as refine.hpp): in each round every identifiable effect not yet taken
+// (thermal once, the variant of its τ grid that fits best) is tested by the F-test of its columns
+// added to those taken, with a Bonferroni correction over the variants tried; the best one below
+// α is taken.  Then every taken effect is decided by decide_step on its parameters' block of the
+// joint fit, one group of sensors at a time (sensor 0; reference X, sensors 1-2; reference Y,
+// sensors 3-4), quantities w and m_w (gauge: their constant removed): applied, or detected and
+// its fitted size added to u.  Why per group: with the raster x fastest, a reference Y track's
+// groups (columns) are read within n_x samples, so a drift of sensors 3-4 is seen only through
+// its fast part, while what it does to w comes from its slow part (the column means, absorbed by
+// r_y): in the backward plan sensors 1-2 drift rates are determined ~25x better than 3-4's.
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "errsep/core/displacement_effects.hpp"
+#include "errsep/core/step_decision.hpp"
+#include "errsep/core/two_axis_displacement.hpp"
+
+namespace errsep::core {
+
+struct DisplacementRefineOptions {
+  double alpha = 0.01;  ///< significance of a step's F-test (after Bonferroni)
+  /// Time constants tried for the thermal drift, as multiples of one scan's duration.
+  std::vector<double> thermal_tau_scans = {0.2, 0.3, 0.45, 0.7, 1.0, 1.5, 2.2, 3.3, 5.0};
+  /// An effect is identifiable when the smallest singular value of its residual columns, relative
+  /// to that of its scan-difference columns, is above this.
+  double identifiable_tolerance = 1e-3;
+  StepDecisionOptions decision;
+  bool is_valid(std::string* why = nullptr) const;
+};
+
+/// One effect of the library on one grid and scan order.
+struct DisplacementEffect {
+  std::string family;                   ///< "drift", "thermal", "tilt"
+  std::string name;                     ///< e.g. "thermal (tau = 312 s)"
+  std::vector<std::string> parameters;  ///< e.g. "a0_um" … "a4_um"
+  /// Parameter groups decided on their own (drift and thermal: sensor 0, sensors 1-2, 3-4).
+  std::vector<std::vector<int>> groups;
+  DisplacementDisturbance unit(Eigen::Index parameter) const;  ///< one unit parameter
+  double tau_s = 0;                                            ///< thermal only
+  Eigen::MatrixXd residual_columns;  ///< P·E: residual rows (see library) × parameters, µm
+  /// −sep(E) for w and m_w, nx·ny (column major) × parameters; [0] rotation off, [1] on.
+  Eigen::MatrixXd d_w[2], d_m_w[2];
+  bool identifiable = false;
+  double relative_singular_value = 0;
+};
+
+struct DisplacementEffectLibrary {
+  int nx = 0, ny = 0;
+  bool s0_repeat = false;  ///< sensor 0 read in scan 2 (its repeat is in the residual rows)
+  TwoAxisScanOrder order;
+  std::vector<DisplacementEffect> effects;
+  /// What this plan cannot identify, one line each (said once, not per run).
+  std::vector<std::string> not_identifiable;
+};
+
+/// The library for scans on this grid (x_mm, y_mm) in this order.  Throws std::invalid_argument
+/// for invalid options.
+DisplacementEffectLibrary make_displacement_effect_library(const Eigen::VectorXd& x_mm,
+                                                           const Eigen::VectorXd& y_mm,
+                                                           bool s0_repeat,
+                                                           const TwoAxisScanOrder& order,
+                                                           const TwoAxisOptions& separation,
+                                                           const DisplacementRefineOptions& o = {});
+
+/// The residual rows of the redundant equations, scan differences minus their group means (the
+/// sensor 1, 2, 3, 4 groups, then sensor 0's when repeated), µm.
+Eigen::VectorXd displacement_redundancy_residual(const TwoAxisScan& scan);
+
+struct DisplacementRefineStep {
+  std::string effect;
+  std::vector<std::string> names;
+  Eigen::VectorXd value, u;  ///< fitted parameters and their standard uncertainties
+  double F = 0, p_value = 1;
+  bool applied = false;
+  StepDecision decision;
+  std::string line;  ///< describe_decision's line
+};
+
+struct DisplacementRefineResult {
+  TwoAxisResult base;     ///< the separation of the readings as measured
+  TwoAxisResult refined;  ///< of the corrected readings; u_w_um, u_m_w_um the refined ones
+  std::vector<DisplacementRefineStep> steps;  ///< effects taken (applied or detected)
+  std::vector<std::string> not_identifiable;  ///< the library's, said once
+  double sigma_scale = 1;  ///< residual variance after the fit over σ̂² (≈ 1 when the model fits)
+  bool applied_any() const;
+  std::string brief_report() const;
+};
+
+/// Separation, selection and decision (see above).  The rotation correction is decided on the
+/// readings as measured and kept for the refined separation.  Throws std::invalid_argument when
+/// the scan does not match the library's grid or sensor 0 repeat, or the options are invalid.
+DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisOptions& separation,
+                                         const DisplacementEffectLibrary& library,
+                                         const DisplacementRefineOptions& o = {});
+
+}  // namespace errsep::core

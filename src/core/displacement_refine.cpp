@@ -1,0 +1,559 @@
+#include "errsep/core/displacement_refine.hpp"
+
+#include <Eigen/QR>
+#include <Eigen/SVD>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+namespace errsep::core {
+namespace {
+
+Eigen::VectorXd flatten(const Eigen::MatrixXd& m) {
+  return Eigen::Map<const Eigen::VectorXd>(m.data(), m.size());
+}
+
+/// A scan of zeros on the grid (sensor 0 repeated or not).
+TwoAxisScan zero_scan(const Eigen::VectorXd& x_mm, const Eigen::VectorXd& y_mm, bool s0_repeat) {
+  TwoAxisScan s;
+  s.x_mm = x_mm;
+  s.y_mm = y_mm;
+  const Eigen::MatrixXd z = Eigen::MatrixXd::Zero(x_mm.size(), y_mm.size());
+  for (auto* m : {&s.s0_1_um, &s.s1_1_um, &s.s1_2_um, &s.s2_1_um, &s.s2_2_um, &s.s3_1_um,
+                  &s.s3_2_um, &s.s4_1_um, &s.s4_2_um})
+    *m = z;
+  if (s0_repeat) s.s0_2_um = z;
+  return s;
+}
+
+/// The scan differences D_1 … D_4 (then D_0 when sensor 0 is repeated), stacked column major.
+Eigen::VectorXd scan_differences(const TwoAxisScan& s) {
+  const Eigen::Index N = s.s1_1_um.size();
+  const bool rep = s.s0_2_um.size() != 0;
+  Eigen::VectorXd d((rep ? 5 : 4) * N);
+  d.segment(0, N) = flatten(s.s1_2_um - s.s1_1_um);
+  d.segment(N, N) = flatten(s.s2_2_um - s.s2_1_um);
+  d.segment(2 * N, N) = flatten(s.s3_2_um - s.s3_1_um);
+  d.segment(3 * N, N) = flatten(s.s4_2_um - s.s4_1_um);
+  if (rep) d.segment(4 * N, N) = flatten(s.s0_2_um - s.s0_1_um);
+  return d;
+}
+
+/// P: each difference minus its group mean (sensors 1, 2: the row x_i over every y; sensors 3, 4:
+/// the column y_j over every x; sensor 0: all points), in place on stacked columns.
+void project(Eigen::Ref<Eigen::MatrixXd> d, Eigen::Index nx, Eigen::Index ny) {
+  const Eigen::Index N = nx * ny;
+  for (Eigen::Index c = 0; c < d.cols(); ++c)
+    for (Eigen::Index k = 0; k * N < d.rows(); ++k) {
+      Eigen::Map<Eigen::MatrixXd> g(d.col(c).data() + k * N, nx, ny);
+      if (k < 2)
+        g.colwise() -= g.rowwise().mean();  // row i: mean over j
+      else if (k < 4)
+        g.rowwise() -= g.colwise().mean();  // column j: mean over i
+      else
+        g.array() -= g.mean();
+    }
+}
+
+struct LsFit {
+  Eigen::VectorXd beta;
+  double rss = 0;
+};
+
+LsFit least_squares(const Eigen::MatrixXd& X, const Eigen::VectorXd& y) {
+  LsFit f;
+  if (X.cols() == 0) {
+    f.rss = y.squaredNorm();
+    return f;
+  }
+  const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(X);
+  f.beta = qr.solve(y);
+  f.rss = (y - X * f.beta).squaredNorm();
+  return f;
+}
+
+std::string family_hint(const std::string& family, bool s0_repeat) {
+  if (family == "drift")
+    return "scan 2 in the order of scan 1 makes the scan difference one constant per sensor, "
+           "absorbed by r's slope and sensor 0's offset; run scan 2 backwards";
+  if (family == "tilt" && !s0_repeat)
+    return "only sensor 0's repeat sees it: record sensor 0 in scan 2";
+  return "its scan differences are absorbed by the joint model";
+}
+
+/// The residual columns P·E of an effect (and, in *diff, the scan differences E).
+Eigen::MatrixXd residual_columns(const DisplacementEffect& e, const TwoAxisScan& zero,
+                                 const TwoAxisScanOrder& order, Eigen::MatrixXd* diff = nullptr) {
+  const auto k = static_cast<Eigen::Index>(e.parameters.size());
+  Eigen::MatrixXd d(scan_differences(zero).size(), k);
+  for (Eigen::Index j = 0; j < k; ++j) {
+    TwoAxisScan u = zero;
+    add_disturbance(u, e.unit(j), order);
+    d.col(j) = scan_differences(u);
+  }
+  if (diff) *diff = d;
+  project(d, zero.s1_1_um.rows(), zero.s1_1_um.cols());
+  return d;
+}
+
+/// Fills the effect's residual columns, sensitivities and identifiability.
+void complete_effect(DisplacementEffect& e, const TwoAxisScan& zero, const TwoAxisScanOrder& order,
+                     const TwoAxisOptions& separation, double tolerance) {
+  const auto k = static_cast<Eigen::Index>(e.parameters.size());
+  const Eigen::Index N = zero.s1_1_um.size();
+  Eigen::MatrixXd diff;
+  e.residual_columns = residual_columns(e, zero, order, &diff);
+  for (int r = 0; r < 2; ++r) {
+    e.d_w[r].resize(N, k);
+    e.d_m_w[r].resize(N, k);
+  }
+  for (Eigen::Index j = 0; j < k; ++j) {
+    TwoAxisScan u = zero;
+    add_disturbance(u, e.unit(j), order);
+    for (int r = 0; r < 2; ++r) {
+      TwoAxisOptions so = separation;
+      so.rotation = r ? RotationCorrection::on : RotationCorrection::off;
+      so.displacement_sigma_mm = 0;
+      const TwoAxisResult sep = separate_two_axis(u, so);
+      e.d_w[r].col(j) = -flatten(sep.w_um);
+      e.d_m_w[r].col(j) = -flatten(sep.m_w_um);
+    }
+  }
+  // Identifiability: residual columns scaled by their difference column's norm.
+  Eigen::VectorXd scale(k);
+  bool zero_column = false;
+  for (Eigen::Index j = 0; j < k; ++j) {
+    const double n = diff.col(j).norm();
+    zero_column = zero_column || !(n > 0);
+    scale(j) = n > 0 ? 1.0 / n : 0.0;
+  }
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(e.residual_columns * scale.asDiagonal());
+  e.relative_singular_value = zero_column ? 0.0 : svd.singularValues().minCoeff();
+  e.identifiable = e.relative_singular_value > tolerance;
+}
+
+/// Sensor 0; the reference X sensors 1, 2; the reference Y sensors 3, 4.
+const std::vector<std::vector<int>> kSensorGroups = {{0}, {1, 2}, {3, 4}};
+
+/// "sensor 0", "sensors 1-2" (thermal's dtau_s, index 5, is in every group and not named).
+std::string group_name(std::vector<int> g) {
+  std::erase_if(g, [](int i) { return i >= 5; });
+  if (g.size() == 1) return "sensor " + std::to_string(g[0]);
+  return "sensors " + std::to_string(g.front()) + "-" + std::to_string(g.back());
+}
+
+std::string thermal_name(double tau_s) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "thermal (tau = %.0f s)", tau_s);
+  return buf;
+}
+
+}  // namespace
+
+bool DisplacementRefineOptions::is_valid(std::string* why) const {
+  auto fail = [&](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  if (!(alpha > 0 && alpha < 1))
+    return fail("alpha = " + std::to_string(alpha) + ": not in (0, 1)");
+  if (thermal_tau_scans.empty()) return fail("thermal_tau_scans is empty");
+  for (const double t : thermal_tau_scans)
+    if (!(std::isfinite(t) && t > 0))
+      return fail("thermal_tau_scans has " + std::to_string(t) + ": must be > 0");
+  if (!(identifiable_tolerance > 0 && identifiable_tolerance < 1))
+    return fail("identifiable_tolerance = " + std::to_string(identifiable_tolerance) +
+                ": not in (0, 1)");
+  std::string sub;
+  if (!decision.is_valid(&sub)) return fail("decision." + sub);
+  return true;
+}
+
+DisplacementDisturbance DisplacementEffect::unit(Eigen::Index k) const {
+  DisplacementDisturbance d;
+  const auto s = static_cast<std::size_t>(k);
+  if (k >= 5) return d;  // thermal's dtau_s: not a unit disturbance (see refine_two_axis)
+  if (family == "drift") d.drift_um_per_s[s] = 1.0;
+  if (family == "thermal") {
+    d.thermal_um[s] = 1.0;
+    d.thermal_tau_s = tau_s;
+  }
+  if (family == "tilt") (k == 0 ? d.tilt_x_urad : d.tilt_y_urad) = 1.0;
+  return d;
+}
+
+Eigen::VectorXd displacement_redundancy_residual(const TwoAxisScan& scan) {
+  Eigen::MatrixXd d = scan_differences(scan);
+  project(d, scan.s1_1_um.rows(), scan.s1_1_um.cols());
+  return d.col(0);
+}
+
+DisplacementEffectLibrary make_displacement_effect_library(const Eigen::VectorXd& x_mm,
+                                                           const Eigen::VectorXd& y_mm,
+                                                           bool s0_repeat,
+                                                           const TwoAxisScanOrder& order,
+                                                           const TwoAxisOptions& separation,
+                                                           const DisplacementRefineOptions& o) {
+  std::string why;
+  if (!o.is_valid(&why)) throw std::invalid_argument("displacement refine options: " + why);
+  if (!order.is_valid(&why)) throw std::invalid_argument(why);
+  if (!separation.is_valid(&why))
+    throw std::invalid_argument("displacement refine: separation options: " + why);
+  DisplacementEffectLibrary lib;
+  lib.nx = static_cast<int>(x_mm.size());
+  lib.ny = static_cast<int>(y_mm.size());
+  lib.s0_repeat = s0_repeat;
+  lib.order = order;
+  const double scan_s = lib.nx * lib.ny * order.sample_period_s;
+
+  std::vector<DisplacementEffect> fx;
+  const std::vector<std::string> sensors = {"0", "1", "2", "3", "4"};
+  {
+    DisplacementEffect e;
+    e.family = e.name = "drift";
+    for (const auto& s : sensors)
+      e.parameters.push_back("v" + s + "_um_per_s");
+    e.groups = kSensorGroups;
+    fx.push_back(e);
+  }
+  for (const double m : o.thermal_tau_scans) {
+    DisplacementEffect e;
+    e.family = "thermal";
+    e.tau_s = m * scan_s;
+    e.name = thermal_name(e.tau_s);
+    for (const auto& s : sensors)
+      e.parameters.push_back("a" + s + "_um");
+    e.groups = kSensorGroups;
+    fx.push_back(e);
+  }
+  {
+    DisplacementEffect e;
+    e.family = e.name = "tilt";
+    e.parameters = {"tilt_x_urad", "tilt_y_urad"};
+    e.groups = {{0, 1}};
+    fx.push_back(e);
+  }
+
+  const TwoAxisScan zero = zero_scan(x_mm, y_mm, s0_repeat);
+  for (auto& e : fx)
+    complete_effect(e, zero, order, separation, o.identifiable_tolerance);
+  // Families none of whose variants the plan identifies, said once.
+  for (const auto& e : fx) {
+    bool any = false, first = true;
+    for (const auto& f : fx)
+      if (f.family == e.family) {
+        any = any || f.identifiable;
+        if (&f != &e && &f < &e) first = false;
+      }
+    if (!any && first) {
+      char buf[64];
+      std::snprintf(buf, sizeof buf, " (relative singular value %.1e)", e.relative_singular_value);
+      lib.not_identifiable.push_back(e.family + ": not identifiable from this plan" + buf + ": " +
+                                     family_hint(e.family, s0_repeat));
+    }
+  }
+  lib.not_identifiable.push_back(
+      "traverse error and yaw between the scans: not identifiable by two scans (a function of "
+      "the piece's coordinate alone, absorbed by r); the traverse's u is in the separation's");
+  lib.effects = std::move(fx);
+  return lib;
+}
+
+bool DisplacementRefineResult::applied_any() const {
+  for (const auto& s : steps)
+    if (s.applied) return true;
+  return false;
+}
+
+std::string DisplacementRefineResult::brief_report() const {
+  std::ostringstream os;
+  os << "displacement refine: " << steps.size() << " effect(s) taken, "
+     << (applied_any() ? "corrections applied" : "nothing applied")
+     << "; residual variance over sigma^2 after the fit " << sigma_scale << "\n";
+  for (const auto& s : steps)
+    os << "  " << s.line << " (F = " << s.F << ", p = " << s.p_value << ")\n";
+  for (const auto& n : not_identifiable)
+    os << "  " << n << "\n";
+  return os.str();
+}
+
+DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisOptions& separation,
+                                         const DisplacementEffectLibrary& lib,
+                                         const DisplacementRefineOptions& o) {
+  std::string why;
+  if (!o.is_valid(&why)) throw std::invalid_argument("displacement refine options: " + why);
+  if (separation.solver != TwoAxisSolver::joint)
+    throw std::invalid_argument(
+        "displacement refine: needs the joint solver (the row-by-row path states no uncertainty)");
+  if (scan.x_mm.size() != lib.nx || scan.y_mm.size() != lib.ny ||
+      (scan.s0_2_um.size() != 0) != lib.s0_repeat)
+    throw std::invalid_argument(
+        "displacement refine: the scan's grid or sensor-0 repeat differs from the library's");
+  DisplacementRefineResult out;
+  out.not_identifiable = lib.not_identifiable;
+  out.base = separate_two_axis(scan, separation);
+  const int rot = out.base.rotation_corrected ? 1 : 0;
+  TwoAxisOptions fixed = separation;
+  fixed.rotation = rot ? RotationCorrection::on : RotationCorrection::off;
+
+  // Whitened residual rows: a scan difference has variance 2σ² of its sensor kind.
+  const Eigen::Index N = static_cast<Eigen::Index>(lib.nx) * lib.ny;
+  const Eigen::VectorXd res = displacement_redundancy_residual(scan);
+  Eigen::VectorXd wt(res.size());
+  const double se = out.base.sigma_reference_um, s0 = out.base.sigma_workpiece_um;
+  if (!(se > 0) || (lib.s0_repeat && !(s0 > 0)))
+    throw std::invalid_argument("displacement refine: the separation's sigma is not positive");
+  wt.head(4 * N).setConstant(1.0 / (std::sqrt(2.0) * se));
+  if (lib.s0_repeat) wt.tail(N).setConstant(1.0 / (std::sqrt(2.0) * s0));
+  const Eigen::VectorXd y = wt.cwiseProduct(res);
+  int dof0 = 2 * lib.nx * (lib.ny - 1) + 2 * lib.ny * (lib.nx - 1);
+  if (lib.s0_repeat) dof0 += static_cast<int>(N) - 1;
+  auto columns = [&](const std::vector<const DisplacementEffect*>& fx) {
+    Eigen::Index k = 0;
+    for (const auto* e : fx)
+      k += e->residual_columns.cols();
+    Eigen::MatrixXd X(y.size(), k);
+    k = 0;
+    for (const auto* e : fx) {
+      X.middleCols(k, e->residual_columns.cols()) = wt.asDiagonal() * e->residual_columns;
+      k += e->residual_columns.cols();
+    }
+    return X;
+  };
+  auto pointers = [](const std::vector<DisplacementEffect>& v) {
+    std::vector<const DisplacementEffect*> p;
+    for (const auto& e : v)
+      p.push_back(&e);
+    return p;
+  };
+  const TwoAxisScan zero = zero_scan(scan.x_mm, scan.y_mm, lib.s0_repeat);
+
+  // Forward selection (one variant per family).  Ranked by p, then (p underflowing to 0 for
+  // strong effects) by F.
+  std::vector<DisplacementEffect> chosen;
+  std::vector<double> taken_F, taken_p;
+  for (;;) {
+    const auto taken = pointers(chosen);
+    const double rss_t = least_squares(columns(taken), y).rss;
+    int tried = 0;
+    double best_p = 2, best_F = 0;
+    const DisplacementEffect* best = nullptr;
+    for (const auto& e : lib.effects) {
+      bool family_taken = false;
+      for (const auto* t : taken)
+        family_taken = family_taken || t->family == e.family;
+      if (family_taken || !e.identifiable) continue;
+      ++tried;
+      auto fx = taken;
+      fx.push_back(&e);
+      const Eigen::MatrixXd X = columns(fx);
+      const double rss = least_squares(X, y).rss;
+      const int kc = static_cast<int>(e.residual_columns.cols());
+      const int dof = dof0 - static_cast<int>(X.cols());
+      if (dof <= 0 || !(rss > 0)) continue;
+      const double F = ((rss_t - rss) / kc) / (rss / dof);
+      const double p = f_test_p_value(F, kc, dof);
+      if (p < best_p || (p == best_p && F > best_F)) {
+        best_p = p;
+        best_F = F;
+        best = &e;
+      }
+    }
+    if (tried == 0 || best == nullptr) break;
+    const double p_adj = std::min(1.0, best_p * tried);  // Bonferroni over the variants tried
+    if (!(p_adj < o.alpha)) break;
+    chosen.push_back(*best);
+    taken_F.push_back(best_F);
+    taken_p.push_back(p_adj);
+  }
+
+  // The thermal time constant between the grid's neighbours of the chosen variant: golden
+  // section on log τ of the residual sum of squares with every chosen effect in the fit.
+  for (auto& e : chosen) {
+    if (e.family != "thermal") continue;
+    double lo = e.tau_s, hi = e.tau_s;
+    for (const auto& f : lib.effects)
+      if (f.family == "thermal") {
+        if (f.tau_s < e.tau_s && (lo == e.tau_s || f.tau_s > lo)) lo = f.tau_s;
+        if (f.tau_s > e.tau_s && (hi == e.tau_s || f.tau_s < hi)) hi = f.tau_s;
+      }
+    if (lo == e.tau_s) lo = e.tau_s / 1.5;
+    if (hi == e.tau_s) hi = e.tau_s * 1.5;
+    DisplacementEffect trial = e;
+    auto rss_at = [&](double log_tau) {
+      trial.tau_s = std::exp(log_tau);
+      trial.residual_columns = residual_columns(trial, zero, lib.order);
+      auto fx = pointers(chosen);
+      for (auto*& q : fx)
+        if (q == &e) q = &trial;
+      return least_squares(columns(fx), y).rss;
+    };
+    const double g = 0.5 * (std::sqrt(5.0) - 1.0);
+    double a = std::log(lo), b = std::log(hi);
+    double c = b - g * (b - a), d = a + g * (b - a);
+    double fc = rss_at(c), fd = rss_at(d);
+    for (int it = 0; it < 14; ++it) {
+      if (fc < fd) {
+        b = d;
+        d = c;
+        fd = fc;
+        c = b - g * (b - a);
+        fc = rss_at(c);
+      } else {
+        a = c;
+        c = d;
+        fc = fd;
+        d = a + g * (b - a);
+        fd = rss_at(d);
+      }
+    }
+    e.tau_s = std::exp(0.5 * (a + b));
+    e.name = thermal_name(e.tau_s);
+    complete_effect(e, zero, lib.order, separation, o.identifiable_tolerance);
+    // τ is estimated too, and the amplitudes trade with it (a long τ's slope is what no scan
+    // difference sees): a Gauss–Newton column dtau_s, Σ â_k ∂E_k/∂τ by central differences, in
+    // the fit and in every group's decision, so that the decision carries τ's uncertainty.
+    const LsFit f0 = least_squares(columns(pointers(chosen)), y);
+    Eigen::Index off = 0;
+    for (const auto& other : chosen) {
+      if (&other == &e) break;
+      off += other.residual_columns.cols();
+    }
+    DisplacementDisturbance hi_d, lo_d;
+    const double h = 1e-3 * e.tau_s;
+    for (int k = 0; k < 5; ++k)
+      hi_d.thermal_um[static_cast<std::size_t>(k)] = lo_d.thermal_um[static_cast<std::size_t>(k)] =
+          f0.beta(off + k);
+    hi_d.thermal_tau_s = e.tau_s + h;
+    lo_d.thermal_tau_s = e.tau_s - h;
+    TwoAxisScan s_hi = zero, s_lo = zero;
+    add_disturbance(s_hi, hi_d, lib.order);
+    add_disturbance(s_lo, lo_d, lib.order);
+    Eigen::VectorXd col = (scan_differences(s_hi) - scan_differences(s_lo)) / (2 * h);
+    project(col, lib.nx, lib.ny);
+    const auto k = e.residual_columns.cols();
+    e.residual_columns.conservativeResize(Eigen::NoChange, k + 1);
+    e.residual_columns.col(k) = col;
+    for (int r = 0; r < 2; ++r) {
+      TwoAxisOptions so = separation;
+      so.rotation = r ? RotationCorrection::on : RotationCorrection::off;
+      so.displacement_sigma_mm = 0;
+      const TwoAxisResult sh = separate_two_axis(s_hi, so), sl = separate_two_axis(s_lo, so);
+      e.d_w[r].conservativeResize(Eigen::NoChange, k + 1);
+      e.d_m_w[r].conservativeResize(Eigen::NoChange, k + 1);
+      e.d_w[r].col(k) = -flatten(sh.w_um - sl.w_um) / (2 * h);
+      e.d_m_w[r].col(k) = -flatten(sh.m_w_um - sl.m_w_um) / (2 * h);
+    }
+    e.parameters.push_back("dtau_s");
+    for (auto& grp : e.groups)
+      grp.push_back(static_cast<int>(k));
+  }
+
+  out.refined = out.base;
+  if (chosen.empty()) {
+    // Nothing taken: the refined result is the separation (rotation as decided on the data).
+    return out;
+  }
+  const Eigen::MatrixXd X = columns(pointers(chosen));
+  const LsFit fit = least_squares(X, y);
+  const auto K = X.cols();
+  // The values applied: the fit at τ̂ without the dtau_s column (a Gauss–Newton direction for the
+  // decision's covariance, not a step: a τ̂ at the edge of its bracket can leave dtau_s far from
+  // 0, and amplitudes conditioned on it would not match the readings corrected at τ̂).
+  Eigen::VectorXd applied_value = fit.beta;
+  {
+    std::vector<Eigen::Index> keep;
+    Eigen::Index c = 0;
+    for (const auto& e : chosen)
+      for (const auto& nm : e.parameters) {
+        if (nm != "dtau_s") keep.push_back(c);
+        ++c;
+      }
+    if (static_cast<Eigen::Index>(keep.size()) < K) {
+      Eigen::MatrixXd X0(X.rows(), static_cast<Eigen::Index>(keep.size()));
+      for (std::size_t j = 0; j < keep.size(); ++j)
+        X0.col(static_cast<Eigen::Index>(j)) = X.col(keep[j]);
+      const LsFit f0 = least_squares(X0, y);
+      applied_value.setZero();
+      for (std::size_t j = 0; j < keep.size(); ++j)
+        applied_value(keep[j]) = f0.beta(static_cast<Eigen::Index>(j));
+    }
+  }
+  out.sigma_scale = fit.rss / (dof0 - K);
+  const Eigen::MatrixXd cov =
+      out.sigma_scale * (X.transpose() * X).completeOrthogonalDecomposition().pseudoInverse();
+
+  const Eigen::VectorXd u_w0 = flatten(out.base.u_w_um), u_m0 = flatten(out.base.u_m_w_um);
+  Eigen::MatrixXd Dw(N, K), Dm(N, K);
+  std::vector<bool> applied(static_cast<std::size_t>(K), false);
+  DisplacementDisturbance correction;
+  Eigen::Index c0 = 0;
+  for (std::size_t t = 0; t < chosen.size(); ++t) {
+    const auto& e = chosen[t];
+    const auto k = e.residual_columns.cols();
+    Dw.middleCols(c0, k) = e.d_w[rot];
+    Dm.middleCols(c0, k) = e.d_m_w[rot];
+    // Each group of parameters decided on its own block (a reference piece read along the
+    // raster's slow axis may be well determined while the other is not).
+    for (const auto& grp : e.groups) {
+      const auto kg = static_cast<Eigen::Index>(grp.size());
+      Eigen::MatrixXd gw(N, kg), gm(N, kg), ck(kg, kg);
+      DisplacementRefineStep st;
+      st.effect = e.name + (e.groups.size() > 1 ? ", " + group_name(grp) : std::string());
+      st.value.resize(kg);
+      for (Eigen::Index a = 0; a < kg; ++a) {
+        const Eigen::Index ia = grp[static_cast<std::size_t>(a)];
+        st.names.push_back(e.parameters[static_cast<std::size_t>(ia)]);
+        st.value(a) = fit.beta(c0 + ia);
+        // The gauge (the constant of w and m_w) removed for the decision.
+        gw.col(a) = e.d_w[rot].col(ia).array() - e.d_w[rot].col(ia).mean();
+        gm.col(a) = e.d_m_w[rot].col(ia).array() - e.d_m_w[rot].col(ia).mean();
+        for (Eigen::Index b = 0; b < kg; ++b)
+          ck(a, b) = cov(c0 + ia, c0 + grp[static_cast<std::size_t>(b)]);
+      }
+      st.u = ck.diagonal().cwiseMax(0.0).cwiseSqrt();
+      st.F = taken_F[t];
+      st.p_value = taken_p[t];
+      st.decision =
+          decide_step(st.value, ck, {{"w", "um", gw, u_w0}, {"m_w", "um", gm, u_m0}}, o.decision);
+      st.applied = st.decision.apply;
+      st.line = describe_decision(st.effect, st.names, st.value, st.u, st.decision);
+      if (st.applied) {
+        for (const int ia : grp) {
+          applied[static_cast<std::size_t>(c0 + ia)] = true;
+          if (e.family == "thermal" && ia >= 5) continue;  // dtau_s: set with τ below
+          const DisplacementDisturbance u = e.unit(ia);
+          const double v = -applied_value(c0 + ia);
+          for (int s = 0; s < 5; ++s) {
+            correction.drift_um_per_s[s] += v * u.drift_um_per_s[s];
+            correction.thermal_um[s] += v * u.thermal_um[s];
+          }
+          correction.tilt_x_urad += v * u.tilt_x_urad;
+          correction.tilt_y_urad += v * u.tilt_y_urad;
+          if (e.family == "thermal")
+            correction.thermal_tau_s = e.tau_s;  // τ̂ (dtau_s is ≈ 0 there; a linearisation)
+        }
+      }
+      out.steps.push_back(std::move(st));
+    }
+    c0 += k;
+  }
+  if (out.applied_any()) {
+    TwoAxisScan corrected = scan;
+    add_disturbance(corrected, correction, lib.order);
+    out.refined = separate_two_axis(corrected, fixed);
+  }
+  // The refined u: the separation's with the applied parameters' covariance and the bias of the
+  // ones left out (step_decision.hpp).
+  const Eigen::VectorXd uw =
+      refined_uncertainty(flatten(out.refined.u_w_um), Dw, cov, fit.beta, applied);
+  const Eigen::VectorXd um =
+      refined_uncertainty(flatten(out.refined.u_m_w_um), Dm, cov, fit.beta, applied);
+  out.refined.u_w_um = Eigen::Map<const Eigen::MatrixXd>(uw.data(), lib.nx, lib.ny);
+  out.refined.u_m_w_um = Eigen::Map<const Eigen::MatrixXd>(um.data(), lib.nx, lib.ny);
+  return out;
+}
+
+}  // namespace errsep::core
