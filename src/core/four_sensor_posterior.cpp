@@ -554,6 +554,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
   FourSensorCovariance::Parts parts;
   int extra_factorizations = 0;
   double lambda = 0.0;
+  double rejected_lambda = 0.0;  // the rule's λ when the collapse rule rejects the prior
   res.penalty = prior ? opts.penalty : Penalty::none;
   if (prior) {
     sys = assemble_pinned_system(cfg, m_um, true);
@@ -635,6 +636,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         (top_edge || res.edf_f < opts.collapse_edf)) {
       res.lambda_fallback = LambdaFallback::collapse_least_squares;
       res.penalty = Penalty::none;
+      rejected_lambda = lambda;
     }
   }
   const bool use_ls = res.penalty == Penalty::none;
@@ -788,7 +790,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
                   "; the %s prior left f with %.2g effective degrees of freedom (lambda %.3g): "
                   "not used, the unregularised separation is reported, and S is undetermined at "
                   "the level of u_S up to %.3g um",
-                  to_string(opts.penalty), res.edf_f, res.lambda, umax);
+                  to_string(opts.penalty), res.edf_f, rejected_lambda, umax);
     res.determination_note += note;
   }
   res.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
