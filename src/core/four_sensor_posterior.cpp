@@ -402,15 +402,14 @@ Criterion reml_at(TikhonovSolver& s, const Eigen::VectorXd& Atb, double bb, doub
   return c;
 }
 
-// GCV: n·‖b − Ax‖²/(n − edf)², edf = n_unknowns − λ²·tr(M⁻¹P) from the selected inverse.
+// GCV: n·‖b − Ax‖²/(n − edf)², edf = tr(M⁻¹AᵀA) from the selected inverse.
 Criterion gcv_at(TikhonovSolver& s, const Eigen::VectorXd& b, const Eigen::VectorXd& Atb,
                  double lambda) {
   Criterion c;
   Eigen::VectorXd x;
   if (s.factorize_and_solve(lambda, Atb, x) != SolverStatus::success) return c;
   const double rss = (s.A() * x - b).squaredNorm();
-  const double edf = static_cast<double>(s.A().cols()) -
-                     lambda * lambda * s.trace_inverse_penalty(s.selected_inverse());
+  const double edf = s.trace_inverse_normal(s.selected_inverse());
   const auto n = static_cast<double>(b.size());
   if (!(n - edf > 0)) return c;
   c.value = n * rss / ((n - edf) * (n - edf));
@@ -555,6 +554,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
   FourSensorCovariance::Parts parts;
   int extra_factorizations = 0;
   double lambda = 0.0;
+  double rejected_lambda = 0.0;  // the rule's λ when the collapse rule rejects the prior
   res.penalty = prior ? opts.penalty : Penalty::none;
   if (prior) {
     sys = assemble_pinned_system(cfg, m_um, true);
@@ -624,8 +624,9 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
   }
   if (prior) {
     const SelectedInverse z = solver->selected_inverse();
-    res.edf = static_cast<double>(solver->A().cols()) -
-              lambda * lambda * solver->trace_inverse_penalty(z);
+    // tr(M⁻¹AᵀA) summed directly, not n − λ²·tr(M⁻¹P): on long scans the difference loses
+    // edf to cancellation (tikhonov_solver.hpp), and the collapse rule below reads it.
+    res.edf = solver->trace_inverse_normal(z);
     res.edf_f = res.edf - 2.0;  // η̃ is not penalised: 2 of them
     // A collapse: the prior swallowed f (issue 15).  The λ at the top of the range, or f with
     // (almost) no degrees of freedom left: S would carry f's amplitude with a small stated u.
@@ -635,6 +636,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         (top_edge || res.edf_f < opts.collapse_edf)) {
       res.lambda_fallback = LambdaFallback::collapse_least_squares;
       res.penalty = Penalty::none;
+      rejected_lambda = lambda;
     }
   }
   const bool use_ls = res.penalty == Penalty::none;
@@ -788,7 +790,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
                   "; the %s prior left f with %.2g effective degrees of freedom (lambda %.3g): "
                   "not used, the unregularised separation is reported, and S is undetermined at "
                   "the level of u_S up to %.3g um",
-                  to_string(opts.penalty), res.edf_f, res.lambda, umax);
+                  to_string(opts.penalty), res.edf_f, rejected_lambda, umax);
     res.determination_note += note;
   }
   res.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

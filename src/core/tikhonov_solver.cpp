@@ -824,4 +824,19 @@ double TikhonovSolver::trace_inverse_penalty(const SelectedInverse& z) const {
   return t;
 }
 
+double TikhonovSolver::trace_inverse_normal(const SelectedInverse& z) const {
+  // Σ_ij (AᵀA)_ij·Z_ij over the pattern of AᵀA: its band (upper triangle, off-diagonal entries
+  // twice), its coupling C with the border and the border block D.
+  const auto* p = static_cast<const int*>(normal_->band.p);
+  const auto* i = static_cast<const int*>(normal_->band.i);
+  const auto* v = static_cast<const double*>(normal_->band.x);
+  double t = 0.0;
+  for (Eigen::Index j = 0; j < static_cast<Eigen::Index>(normal_->band.ncol); ++j)
+    for (int q = p[j]; q < p[j + 1]; ++q)
+      if (v[q] != 0.0) t += (i[q] == j ? 1.0 : 2.0) * v[q] * z(i[q], j);
+  if (border_ > 0)
+    t += 2.0 * (normal_->C.cwiseProduct(z.cross)).sum() + (normal_->D.cwiseProduct(z.border)).sum();
+  return t;
+}
+
 }  // namespace errsep::core

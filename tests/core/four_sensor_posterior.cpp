@@ -56,6 +56,8 @@ TEST_CASE("general-form solver: penalty on band and border equals the dense solv
     CHECK(worst <= 1e-9 * Z.cwiseAbs().maxCoeff());
     const double tr = (Z * Pd).trace();
     CHECK(std::abs(solver.trace_inverse_penalty(z) - tr) <= 1e-9 * std::abs(tr));
+    const double edf = (Z * (Ad.transpose() * Ad)).trace();
+    CHECK(std::abs(solver.trace_inverse_normal(z) - edf) <= 1e-9 * std::abs(edf));
     const Eigen::VectorXd Px = solver.apply_penalty(x);
     CHECK((Px - Pd * x).norm() <= 1e-12 * (Pd * x).norm());
   }
@@ -65,6 +67,7 @@ namespace {
 
 struct DenseRef {
   Eigen::VectorXd f, S, g, u_f, u_S, u_g;
+  double edf = 0.0;  ///< tr(A·M⁻¹·Aᵀ): the hat matrix's trace
 };
 
 // The model of four_sensor_posterior.hpp, dense: unknowns f(x_1..x_{N−2}), η; prior λ²‖Lf‖²
@@ -130,6 +133,7 @@ DenseRef dense_reference(const FourSensorConfig& cfg, const Eigen::MatrixXd& m, 
     X.row(j) << 1.0, O[static_cast<std::size_t>(j)];
   const Eigen::Matrix<double, 2, 4> W = (X.transpose() * X).inverse() * X.transpose();
   DenseRef ref;
+  ref.edf = (A * Minv * A.transpose()).trace();
   ref.f = Eigen::VectorXd::Zero(N);
   ref.u_f = Eigen::VectorXd::Zero(N);
   ref.f.segment(1, N - 2) = xG.head(N - 2);
@@ -191,6 +195,9 @@ TEST_CASE("posterior separation equals the dense model, with and without a prior
     const DenseRef d =
         dense_reference(cfg, sim.m_um, pen, pen == Penalty::none ? 0.0 : 0.3, r.sigma_um);
     compare(r, d, 1e-8);
+    // The effective degrees of freedom (the collapse rule's edf_f = edf − 2) are the dense
+    // hat matrix's trace: the pinned middle and the bow unknown only reparametrise f.
+    if (pen != Penalty::none) CHECK(r.edf == Approx(d.edf).epsilon(1e-8));
     // The covariance object agrees with the per-point figures.
     const int p = 7;
     Eigen::VectorXd a = Eigen::VectorXd::Zero(cfg.positions());
@@ -217,4 +224,38 @@ TEST_CASE("posterior separation is exact for noise-free data", "[four_sensor][po
   CHECK((r.S_um - sim.S_um).cwiseAbs().maxCoeff() <= 1e-8);
   CHECK((r.gamma_rad - sim.gamma_rad).cwiseAbs().maxCoeff() <= 1e-11);
   CHECK((r.f_um - sim.f_um).cwiseAbs().maxCoeff() <= 1e-8);
+}
+
+// The collapse rule reads edf_f, so edf_f must fall as λ grows (a stronger prior leaves f fewer
+// degrees of freedom) at every scan length.  Before it was summed directly, n − λ²·tr(M⁻¹P) lost
+// the answer to cancellation on long scans: at N = 10⁶ edf_f came out 3.4 at λ 9306 and 59.6 at
+// λ 9733.  Here at N = 2·10⁵ over the range the REML search visits around the collapse.
+TEST_CASE("edf_f falls monotonically with lambda on a long scan", "[four_sensor][posterior][edf]") {
+  FourSensorConfig cfg{5.0, 1, 1, 5, 200000};
+  FourSensorSimOptions so;
+  so.sigma_um = 0.1;
+  const FourSensorSimData sim = simulate_four_sensor(cfg, zhao2019_example1(cfg), so);
+  PinnedSystem sys = assemble_pinned_system(cfg, sim.m_um, true);
+  const Eigen::SparseMatrix<double> L = penalty_operator(cfg, Penalty::second_difference, sys);
+  Eigen::SparseMatrix<double> Pm = L.transpose() * L;
+  Pm.prune(0.0);
+  TikhonovSolver solver(std::move(sys.A), sys.border, Pm);
+  const auto n = static_cast<double>(solver.A().cols());
+  // Each step falls, up to round-off of 10⁻³ in edf (the rule compares edf_f with 1; near the
+  // top of the range edf_f is ~10⁻³ and its last digits are round-off).  The difference
+  // n − λ²·tr(M⁻¹P), printed beside it, comes out negative by up to 5·10⁵ there.
+  double last = std::numeric_limits<double>::infinity();
+  for (double log_lambda = 1.0; log_lambda <= 5.0 + 1e-9; log_lambda += 0.5) {
+    const double lambda = std::pow(10.0, log_lambda);
+    REQUIRE(solver.factorize(lambda) == SolverStatus::success);
+    const SelectedInverse z = solver.selected_inverse();
+    const double edf = solver.trace_inverse_normal(z);
+    const double edf_difference = n - lambda * lambda * solver.trace_inverse_penalty(z);
+    std::printf("lambda %10.4g  edf %12.6g  (n - lambda^2 tr(M^-1 P): %12.6g)\n", lambda, edf,
+                edf_difference);
+    CHECK(edf > 2.0);  // η̃ is never penalised
+    CHECK(edf <= n);
+    CHECK(edf < last + 1e-3);
+    last = edf;
+  }
 }
