@@ -109,7 +109,7 @@ TEST_CASE("on clean data the trace and the gross-error search call something in 
 }
 
 TEST_CASE(
-    "must-show: non-linearity found by the reading-level trace; spikes and steps found and "
+    "must-show: non-linearity found by the reading-level trace, spikes and steps found and "
     "kept out of S") {
   constexpr int kSeeds = 20;
   constexpr double kNonlinearityPerSigma = 25.0;  // size 1.25, 2.5, 5: 2.5-20 % at the range ends
@@ -252,7 +252,7 @@ TEST_CASE(
   }
 }
 
-TEST_CASE("a residual that follows a recorded temperature is found; one that does not is not") {
+TEST_CASE("a residual that follows a recorded temperature is found, one that does not is not") {
   const UndeclaredCase c = clean_case(0.1, 77);
   const int P = c.cfg.positions();
   // A temperature record that wanders smoothly in time (period 63 s, two per traverse), and a
