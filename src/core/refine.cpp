@@ -26,6 +26,8 @@ bool RefineOptions::is_valid(std::string* why) const {
   if (!(speed_mm_per_s > 0)) return fail("speed_mm_per_s must be > 0");
   if (!solve.is_valid(why)) return false;
   if (!decision.is_valid(why)) return false;
+  if (!trace.is_valid(why)) return false;
+  if (!gross.is_valid(why)) return false;
   return residual.is_valid(why);
 }
 
@@ -741,6 +743,10 @@ ProfileErrors profile_errors(const FourSensorResult& r, const RefineTruth& truth
   return e;
 }
 
+FourSensorOptions linearised_options(const FourSensorResult& sep, const FourSensorOptions& base) {
+  return linear_options(sep, base);
+}
+
 std::string RefineResult::brief_report() const {
   char buf[512];
   const RefineStep& last = steps.back();
@@ -757,6 +763,10 @@ std::string RefineResult::brief_report() const {
     out += "; " + rc.effect + " " + rc.reason;
   for (const auto& k : implausible_kept)
     out += "; " + k;
+  for (const auto& f : trace.findings)
+    out += "; " + f;
+  for (const auto& f : gross.findings)
+    out += "; " + f + (gross_removed ? "" : " (not removed: RefineOptions::remove_gross_errors)");
   if (!model_complete()) out += "; model incomplete";
   return out;
 }
@@ -1062,6 +1072,34 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
   res.verdicts = current.verdicts;
   res.m_corrected_um = current.m_c;
   res.after = M.effects.empty() ? res.before : current.sep;
+  // Additive analyses of the final residual (issue 16 item 3): the trace is reported only; a
+  // spike or step found is taken out of the separation, never absorbed into S.
+  // The gross errors first: the trace is of the model with them in it (a spike left in the
+  // residual would show as a dependence on whatever variable its reading happens to extremise).
+  res.gross = find_gross_errors(cur.space, cur.m_c, opts.gross);
+  {
+    ResidualSpace traced = cur.space;
+    if (res.gross.found()) traced.add(reduce_columns(cfg, res.gross.columns));
+    res.trace = trace_residual(traced, cur.m_c, RecordedVariables{t_s, {}, {}}, opts.trace);
+  }
+  if (res.gross.found() && opts.remove_gross_errors) {
+    FourSensorResult without = separate_without_gross_errors(cfg, res.m_corrected_um, &res.gross,
+                                                             res.after, opts.solve, opts.decision);
+    // What the effects added to u (their covariance, the size of those left out) stays: the
+    // excess of the refined u over the raw separation's, in quadrature.
+    auto keep = [](Eigen::VectorXd& u, const Eigen::VectorXd& refined,
+                   const Eigen::VectorXd& raw_u) {
+      if (u.size() != refined.size() || u.size() != raw_u.size()) return;
+      u = (u.array().square() + (refined.array().square() - raw_u.array().square()).max(0.0))
+              .sqrt();
+    };
+    keep(without.u_S_um, res.after.u_S_um, res.before.u_S_um);
+    keep(without.u_gamma_rad, res.after.u_gamma_rad, res.before.u_gamma_rad);
+    keep(without.u_f_um, res.after.u_f_um, res.before.u_f_um);
+    res.after = std::move(without);
+    res.m_corrected_um -= res.gross.correction_um;
+    res.gross_removed = true;
+  }
   return res;
 }
 

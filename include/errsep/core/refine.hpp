@@ -36,8 +36,10 @@
 #include <vector>
 
 #include "errsep/core/four_sensor.hpp"
+#include "errsep/core/gross_errors.hpp"
 #include "errsep/core/model_effect.hpp"
 #include "errsep/core/residual_analysis.hpp"
+#include "errsep/core/residual_trace.hpp"
 #include "errsep/core/step_decision.hpp"
 
 namespace errsep::core {
@@ -57,6 +59,14 @@ struct RefineOptions {
   /// Whether a significant effect's correction is applied (step_decision.hpp): on the expected
   /// error of S, γ and f, not on the F-test alone.
   StepDecisionOptions decision;
+  /// The final residual traced against the recorded variables (residual_trace.hpp): reported in
+  /// RefineResult::trace and its findings, never applied.
+  ResidualTraceOptions trace;
+  /// Spikes and steps searched in the final residual (gross_errors.hpp).  When one is found and
+  /// remove_gross_errors is set, `after` is the separation without them (their sizes' covariance
+  /// in u_S): a gross error is not absorbed into S.
+  GrossErrorOptions gross;
+  bool remove_gross_errors = true;
   bool is_valid(std::string* why = nullptr) const;
 };
 
@@ -181,13 +191,19 @@ struct RefineResult {
   Eigen::MatrixXd t_s;             ///< reading times used
   double alpha_per_candidate = 0;
   double alpha_residual = 0.01;  ///< level of the whiteness test (RefineOptions::residual.alpha)
+  /// The final model's residual against time, position, configuration, reading level, direction
+  /// and temperature, and the spikes and steps in it (see RefineOptions::gross).
+  ResidualTrace trace;
+  GrossErrorScan gross;
+  bool gross_removed = false;  ///< `after` is the separation without the gross errors
   /// True when the final residual passes the whiteness test.  False means the model is still
   /// missing something even if no candidate in the library was significant.
   bool residual_white() const { return residual.whiteness.white; }
   /// The verdict: the residual is white and no significant candidate had to be rejected as
   /// implausible (a rejection means the data hold something the library cannot describe).
   bool model_complete() const {
-    return residual_white() && rejected.empty() && implausible_kept.empty();
+    return residual_white() && rejected.empty() && implausible_kept.empty() && !trace.depends &&
+           !gross.found();
   }
   std::string brief_report() const;
 };
@@ -199,6 +215,10 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
                                 const Eigen::MatrixXd& t_s = {}, const RefineOptions& opts = {},
                                 const RefineTruth* truth = nullptr,
                                 std::vector<std::unique_ptr<ModelEffect>> library = {});
+
+/// The options of a separation that is linear in the readings at the λ (and penalty) `sep` chose:
+/// the change of S, γ, f per unit change of the readings, for sensitivities.
+FourSensorOptions linearised_options(const FourSensorResult& sep, const FourSensorOptions& base);
 
 /// The joint fit of given effects without any selection (what one step of the loop does for
 /// the model it has chosen): Gauss–Newton from `start` (one vector per effect; empty = zeros).

@@ -1,0 +1,98 @@
+#pragma once
+// The residual of the four-sensor model traced against everything a scan records (issue 16,
+// item 3): reading time, slide position, configuration, reading level, direction and temperature.
+//
+// A missing effect that is a smooth function of a recorded variable v leaves a residual
+// r = Π·(Z(v)·β + ε), Π the projector onto the complement of the model's columns in the reduced
+// space (residual_analysis.hpp).  For each variable the trace adds the columns Z(v) (Legendre
+// polynomials of v scaled to [−1, 1], per configuration where a sensor position can differ) to the
+// model and tests them with the ordinary F-test of nested least-squares models,
+//   F = (ΔRSS/k)/((RSS − ΔRSS)/(dof − k)),   k = directions of Π·Z that do not vanish,
+// which is exactly F(k, dof − k) under Gaussian noise for columns that do not depend on the noise
+// (time, position, direction, temperature).  The reading level m does contain the noise; its
+// columns are then correlated with the residual at order σ/range (0.1 µm against readings that
+// span some µm), which the clean false-alarm rate of tests/core/residual_trace checks.
+// The configuration's own test (is one sensor position noisier than the others?) compares the
+// per-configuration residual energy with its expectation under the projector; its null
+// distribution has no closed form, so it is calibrated by Monte-Carlo draws of Π·ε (exact for
+// Gaussian noise, as the whiteness test).  Each test's p-value is multiplied by the number of
+// tests carried out (Bonferroni), so on a complete model the trace reports a dependence in at
+// most a fraction α of scans.
+//
+// A sensor non-linearity (r + κ(r − r̄)², not in the effect library) is the reading-level trace's
+// quadratic term: κ is reported with the finding, as the change of the sensor's slope per 100 µm
+// of reading.
+#include <Eigen/Core>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "errsep/core/residual_analysis.hpp"
+
+namespace errsep::core {
+
+/// What the scan recorded besides the readings, each P × 4 like them (row = position,
+/// column = configuration); empty when not recorded.
+struct RecordedVariables {
+  Eigen::MatrixXd t_s;            ///< reading times (empty: scan order, scan_order_times_s)
+  Eigen::MatrixXd direction;      ///< +1 forward, −1 backward (empty: not recorded)
+  Eigen::MatrixXd temperature_C;  ///< temperature at each reading (empty: not recorded)
+};
+
+struct ResidualTraceOptions {
+  double alpha = 0.01;         ///< family-wise level over all tests of the trace
+  int time_degree = 3;         ///< Legendre degrees of each variable's columns
+  int position_degree = 3;     ///< per configuration
+  int level_degree = 3;        ///< per configuration, and common to all (degree 2 and up)
+  int temperature_degree = 2;  ///< common to all configurations
+  int mc_samples = 400;        ///< draws for the configuration test
+  std::uint64_t seed = 11;     ///< fixed: the same data give the same report
+  bool is_valid(std::string* why = nullptr) const;
+};
+
+/// One variable's test.
+struct DependenceTest {
+  std::string variable;  ///< "time", "position", "configuration", "reading level", ...
+  bool tested = false;
+  std::string not_tested;  ///< why not (not recorded, constant, nothing identifiable)
+  int parameters = 0;      ///< columns tried
+  int identifiable = 0;    ///< directions left after the model's own columns
+  double statistic = 0;    ///< F, or for "configuration" the largest energy ratio
+  double p_value = 1;      ///< of this test alone
+  double p_adjusted = 1;   ///< times the number of tests carried out (Bonferroni), at most 1
+  /// Fitted coefficients of the Legendre terms P_1..P_d (µm), for the polynomial tests; for the
+  /// reading level also: `kappa_per_um`, the quadratic coefficient of the fit in m, and
+  /// `nonlinear_um`, the largest departure of the degree >= 2 part over the readings' range.
+  Eigen::VectorXd coefficients_um;
+  double kappa_per_um = 0;
+  double nonlinear_um = 0;
+  double range_lo_um = 0, range_hi_um = 0;
+  bool significant = false;  ///< p_adjusted < alpha
+  std::string finding;       ///< one line when significant, else empty
+};
+
+struct ResidualTrace {
+  std::vector<DependenceTest> tests;
+  int tests_run = 0;
+  double p_value = 1;    ///< smallest p_adjusted
+  bool depends = false;  ///< some test significant at the family-wise alpha
+  double alpha = 0.01;
+  std::vector<std::string> findings;  ///< the significant tests' lines
+  std::string brief_report() const;
+};
+
+/// Traces the residual of the readings `m_um` (P × 4, corrected for any effects already in the
+/// model) against `recorded` under the model `space`.  Throws std::invalid_argument for shape
+/// mismatches or invalid options.
+ResidualTrace trace_residual(const ResidualSpace& space, const Eigen::MatrixXd& m_um,
+                             const RecordedVariables& recorded = {},
+                             const ResidualTraceOptions& opts = {});
+
+/// Diagonal of the reading-space residual projector (P × 4): the variance of each reading's
+/// residual in units of σ².  0 for a reading the model fits exactly.
+Eigen::MatrixXd reading_projector_diagonal(const ResidualSpace& space);
+
+/// Upper-tail p-value of F(k, dof) at F (1 for k <= 0, dof <= 0 or F <= 0).
+double f_test_p_value(double F, int k, int dof);
+
+}  // namespace errsep::core

@@ -1,0 +1,373 @@
+#include "errsep/core/gross_errors.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <stdexcept>
+
+#include "errsep/core/refine.hpp"
+#include "errsep/core/residual_trace.hpp"
+#include "errsep/core/step_decision.hpp"
+
+namespace errsep::core {
+
+namespace {
+
+// Standardised residuals |r_nc|/√d_nc of the valid readings (d_nc > tiny) and their MAD scale.
+double robust_scale(const Eigen::MatrixXd& res, const Eigen::MatrixXd& d,
+                    std::vector<double>* buf) {
+  buf->clear();
+  for (Eigen::Index n = 0; n < res.rows(); ++n)
+    for (Eigen::Index i = 0; i < 4; ++i)
+      if (d(n, i) > 1e-9) buf->push_back(std::abs(res(n, i)) / std::sqrt(d(n, i)));
+  if (buf->empty()) return 0.0;
+  auto mid = buf->begin() + static_cast<std::ptrdiff_t>(buf->size() / 2);
+  std::nth_element(buf->begin(), mid, buf->end());
+  return 1.4826 * *mid;
+}
+
+struct Candidates {
+  // Spikes: readings with d > tiny; steps: normalised projected columns W (2P × S) and their
+  // (configuration, first position).
+  Eigen::MatrixXd W;
+  std::vector<std::pair<int, int>> steps;
+};
+
+struct RoundStats {
+  double spike = 0, step = 0;
+  int spike_n = -1, spike_c = -1, step_j = -1;
+  double sigma = 0;
+  // The best rival of the other configurations: at the spike's position, and among the steps.
+  double spike_rival = 0, step_rival = 0;
+  double rss = 0;
+};
+
+RoundStats round_statistics(const FourSensorConfig& cfg, const Eigen::VectorXd& r,
+                            const Eigen::MatrixXd& d, const Candidates& cand, int dof,
+                            std::vector<double>* buf) {
+  RoundStats s;
+  const Eigen::MatrixXd res = expand_residual(cfg, r);
+  s.sigma = robust_scale(res, d, buf);
+  if (!(s.sigma > 0)) return s;
+  for (Eigen::Index n = 0; n < res.rows(); ++n)
+    for (int i = 0; i < 4; ++i) {
+      if (!(d(n, i) > 1e-9)) continue;
+      const double t = std::abs(res(n, i)) / std::sqrt(d(n, i)) / s.sigma;
+      if (t > s.spike) {
+        s.spike = t;
+        s.spike_n = static_cast<int>(n);
+        s.spike_c = i;
+      }
+    }
+  s.rss = r.squaredNorm();
+  if (s.spike_n >= 0)
+    for (int i = 0; i < 4; ++i)
+      if (i != s.spike_c && d(s.spike_n, i) > 1e-9)
+        s.spike_rival = std::max(
+            s.spike_rival, std::abs(res(s.spike_n, i)) / std::sqrt(d(s.spike_n, i)) / s.sigma);
+  if (cand.W.cols() > 0) {
+    // The likelihood ratio of a change-point: |c_j| over σ̂ of the model with that step in it,
+    // so the step does not inflate its own scale (a MAD would be: it moves most readings).
+    const Eigen::VectorXd c = (cand.W.transpose() * r).cwiseAbs();
+    Eigen::Index j = 0;
+    const double cmax = c.maxCoeff(&j);
+    const double rest = std::max(s.rss - cmax * cmax, 1e-300);
+    const double sd = std::sqrt(rest / std::max(1, dof - 1));
+    s.step = cmax / sd;
+    s.step_j = static_cast<int>(j);
+    const int cj = cand.steps[static_cast<std::size_t>(j)].first;
+    for (Eigen::Index i = 0; i < c.size(); ++i)
+      if (cand.steps[static_cast<std::size_t>(i)].first != cj)
+        s.step_rival = std::max(s.step_rival, c(i));
+    s.step_rival /= sd;
+  }
+  return s;
+}
+
+Eigen::VectorXd spike_column(int P, int n, int c) {
+  Eigen::VectorXd z = Eigen::VectorXd::Zero(4 * P);
+  z(4 * n + c) = 1.0;
+  return z;
+}
+
+Eigen::VectorXd step_column(int P, int k, int c) {
+  Eigen::VectorXd z = Eigen::VectorXd::Zero(4 * P);
+  for (int n = k; n < P; ++n)
+    z(4 * n + c) = 1.0;
+  return z;
+}
+
+// The value exceeded by a fraction `level` of the draws.
+double upper_quantile(std::vector<double> v, double level) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const auto k = static_cast<std::size_t>(
+      std::clamp((1.0 - level) * static_cast<double>(v.size()), 0.0, double(v.size() - 1)));
+  return v[k];
+}
+
+// The correction, the carried covariance and the report lines from the errors' applied flags.
+void finish(GrossErrorScan* out, int P) {
+  out->correction_um = Eigen::MatrixXd::Zero(P, 4);
+  out->carried = out->covariance;
+  out->findings.clear();
+  for (std::size_t j = 0; j < out->errors.size(); ++j) {
+    GrossError& e = out->errors[j];
+    const auto c = static_cast<Eigen::Index>(j);
+    if (e.applied) {
+      for (int n = 0; n < P; ++n)
+        for (int i = 0; i < 4; ++i)
+          out->correction_um(n, i) += e.size_um * out->columns(4 * n + i, c);
+    } else {
+      out->carried(c, c) += e.size_um * e.size_um;  // left in: its fitted size goes into u
+    }
+    char buf[600];
+    const std::string what =
+        e.applied ? (e.kind == GrossErrorKind::spike ? "removed from the separation"
+                                                     : "given its own offset in the separation")
+                  : "NOT removed (" + e.not_applied + "): its size is in u_S";
+    if (e.kind == GrossErrorKind::spike)
+      std::snprintf(buf, sizeof buf,
+                    "spike: the reading of configuration %d at x = %.4g mm is off by %+.3g +- "
+                    "%.2g um (robust z = %.3g, p = %.2g); %s",
+                    e.configuration + 1, e.x_mm, e.size_um, e.u_size_um, e.robust_z, e.p_value,
+                    what.c_str());
+    else
+      std::snprintf(buf, sizeof buf,
+                    "step: configuration %d reads %+.3g +- %.2g um off from x = %.4g mm on "
+                    "(a knocked sensor; z = %.3g, p = %.2g); %s",
+                    e.configuration + 1, e.size_um, e.u_size_um, e.x_mm, e.robust_z, e.p_value,
+                    what.c_str());
+    e.description = buf;
+    out->findings.push_back(e.description);
+  }
+}
+
+}  // namespace
+
+const char* to_string(GrossErrorKind k) {
+  return k == GrossErrorKind::spike ? "spike" : "step";
+}
+
+bool GrossErrorOptions::is_valid(std::string* why) const {
+  auto fail = [&](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  if (!(alpha > 0 && alpha < 1))
+    return fail("alpha = " + std::to_string(alpha) + ": must be in (0, 1)");
+  if (max_errors < 0) return fail("max_errors = " + std::to_string(max_errors) + ": must be >= 0");
+  if (!(apply_margin >= 0))
+    return fail("apply_margin = " + std::to_string(apply_margin) + ": must be >= 0");
+  if (!(attribution_chi2 >= 0))
+    return fail("attribution_chi2 = " + std::to_string(attribution_chi2) + ": must be >= 0");
+  if (min_segment < 1)
+    return fail("min_segment = " + std::to_string(min_segment) + ": must be >= 1");
+  // The smallest Monte-Carlo p-value is 1/(mc_samples + 1); it must reach α/2.
+  if (static_cast<double>(mc_samples + 1) * 0.5 * alpha <= 1.0)
+    return fail("mc_samples = " + std::to_string(mc_samples) +
+                " cannot reach alpha/2 = " + std::to_string(0.5 * alpha));
+  return true;
+}
+
+GrossErrorScan find_gross_errors(const ResidualSpace& space_in, const Eigen::MatrixXd& m_um,
+                                 const GrossErrorOptions& opts) {
+  std::string why;
+  if (!opts.is_valid(&why)) throw std::invalid_argument("invalid gross error options: " + why);
+  const FourSensorConfig& cfg = space_in.config();
+  const int P = cfg.positions();
+  if (m_um.rows() != P || m_um.cols() != 4)
+    throw std::invalid_argument("find_gross_errors: readings must be P x 4");
+  GrossErrorScan out;
+  out.correction_um = Eigen::MatrixXd::Zero(P, 4);
+  out.columns.resize(4 * P, 0);
+  const Eigen::VectorXd y = reduce_readings(cfg, m_um);
+  ResidualSpace space = space_in;
+  std::vector<double> buf;
+  std::mt19937_64 rng(opts.seed);
+  std::normal_distribution<double> g(0.0, 1.0);
+  std::vector<std::pair<int, int>> spikes_found;
+  for (int round = 0; round < opts.max_errors && space.dof() > 2; ++round) {
+    const Eigen::VectorXd r = space.project_out(y);
+    const Eigen::MatrixXd d = reading_projector_diagonal(space);
+    Candidates cand;
+    {
+      std::vector<Eigen::VectorXd> cols;
+      for (int c = 0; c < 4; ++c)
+        for (int k = opts.min_segment; k <= P - opts.min_segment; ++k) {
+          const Eigen::VectorXd z = reduce_columns(cfg, step_column(P, k, c));
+          const Eigen::VectorXd zp = space.project_out(z);
+          if (zp.norm() <= 1e-6 * z.norm()) continue;  // the model already holds it
+          cols.push_back(zp / zp.norm());
+          cand.steps.emplace_back(c, k);
+        }
+      cand.W.resize(2 * P, static_cast<Eigen::Index>(cols.size()));
+      for (std::size_t j = 0; j < cols.size(); ++j)
+        cand.W.col(static_cast<Eigen::Index>(j)) = cols[j];
+    }
+    const RoundStats data = round_statistics(cfg, r, d, cand, space.dof(), &buf);
+    if (!(data.sigma > 0)) break;
+    if (round == 0) out.sigma_robust_um = data.sigma;
+    int ge_spike = 0, ge_step = 0;
+    double max_spike = 0, max_step = 0;
+    std::vector<double> null_spike, null_step;
+    Eigen::VectorXd z(2 * P);
+    for (int s = 0; s < opts.mc_samples; ++s) {
+      for (Eigen::Index j = 0; j < z.size(); ++j)
+        z(j) = g(rng);
+      const RoundStats st = round_statistics(cfg, space.project_out(z), d, cand, space.dof(), &buf);
+      if (st.spike >= data.spike) ++ge_spike;
+      if (st.step >= data.step) ++ge_step;
+      max_spike = std::max(max_spike, st.spike);
+      max_step = std::max(max_step, st.step);
+      null_spike.push_back(st.spike);
+      null_step.push_back(st.step);
+    }
+    const double p_spike = (1.0 + ge_spike) / (1.0 + opts.mc_samples);
+    const double p_step = cand.W.cols() > 0 ? (1.0 + ge_step) / (1.0 + opts.mc_samples) : 1.0;
+    const double level = 0.5 * opts.alpha;
+    if (!(std::min(p_spike, p_step) < level)) break;
+    GrossError e;
+    Eigen::VectorXd col;
+    // The smaller p first; on a tie (both at the Monte-Carlo floor) the larger excess over the
+    // largest null draw of its own kind: a step spreads over many readings and also raises the
+    // largest reading, a spike raises one reading far more than any step column.
+    const bool spike =
+        p_spike < p_step || (p_spike == p_step && data.spike / std::max(max_spike, 1e-300) >=
+                                                      data.step / std::max(max_step, 1e-300));
+    if (spike) {
+      e.kind = GrossErrorKind::spike;
+      e.configuration = data.spike_c;
+      e.position = data.spike_n;
+      e.robust_z = data.spike;
+      e.p_value = p_spike;
+      e.rival_z = data.spike_rival;
+      e.z_critical = upper_quantile(null_spike, level);
+      col = spike_column(P, data.spike_n, data.spike_c);
+    } else {
+      e.kind = GrossErrorKind::step;
+      e.configuration = cand.steps[static_cast<std::size_t>(data.step_j)].first;
+      e.position = cand.steps[static_cast<std::size_t>(data.step_j)].second;
+      e.robust_z = data.step;
+      e.p_value = p_step;
+      e.rival_z = data.step_rival;
+      e.z_critical = upper_quantile(null_step, level);
+      col = step_column(P, e.position, e.configuration);
+    }
+    e.x_mm = e.position * cfg.dx_mm;
+    // Which sensor position it was: the best candidate of another configuration must explain
+    // clearly less (likelihood ratio of the two one-column models above χ²₁(0.99)); otherwise
+    // the error is reported but not removed (removing the wrong one moves S by its full size).
+    e.applied = e.robust_z * e.robust_z - e.rival_z * e.rival_z >= opts.attribution_chi2;
+    // Near the detection threshold the largest of many candidates is mostly the largest noise
+    // (the winner's curse): its fitted size is inflated and removing it makes S worse.  Removed
+    // only when the statistic clears the threshold by `apply_margin` (in its own units, ~σ).
+    if (space.add(reduce_columns(cfg, col)) == 0) break;
+    Eigen::MatrixXd C(4 * P, out.columns.cols() + 1);
+    C << out.columns, col;
+    out.columns = std::move(C);
+    out.errors.push_back(e);
+  }
+  const auto K = out.columns.cols();
+  const Eigen::VectorXd r0 = space_in.project_out(y);
+  if (K == 0) {
+    out.sigma_um = space_in.dof() > 0 ? std::sqrt(r0.squaredNorm() / space_in.dof()) : 0.0;
+    return out;
+  }
+  // Joint fit of the sizes: r0 ≈ Π·Z·β (Π of the model without them).
+  const Eigen::MatrixXd Zp = space_in.project_out(reduce_columns(cfg, out.columns));
+  const Eigen::MatrixXd A = Zp.transpose() * Zp;
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(A);
+  const Eigen::VectorXd beta = ldlt.solve(Zp.transpose() * r0);
+  const int dof = space_in.dof() - static_cast<int>(K);
+  const double s2 = dof > 0 ? (r0 - Zp * beta).squaredNorm() / dof : 0.0;
+  out.sigma_um = std::sqrt(s2);
+  out.covariance = s2 * ldlt.solve(Eigen::MatrixXd::Identity(K, K));
+  for (Eigen::Index j = 0; j < K; ++j) {
+    GrossError& e = out.errors[static_cast<std::size_t>(j)];
+    e.size_um = beta(j);
+    e.u_size_um = std::sqrt(std::max(0.0, out.covariance(j, j)));
+    if (!e.applied)
+      e.not_applied = e.kind == GrossErrorKind::spike
+                          ? "another configuration's reading explains it almost as well"
+                          : "a step of another configuration explains it almost as well";
+    else if (e.robust_z < e.z_critical + opts.apply_margin) {
+      e.applied = false;
+      char b[160];
+      std::snprintf(b, sizeof b,
+                    "z = %.3g is within %.2g of the detection threshold %.3g: its size is not "
+                    "determined",
+                    e.robust_z, opts.apply_margin, e.z_critical);
+      e.not_applied = b;
+    }
+  }
+  finish(&out, P);
+  return out;
+}
+
+FourSensorResult separate_without_gross_errors(const FourSensorConfig& cfg,
+                                               const Eigen::MatrixXd& m_um, GrossErrorScan* scan,
+                                               const FourSensorResult& before,
+                                               const FourSensorOptions& solve,
+                                               const StepDecisionOptions& decision) {
+  if (!scan || !scan->found()) return before;
+  const int P = cfg.positions(), N = cfg.N;
+  const auto K = scan->columns.cols();
+  // Sensitivities to the sizes at before's λ: the correction −β·z is subtracted.
+  const FourSensorOptions lin = linearised_options(before, solve);
+  Eigen::MatrixXd D_S(P, K), D_g(P, K), D_f(N, K);
+  for (Eigen::Index j = 0; j < K; ++j) {
+    Eigen::MatrixXd c(P, 4);
+    for (int n = 0; n < P; ++n)
+      for (int i = 0; i < 4; ++i)
+        c(n, i) = -scan->columns(4 * n + i, j);
+    const FourSensorResult s = separate_four_sensor(cfg, c, lin);
+    D_S.col(j) = s.S_um;
+    D_g.col(j) = 1e6 * s.gamma_rad;
+    D_f.col(j) = s.f_um;
+  }
+  D_S = remove_polynomial(D_S, 2);
+  D_g = remove_polynomial(D_g, 1);
+  // Removed only where that makes S, γ and f better (step_decision.hpp): a size the data
+  // determine poorly (a step of configuration 4, whose readings γ nearly fits) is left in and
+  // its fitted size goes into u instead.
+  auto or_ones = [](const Eigen::VectorXd& u, Eigen::Index n) {
+    return u.size() == n ? u : Eigen::VectorXd::Ones(n);
+  };
+  const Eigen::VectorXd uS = or_ones(before.u_S_um, P), ug = or_ones(1e6 * before.u_gamma_rad, P),
+                        uf = or_ones(before.u_f_um, N);
+  for (Eigen::Index j = 0; j < K; ++j) {
+    GrossError& e = scan->errors[static_cast<std::size_t>(j)];
+    if (!e.applied) continue;
+    const std::vector<QuantityImpact> q = {{"S", "um", D_S.col(j), uS},
+                                           {"gamma", "urad", D_g.col(j), ug},
+                                           {"f", "um", D_f.col(j), uf}};
+    const StepDecision d =
+        decide_step(Eigen::VectorXd::Constant(1, e.size_um),
+                    Eigen::MatrixXd::Constant(1, 1, scan->covariance(j, j)), q, decision);
+    if (!d.apply) {
+      e.applied = false;
+      e.not_applied = d.reason;
+    }
+  }
+  finish(scan, P);
+  FourSensorResult after = separate_four_sensor(cfg, m_um - scan->correction_um, solve);
+  // The gauge of `before` (refine.hpp): the constant, line and bow of S, constant and line of γ.
+  after.S_um = before.S_um + remove_polynomial(after.S_um - before.S_um, 2);
+  after.gamma_rad = before.gamma_rad + remove_polynomial(after.gamma_rad - before.gamma_rad, 1);
+  auto widen = [&](Eigen::VectorXd& u, const Eigen::MatrixXd& D, double scale) {
+    if (u.size() != D.rows()) return;
+    const Eigen::VectorXd var = (D * scan->carried).cwiseProduct(D).rowwise().sum();
+    u = (u.array().square() + (scale * scale) * var.array().max(0.0)).sqrt();
+  };
+  widen(after.u_S_um, D_S, 1.0);
+  widen(after.u_gamma_rad, D_g, 1e-6);
+  widen(after.u_f_um, D_f, 1.0);
+  if (after.covariance) after.covariance->add_low_rank(D_S, 1e-6 * D_g, D_f, scan->carried);
+  return after;
+}
+
+}  // namespace errsep::core

@@ -1,0 +1,346 @@
+#include "errsep/core/residual_trace.hpp"
+
+#include <Eigen/SVD>
+#include <algorithm>
+#include <boost/math/distributions/fisher_f.hpp>
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <stdexcept>
+
+namespace errsep::core {
+
+namespace {
+
+double legendre(int k, double u) {
+  double p0 = 1.0, p1 = u;
+  if (k == 0) return p0;
+  for (int j = 2; j <= k; ++j) {
+    const double p2 = ((2.0 * j - 1.0) * u * p1 - (j - 1.0) * p0) / j;
+    p0 = p1;
+    p1 = p2;
+  }
+  return p1;
+}
+
+// The F-test of reading-space columns Z (4P × k, row 4n + i) against the model: projected,
+// column-normalised, directions below 1e-6 of a column's norm dropped (as ResidualSpace::add).
+struct Nested {
+  int identifiable = 0;
+  double delta_rss = 0, F = 0, p = 1;
+  Eigen::VectorXd beta;  // least-squares coefficients of Z's columns (minimum norm)
+};
+Nested nested_test(const ResidualSpace& space, const Eigen::VectorXd& r, const Eigen::MatrixXd& Z) {
+  Nested out;
+  out.beta = Eigen::VectorXd::Zero(Z.cols());
+  if (Z.cols() == 0) return out;
+  Eigen::MatrixXd Zp = space.project_out(reduce_columns(space.config(), Z));
+  Eigen::VectorXd D(Z.cols());
+  const Eigen::MatrixXd Zr = reduce_columns(space.config(), Z);
+  for (Eigen::Index c = 0; c < Z.cols(); ++c) {
+    D(c) = Zr.col(c).norm();
+    if (D(c) > 0) Zp.col(c) /= D(c);
+  }
+  Eigen::BDCSVD<Eigen::MatrixXd> svd(Zp, Eigen::ComputeThinU | Eigen::ComputeThinV);
+  const Eigen::VectorXd& sv = svd.singularValues();
+  int k = 0;
+  for (Eigen::Index j = 0; j < sv.size(); ++j)
+    if (sv(j) > 1e-6) ++k;
+  out.identifiable = k;
+  const int dof = space.dof();
+  if (k == 0 || dof - k <= 0) return out;
+  const Eigen::VectorXd c = svd.matrixU().leftCols(k).transpose() * r;
+  out.delta_rss = c.squaredNorm();
+  const double rest = r.squaredNorm() - out.delta_rss;
+  out.F = rest > 0 ? (out.delta_rss / k) / (rest / (dof - k)) : 0.0;
+  out.p = f_test_p_value(out.F, k, dof - k);
+  const Eigen::VectorXd bt = svd.matrixV().leftCols(k) * (c.array() / sv.head(k).array()).matrix();
+  for (Eigen::Index j = 0; j < Z.cols(); ++j)
+    out.beta(j) = D(j) > 0 ? bt(j) / D(j) : 0.0;
+  return out;
+}
+
+// Legendre columns P_1..P_d of v scaled to [−1, 1] over the readings selected by `config`
+// (0..3, or −1 for all, one common set of columns).
+Eigen::MatrixXd legendre_columns(const Eigen::MatrixXd& v, int degree, int config, int first,
+                                 double* lo_out = nullptr, double* hi_out = nullptr) {
+  const Eigen::Index P = v.rows();
+  double lo = 0, hi = 0;
+  if (config < 0) {
+    lo = v.minCoeff();
+    hi = v.maxCoeff();
+  } else {
+    lo = v.col(config).minCoeff();
+    hi = v.col(config).maxCoeff();
+  }
+  if (lo_out) *lo_out = lo;
+  if (hi_out) *hi_out = hi;
+  const int k = degree - first + 1;
+  Eigen::MatrixXd Z = Eigen::MatrixXd::Zero(4 * P, std::max(0, k));
+  if (!(hi > lo) || k <= 0) return Eigen::MatrixXd(4 * P, 0);
+  const double mid = 0.5 * (lo + hi), half = 0.5 * (hi - lo);
+  for (Eigen::Index n = 0; n < P; ++n)
+    for (int i = 0; i < 4; ++i) {
+      if (config >= 0 && i != config) continue;
+      const double u = (v(n, i) - mid) / half;
+      for (int d = first; d <= degree; ++d)
+        Z(4 * n + i, d - first) = legendre(d, u);
+    }
+  return Z;
+}
+
+std::string fmt(const char* f, double a, double b = 0, double c = 0, double d = 0) {
+  char buf[256];
+  std::snprintf(buf, sizeof buf, f, a, b, c, d);
+  return buf;
+}
+
+// Largest ratio of a configuration's residual energy to its expectation, relative to the whole:
+// max_c (Σ_n r_nc²/Σ_n d_nc)/(Σ r²/Σ d).
+double configuration_statistic(const Eigen::MatrixXd& res, const Eigen::Vector4d& dsum,
+                               int* which = nullptr) {
+  const double total = res.squaredNorm() / dsum.sum();
+  double best = 0;
+  for (int c = 0; c < 4; ++c) {
+    if (!(dsum(c) > 1e-9)) continue;
+    const double v = res.col(c).squaredNorm() / dsum(c) / total;
+    if (v > best) {
+      best = v;
+      if (which) *which = c;
+    }
+  }
+  return best;
+}
+
+}  // namespace
+
+double f_test_p_value(double F, int k, int dof) {
+  if (k <= 0 || dof <= 0 || !(F > 0)) return 1.0;
+  boost::math::fisher_f_distribution<double> dist(k, dof);
+  return boost::math::cdf(boost::math::complement(dist, F));
+}
+
+bool ResidualTraceOptions::is_valid(std::string* why) const {
+  auto fail = [&](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  if (!(alpha > 0 && alpha < 1))
+    return fail("alpha = " + std::to_string(alpha) + ": must be in (0, 1)");
+  if (time_degree < 1 || position_degree < 1 || level_degree < 2 || temperature_degree < 1)
+    return fail("degrees must be >= 1 (level_degree >= 2: the common level terms start at 2)");
+  if (mc_samples < 19)
+    return fail("mc_samples = " + std::to_string(mc_samples) + ": must be >= 19");
+  return true;
+}
+
+Eigen::MatrixXd reading_projector_diagonal(const ResidualSpace& space) {
+  const FourSensorConfig& cfg = space.config();
+  const int P = cfg.positions();
+  const auto V = residual_basis(cfg);
+  const Eigen::MatrixXd& Q = space.basis();
+  Eigen::MatrixXd d(P, 4);
+  for (int n = 0; n < P; ++n)
+    for (int i = 0; i < 4; ++i) {
+      const Eigen::Vector2d v = V.row(i).transpose();
+      d(n, i) =
+          std::max(0.0, v.squaredNorm() - (Q.middleRows<2>(2 * n).transpose() * v).squaredNorm());
+    }
+  return d;
+}
+
+std::string ResidualTrace::brief_report() const {
+  std::string out =
+      fmt("residual trace: %d tests, smallest adjusted p = %.3g: ", tests_run, p_value);
+  if (!depends) return out + "no dependence on a recorded variable";
+  for (std::size_t j = 0; j < findings.size(); ++j)
+    out += (j ? "; " : "") + findings[j];
+  return out;
+}
+
+ResidualTrace trace_residual(const ResidualSpace& space, const Eigen::MatrixXd& m_um,
+                             const RecordedVariables& rec, const ResidualTraceOptions& opts) {
+  std::string why;
+  if (!opts.is_valid(&why)) throw std::invalid_argument("invalid residual trace options: " + why);
+  const FourSensorConfig& cfg = space.config();
+  const int P = cfg.positions();
+  if (m_um.rows() != P || m_um.cols() != 4)
+    throw std::invalid_argument("trace_residual: readings must be P x 4");
+  auto check = [&](const Eigen::MatrixXd& v, const char* name) {
+    if (v.size() != 0 && (v.rows() != P || v.cols() != 4 || !v.allFinite()))
+      throw std::invalid_argument(std::string("trace_residual: ") + name +
+                                  " must be a finite P x 4 matrix like the readings");
+  };
+  check(rec.t_s, "t_s");
+  check(rec.direction, "direction");
+  check(rec.temperature_C, "temperature_C");
+  const Eigen::MatrixXd t = rec.t_s.size() == 0 ? scan_order_times_s(cfg) : rec.t_s;
+
+  ResidualTrace out;
+  out.alpha = opts.alpha;
+  const Eigen::VectorXd r = space.project_out(reduce_readings(cfg, m_um));
+  const int dof = space.dof();
+  auto polynomial_test = [&](const std::string& name, const Eigen::MatrixXd& Z) {
+    DependenceTest d;
+    d.variable = name;
+    d.parameters = static_cast<int>(Z.cols());
+    if (Z.cols() == 0) {
+      d.not_tested = "constant or not recorded";
+      return d;
+    }
+    const Nested nt = nested_test(space, r, Z);
+    d.identifiable = nt.identifiable;
+    if (nt.identifiable == 0 || dof - nt.identifiable <= 0) {
+      d.not_tested = "the model already holds every such function";
+      return d;
+    }
+    d.tested = true;
+    d.statistic = nt.F;
+    d.p_value = nt.p;
+    d.coefficients_um = nt.beta;
+    return d;
+  };
+
+  Eigen::MatrixXd x(P, 4);
+  for (int n = 0; n < P; ++n)
+    x.row(n).setConstant(n * cfg.dx_mm);
+  out.tests.push_back(polynomial_test("time", legendre_columns(t, opts.time_degree, -1, 1)));
+  {
+    Eigen::MatrixXd Z(4 * P, 0);
+    for (int c = 0; c < 4; ++c) {
+      const Eigen::MatrixXd Zc = legendre_columns(x, opts.position_degree, c, 1);
+      Eigen::MatrixXd Zn(4 * P, Z.cols() + Zc.cols());
+      Zn << Z, Zc;
+      Z = std::move(Zn);
+    }
+    out.tests.push_back(polynomial_test("position (per configuration)", Z));
+  }
+  {
+    // Configuration: Monte-Carlo calibrated (see the file comment).
+    DependenceTest d;
+    d.variable = "configuration";
+    const Eigen::MatrixXd dg = reading_projector_diagonal(space);
+    const Eigen::Vector4d dsum = dg.colwise().sum().transpose();
+    if (dof > 0 && r.squaredNorm() > 0) {
+      d.tested = true;
+      d.parameters = 4;
+      d.identifiable = 3;
+      int which = 0;
+      d.statistic = configuration_statistic(expand_residual(cfg, r), dsum, &which);
+      std::mt19937_64 rng(opts.seed);
+      std::normal_distribution<double> g(0.0, 1.0);
+      Eigen::MatrixXd Zd(2 * P, opts.mc_samples);
+      for (Eigen::Index j = 0; j < Zd.size(); ++j)
+        Zd.data()[j] = g(rng);
+      const Eigen::MatrixXd R = space.project_out(Zd);
+      int ge = 0;
+      for (int s = 0; s < opts.mc_samples; ++s)
+        if (configuration_statistic(expand_residual(cfg, R.col(s)), dsum) >= d.statistic) ++ge;
+      d.p_value = (1.0 + ge) / (1.0 + opts.mc_samples);
+      d.coefficients_um = Eigen::VectorXd::Constant(1, which + 1.0);  // the configuration (1-based)
+    } else {
+      d.not_tested = "no redundancy";
+    }
+    out.tests.push_back(d);
+  }
+  {
+    // Reading level: common to every configuration (one sensor moved to four places reads
+    // through one characteristic; its gain is not identifiable, so degree 2 and up), then per
+    // configuration (degree 1 and up: a configuration's gain is the library's gain effect).
+    double lo = 0, hi = 0;
+    DependenceTest d = polynomial_test("reading level",
+                                       legendre_columns(m_um, opts.level_degree, -1, 2, &lo, &hi));
+    auto level_figures = [&](DependenceTest& dt, double a, double b, int first) {
+      dt.range_lo_um = a;
+      dt.range_hi_um = b;
+      if (!dt.tested || dt.coefficients_um.size() == 0) return;
+      const double half = 0.5 * (b - a);
+      // Quadratic coefficient in m: P_2(u) = (3u² − 1)/2 gives 1.5 c_2/half²; P_3 has none in u²
+      // about the mid-range.
+      const int i2 = 2 - first;
+      if (i2 >= 0 && i2 < dt.coefficients_um.size())
+        dt.kappa_per_um = 1.5 * dt.coefficients_um(i2) / (half * half);
+      double worst = 0;
+      for (int s = 0; s <= 40; ++s) {
+        const double u = -1.0 + s / 20.0;
+        double v = 0;
+        for (Eigen::Index j = 0; j < dt.coefficients_um.size(); ++j)
+          if (first + j >= 2) v += dt.coefficients_um(j) * legendre(static_cast<int>(first + j), u);
+        worst = std::max(worst, std::abs(v));
+      }
+      dt.nonlinear_um = worst;
+    };
+    level_figures(d, lo, hi, 2);
+    out.tests.push_back(d);
+    for (int c = 0; c < 4; ++c) {
+      DependenceTest dc =
+          polynomial_test("reading level of configuration " + std::to_string(c + 1),
+                          legendre_columns(m_um, opts.level_degree, c, 1, &lo, &hi));
+      level_figures(dc, lo, hi, 1);
+      out.tests.push_back(dc);
+    }
+  }
+  {
+    // Direction: an offset per configuration between the readings taken backward and forward
+    // (hysteresis, backlash of the sensor stage).
+    Eigen::MatrixXd Z(4 * P, 0);
+    if (rec.direction.size() != 0)
+      for (int c = 0; c < 4; ++c) {
+        const bool both =
+            rec.direction.col(c).maxCoeff() > 0 && rec.direction.col(c).minCoeff() < 0;
+        if (!both) continue;
+        Eigen::MatrixXd Zn(4 * P, Z.cols() + 1);
+        Zn.leftCols(Z.cols()) = Z;
+        Zn.col(Z.cols()).setZero();
+        for (int n = 0; n < P; ++n)
+          Zn(4 * n + c, Z.cols()) = rec.direction(n, c) < 0 ? 1.0 : 0.0;
+        Z = std::move(Zn);
+      }
+    DependenceTest d = polynomial_test("direction", Z);
+    if (rec.direction.size() == 0)
+      d.not_tested = "not recorded";
+    else if (Z.cols() == 0)
+      d.not_tested = "every configuration measured in one direction only";
+    out.tests.push_back(d);
+  }
+  {
+    DependenceTest d =
+        rec.temperature_C.size() == 0
+            ? polynomial_test("temperature", Eigen::MatrixXd(4 * P, 0))
+            : polynomial_test("temperature",
+                              legendre_columns(rec.temperature_C, opts.temperature_degree, -1, 1));
+    if (rec.temperature_C.size() == 0) d.not_tested = "not recorded";
+    out.tests.push_back(d);
+  }
+
+  for (const auto& d : out.tests)
+    if (d.tested) ++out.tests_run;
+  for (auto& d : out.tests) {
+    if (!d.tested) continue;
+    d.p_adjusted = std::min(1.0, d.p_value * out.tests_run);
+    out.p_value = std::min(out.p_value, d.p_adjusted);
+    d.significant = d.p_adjusted < opts.alpha;
+    if (!d.significant) continue;
+    std::string f = "residual depends on " + d.variable + fmt(": p = %.2g", d.p_adjusted);
+    if (d.variable == "configuration") {
+      f +=
+          fmt(" (configuration %.0f's residual %.2f times its expected share: a noisier or "
+              "disturbed sensor position)",
+              d.coefficients_um(0), d.statistic);
+    } else if (d.variable.rfind("reading level", 0) == 0) {
+      f +=
+          fmt(", quadratic term %.3g /um (the sensor's slope changes %.3g %% per 100 um); "
+              "non-linear part up to %.3g um over readings %.4g..",
+              d.kappa_per_um, 2.0 * d.kappa_per_um * 100.0 * 100.0, d.nonlinear_um, d.range_lo_um) +
+          fmt("%.4g um: a sensor non-linearity (not in the effect library)", d.range_hi_um);
+    } else {
+      f += fmt(", F = %.3g on %.0f directions", d.statistic, d.identifiable);
+    }
+    d.finding = f;
+    out.findings.push_back(f);
+  }
+  out.depends = !out.findings.empty();
+  return out;
+}
+
+}  // namespace errsep::core
