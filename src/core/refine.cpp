@@ -2,7 +2,6 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
-#include <boost/math/distributions/fisher_f.hpp>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -53,13 +52,6 @@ double rms_after_polynomial(const Eigen::VectorXd& d, int degree) {
   const Eigen::Index n = d.size();
   if (n <= degree + 1) return 0.0;
   return std::sqrt(remove_polynomial(d, degree).squaredNorm() / static_cast<double>(n));
-}
-
-double p_value_F(double F, int k, int dof) {
-  if (k <= 0 || dof <= 0) return 1.0;
-  if (!(F > 0)) return 1.0;
-  boost::math::fisher_f_distribution<double> dist(k, dof);
-  return boost::math::cdf(boost::math::complement(dist, F));
 }
 
 // The base model of Eq. (1) in the reduced space (residual_analysis.hpp: S and γ eliminated per
@@ -529,7 +521,7 @@ std::vector<Scored> score_candidates(const FourSensorConfig& cfg, const Solved& 
         best.score.F = F;
         best.score.delta_rss_um2 = fit.delta_rss;
         best.score.relative_sv = fit.relative_sv;
-        best.score.p_value = p_value_F(F, fit.identifiable, dof);
+        best.score.p_value = f_test_p_value(F, fit.identifiable, dof);
         best.variant = std::shared_ptr<const ModelEffect>(v->clone());
         best.p0 = fit.dp;
       }

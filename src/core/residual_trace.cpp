@@ -1,8 +1,9 @@
 #include "errsep/core/residual_trace.hpp"
 
+#include "errsep/core/step_decision.hpp"
+
 #include <Eigen/SVD>
 #include <algorithm>
-#include <boost/math/distributions/fisher_f.hpp>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -113,12 +114,6 @@ double configuration_statistic(const Eigen::MatrixXd& res, const Eigen::Vector4d
 }
 
 }  // namespace
-
-double f_test_p_value(double F, int k, int dof) {
-  if (k <= 0 || dof <= 0 || !(F > 0)) return 1.0;
-  boost::math::fisher_f_distribution<double> dist(k, dof);
-  return boost::math::cdf(boost::math::complement(dist, F));
-}
 
 bool ResidualTraceOptions::is_valid(std::string* why) const {
   auto fail = [&](const std::string& m) {

@@ -92,7 +92,4 @@ ResidualTrace trace_residual(const ResidualSpace& space, const Eigen::MatrixXd& 
 /// residual in units of σ².  0 for a reading the model fits exactly.
 Eigen::MatrixXd reading_projector_diagonal(const ResidualSpace& space);
 
-/// Upper-tail p-value of F(k, dof) at F (1 for k <= 0, dof <= 0 or F <= 0).
-double f_test_p_value(double F, int k, int dof);
-
 }  // namespace errsep::core
