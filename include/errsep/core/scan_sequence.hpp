@@ -36,6 +36,11 @@ struct Traverse {
 
 enum class ScanSequenceKind { single, closing_pass, reversed, interleaved };
 const char* to_string(ScanSequenceKind k);
+/// The plan names a config or command line gives: "single", "closing" (or "closing pass"),
+/// "reversed", "interleaved".  Throws std::invalid_argument naming the accepted names.
+ScanSequenceKind scan_sequence_kind_from_string(const std::string& name);
+/// "single, closing, reversed, interleaved" (for help texts and error messages).
+const char* scan_sequence_kind_names();
 
 struct ScanSequence {
   std::vector<Traverse> traverses;
