@@ -34,6 +34,7 @@ ScanSequenceKind scan_sequence_kind_from_string(const std::string& name) {
 
 Eigen::MatrixXd ScanSequence::times_s(const FourSensorConfig& cfg) const {
   const int P = cfg.positions();
+  if (recorded_times_s.rows() == P && recorded_times_s.cols() == size()) return recorded_times_s;
   Eigen::MatrixXd t(P, size());
   for (int k = 0; k < size(); ++k) {
     const Traverse& tr = traverses[static_cast<std::size_t>(k)];

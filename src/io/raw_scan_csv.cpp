@@ -224,10 +224,16 @@ std::pair<core::ScanSequence, Eigen::MatrixXd> scan_sequence_of(const RawFourSen
   for (Eigen::Index k = 0; k < T; ++k)
     for (Eigen::Index n = 0; n < P; ++n)
       m(n, k) = q.m_um[static_cast<std::size_t>(k)][static_cast<std::size_t>(n)];
-  // The slide speed of core's time model, from the first traverse's recorded times.
+  // The slide speed of core's time model, from the first traverse's recorded times; the
+  // recorded times themselves where every one is known (a complete scan).
   const auto& t0 = q.t_s.front();
   const double dt = std::abs(t0.back() - t0.front());
   if (P > 1 && dt > 0) seq.speed_mm_per_s = std::abs(scan.x_mm.back() - scan.x_mm.front()) / dt;
+  Eigen::MatrixXd t(P, T);
+  for (Eigen::Index k = 0; k < T; ++k)
+    for (Eigen::Index n = 0; n < P; ++n)
+      t(n, k) = q.t_s[static_cast<std::size_t>(k)][static_cast<std::size_t>(n)];
+  if (t.allFinite()) seq.recorded_times_s = t;
   return {seq, m};
 }
 
