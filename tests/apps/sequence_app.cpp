@@ -118,7 +118,7 @@ TEST_CASE("single plan: the drift is detected, said not identifiable, not applie
 // The machine's way: [scan] plan = "reversed" and the device simulator's sensor drifting in
 // time; errsep-scan --refine runs the traverses in the plan's order, records them, and its
 // result folder's refine/ holds the findings the report prints.
-TEST_CASE("errsep-scan with [scan] plan = reversed and a drifting sensor: drift identified") {
+TEST_CASE("errsep-scan with [scan] plan = reversed and a drifting sensor: the drift is found") {
   TempDir tmp;
   std::string t = test::read_file(test::source_dir() / "config" / "simulator.toml");
   auto replace = [&t](const std::string& from, const std::string& to) {

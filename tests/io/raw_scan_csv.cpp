@@ -244,7 +244,7 @@ TEST_CASE("impossible values of a displacement raw scan are refused with file:li
 
 // Issue 16 item 2: a scan sequence's traverses are recorded per reading (traverse, direction,
 // time), and today's files read as the single plan.
-TEST_CASE("a scan sequence round-trips; a file without traverses is the single plan") {
+TEST_CASE("a scan sequence round-trips, and a file without traverses is the single plan") {
   TempDir dir;
   auto s = sample_scan(true);
   const auto seq = errsep::core::ScanSequence::make(errsep::core::ScanSequenceKind::reversed,
