@@ -5,6 +5,7 @@
 #include <iostream>
 
 #include "errsep/core/four_sensor.hpp"
+#include "errsep/core/four_sensor_sequence_simulation.hpp"
 #include "errsep/core/four_sensor_simulation.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/four_sensor_result_csv.hpp"
@@ -24,6 +25,9 @@ int main(int argc, char** argv) {
   int example = 1, k = 3;
   bool pe1 = false, pe2 = false;
   std::string noise_on = "sensors";
+  std::string plan = "single";
+  std::vector<double> drift_um_per_s, thermal_um;
+  double thermal_tau_s = 40.0;
   errsep::core::FourSensorConfig cfg;
   app.add_option("--out", out_dir, "output directory")->capture_default_str();
   app.add_option("--sigma-um", sigma, "sensor noise standard deviation, um")->capture_default_str();
@@ -42,6 +46,21 @@ int main(int argc, char** argv) {
                "sensor positioning error PE1: the sensor misses each spacing by +12, -15, +20 um "
                "(D = 5.012, 4.985, 25.02 mm at the default geometry)");
   app.add_flag("--pe2", pe2, "slideway positioning error PE2 (Eq. 20)");
+  app.add_option("--plan", plan,
+                 std::string("scan plan (order of the traverses, core/scan_sequence.hpp): ") +
+                     errsep::core::scan_sequence_kind_names() +
+                     "; other than single, raw.csv records every traverse")
+      ->capture_default_str();
+  app.add_option("--drift-um-per-s", drift_um_per_s,
+                 "undeclared linear drift a_c * t of the sensor in configurations 1..4, um/s "
+                 "(four values; records the scan as a sequence)")
+      ->expected(4);
+  app.add_option("--thermal-um", thermal_um,
+                 "undeclared thermal drift A_c * (1 - exp(-t/tau)) in configurations 1..4, um "
+                 "(four values; records the scan as a sequence)")
+      ->expected(4);
+  app.add_option("--thermal-tau-s", thermal_tau_s, "time constant of --thermal-um, s")
+      ->capture_default_str();
   app.add_option("--dx-mm", cfg.dx_mm, "sampling interval, mm")->capture_default_str();
   app.add_option("--N", cfg.N, "number of reference points")->capture_default_str();
   app.add_option("--s2", cfg.s2)->capture_default_str();
@@ -61,15 +80,43 @@ int main(int argc, char** argv) {
     if (combined) so.noise_model = errsep::core::NoiseModel::combined_outputs;
     if (pe1) so.actual_spacing_mm = errsep::core::zhao2019_pe1_spacing_mm(cfg);
     if (pe2) so.positioning_error_um = errsep::core::zhao2019_pe2_um(cfg.travel_mm());
-    const auto sim = errsep::core::simulate_four_sensor(cfg, truth, so);
+    auto sim = errsep::core::simulate_four_sensor(cfg, truth, so);
 
     errsep::io::RawFourSensorScan raw;
     raw.complete = true;
     raw.geometry = cfg;
     raw.x_mm.assign(sim.x_mm.data(), sim.x_mm.data() + sim.x_mm.size());
-    for (int j = 0; j < 4; ++j)
-      for (Eigen::Index n = 0; n < sim.m_um.rows(); ++n)
-        raw.m_um[static_cast<size_t>(j)].push_back(sim.m_um(n, j));
+    // A scan sequence (issue 16 item 2): every traverse with its time and direction, and the
+    // undeclared time effects on top; the separation below takes each configuration's first
+    // traverse (m1..m4), the refine step of errsep-separate/errsep-scan the whole sequence.
+    const auto kind = errsep::core::scan_sequence_kind_from_string(plan);
+    const bool sequence = kind != errsep::core::ScanSequenceKind::single ||
+                          !drift_um_per_s.empty() || !thermal_um.empty();
+    if (sequence && (combined || pe1 || pe2))
+      throw std::invalid_argument(
+          "--plan/--drift-um-per-s/--thermal-um simulate the sensors' noise and no PE1/PE2: "
+          "drop --noise-on combined, --pe1, --pe2");
+    std::optional<errsep::core::SequenceSimData> seq_sim;
+    if (sequence) {
+      const auto seq = errsep::core::ScanSequence::make(kind, cfg);
+      errsep::core::SequenceSimOptions qo;
+      qo.sigma_um = sigma;
+      qo.seed = seed;
+      for (std::size_t c = 0; c < drift_um_per_s.size(); ++c)
+        qo.effects.drift_um_per_s[c] = drift_um_per_s[c];
+      for (std::size_t c = 0; c < thermal_um.size(); ++c)
+        qo.effects.thermal_um[c] = thermal_um[c];
+      qo.effects.thermal_tau_s = thermal_tau_s;
+      seq_sim = errsep::core::simulate_four_sensor_sequence(cfg, truth, seq, qo);
+      errsep::io::set_sequence(raw, seq, seq_sim->m_um, seq_sim->t_s);
+      for (int j = 0; j < 4; ++j)
+        for (Eigen::Index n = 0; n < sim.m_um.rows(); ++n)
+          sim.m_um(n, j) = raw.m_um[static_cast<size_t>(j)][static_cast<size_t>(n)];
+    } else {
+      for (int j = 0; j < 4; ++j)
+        for (Eigen::Index n = 0; n < sim.m_um.rows(); ++n)
+          raw.m_um[static_cast<size_t>(j)].push_back(sim.m_um(n, j));
+    }
     // DIR is one result set, replacing an earlier simulation's whole (io/staged_directory.hpp).
     errsep::io::StagedDirectory stage(
         out_dir, {"simulate", std::string("errsep-simulate ") + errsep::kVersion, false, {}});

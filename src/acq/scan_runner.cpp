@@ -1,6 +1,7 @@
 #include "errsep/acq/scan_runner.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <ctime>
 #include <limits>
@@ -49,6 +50,7 @@ class Runner {
   WindowAverager::Window measure(const std::vector<std::size_t>& channels,
                                  const std::string& where);
   void four_sensor_single();
+  void four_sensor_sequence();
   void four_sensor_fixed();
   void displacement();
   void progress(const std::string& phase, double x_mm, std::vector<double> values);
@@ -179,6 +181,7 @@ void Runner::progress(const std::string& phase, double x_mm, std::vector<double>
 // One sensor moved to the four configurations by the sensor stage; a full slide pass for each,
 // always in the same direction (no reversal backlash in the data).
 void Runner::four_sensor_single() {
+  if (opts_.plan != core::ScanSequenceKind::single) return four_sensor_sequence();
   auto& raw = *res_.four_sensor;
   const auto off = opts_.geometry.offsets_mm();
   const int P = opts_.geometry.positions();
@@ -195,6 +198,47 @@ void Runner::four_sensor_single() {
       raw.m_um[col][nn] = w.mean[0];
       (*raw.t_s)[col][nn] = t_rel_s(w.t_mean_ns[0]);
       cell(col, nn, raw.m_um[col][nn], (*raw.t_s)[col][nn]);
+      progress(phase, x, {w.mean[0]});
+    }
+  }
+}
+
+// The traverses of a scan plan (core/scan_sequence.hpp) in their order: the sensor stage to the
+// traverse's configuration, the slide through the positions forward or backward.  Each reading
+// goes into its traverse's column with its time; the first traverse of each configuration also
+// into m1..m4 (and the cell hook, so a checkpoint keeps a separable single scan).  The recorded
+// start of a traverse is the time of its first reading.
+void Runner::four_sensor_sequence() {
+  auto& raw = *res_.four_sensor;
+  const auto off = opts_.geometry.offsets_mm();
+  const int P = opts_.geometry.positions();
+  auto& q = *raw.sequence;
+  std::array<bool, 4> seen{};
+  for (std::size_t k = 0; k < q.traverses.size(); ++k) {
+    auto& tr = q.traverses[k];
+    const auto c = static_cast<std::size_t>(tr.configuration);
+    const bool first = !seen[c];
+    seen[c] = true;
+    const bool fwd = tr.direction == core::TraverseDirection::forward;
+    const std::string phase = "traverse " + std::to_string(k + 1) + "/" +
+                              std::to_string(q.traverses.size()) + " (configuration " +
+                              std::to_string(c + 1) + (fwd ? ", forward)" : ", backward)");
+    move(*dev_.sensor_stage, opts_.sensor_stage_origin_mm + off[c], phase);
+    for (int i = 0; i < P; ++i) {
+      const int n = fwd ? i : P - 1 - i;
+      const double x = n * opts_.geometry.dx_mm;
+      const std::string where = phase + ", x = " + fmt(x) + " mm";
+      move(*dev_.slide, opts_.slide_start_mm + opts_.axes.scan_direction * x, where);
+      const auto w = measure({0}, where);
+      const auto nn = static_cast<std::size_t>(n);
+      q.m_um[k][nn] = w.mean[0];
+      q.t_s[k][nn] = t_rel_s(w.t_mean_ns[0]);
+      if (i == 0) tr.start_s = q.t_s[k][nn];
+      if (first) {
+        raw.m_um[c][nn] = q.m_um[k][nn];
+        (*raw.t_s)[c][nn] = q.t_s[k][nn];
+        cell(c, nn, raw.m_um[c][nn], (*raw.t_s)[c][nn]);
+      }
       progress(phase, x, {w.mean[0]});
     }
   }
@@ -264,8 +308,21 @@ ScanResult Runner::run() {
       raw.m_um[i].assign(P, kNaN);
       (*raw.t_s)[i].assign(P, kNaN);
     }
+    std::size_t traverses = 4;
+    if (opts_.plan != core::ScanSequenceKind::single) {
+      const auto seq = core::ScanSequence::make(opts_.plan, opts_.geometry);
+      io::RawSequence q;
+      q.plan = seq.name;
+      q.traverses = seq.traverses;  // start_s replaced by the measured start
+      for (auto& tr : q.traverses)
+        tr.start_s = kNaN;
+      q.m_um.assign(seq.traverses.size(), std::vector<double>(P, kNaN));
+      q.t_s.assign(seq.traverses.size(), std::vector<double>(P, kNaN));
+      traverses = seq.traverses.size();
+      raw.sequence = std::move(q);
+    }
     res_.four_sensor = std::move(raw);
-    res_.counts.points_total = static_cast<int>(P) * 4 / (ns == 4 ? 4 : 1);
+    res_.counts.points_total = static_cast<int>(P * traverses) / (ns == 4 ? 4 : 1);
   } else {
     const auto K = static_cast<std::size_t>(opts_.displacement_points);
     io::RawDisplacementScan raw;
@@ -492,6 +549,7 @@ ScanOptions scan_options_from_config(const io::MachineConfig& cfg, ScanKind kind
   o.sensor_stage_origin_mm = sc.sensor_stage_origin_mm;
   o.averages = sc.averages;
   o.settle_ms = sc.settle_ms;
+  o.plan = sc.plan;
   o.d_mm = sc.d_mm;
   o.displacement_points = sc.displacement_points > 0 ? sc.displacement_points : sc.geometry.N;
   int timeout = 0;
@@ -545,6 +603,10 @@ ScanResult run_scan(const ScanDevices& devices, const ScanOptions& opts, const S
     if (devices.sensors.size() == 1 && !devices.sensor_stage)
       throw std::invalid_argument(
           "run_scan: a four-sensor scan with one sensor needs the sensor stage to move it");
+    if (devices.sensors.size() != 1 && opts.plan != core::ScanSequenceKind::single)
+      throw std::invalid_argument(
+          std::string("run_scan: plan '") + core::to_string(opts.plan) +
+          "' needs one sensor on the sensor stage (a traverse measures one configuration)");
   } else {
     if (devices.sensors.size() != 2)
       throw std::invalid_argument(

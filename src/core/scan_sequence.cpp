@@ -19,8 +19,22 @@ const char* to_string(ScanSequenceKind k) {
   return "unknown";
 }
 
+const char* scan_sequence_kind_names() {
+  return "single, closing, reversed, interleaved";
+}
+
+ScanSequenceKind scan_sequence_kind_from_string(const std::string& name) {
+  if (name == "single") return ScanSequenceKind::single;
+  if (name == "closing" || name == "closing pass") return ScanSequenceKind::closing_pass;
+  if (name == "reversed") return ScanSequenceKind::reversed;
+  if (name == "interleaved") return ScanSequenceKind::interleaved;
+  throw std::invalid_argument("unknown scan plan '" + name + "': one of " +
+                              scan_sequence_kind_names());
+}
+
 Eigen::MatrixXd ScanSequence::times_s(const FourSensorConfig& cfg) const {
   const int P = cfg.positions();
+  if (recorded_times_s.rows() == P && recorded_times_s.cols() == size()) return recorded_times_s;
   Eigen::MatrixXd t(P, size());
   for (int k = 0; k < size(); ++k) {
     const Traverse& tr = traverses[static_cast<std::size_t>(k)];

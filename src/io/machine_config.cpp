@@ -377,6 +377,7 @@ void read_scan(const Reader& root, MachineConfig& c) {
           "sensor_stage_origin_mm",
           "averages",
           "settle_ms",
+          "plan",
           "d_mm",
           "displacement_points",
           "workpiece_sensor",
@@ -412,6 +413,16 @@ void read_scan(const Reader& root, MachineConfig& c) {
   r.get("sensor_stage_origin_mm", s.sensor_stage_origin_mm);
   r.get_int("averages", s.averages, 1, 1000000);
   r.get_int("settle_ms", s.settle_ms, 0, 600000);
+  std::string plan = core::to_string(s.plan);
+  r.get("plan", plan);
+  try {
+    s.plan = core::scan_sequence_kind_from_string(plan);
+  } catch (const std::invalid_argument& e) {
+    r.fail("plan", e.what());
+  }
+  r.check("plan", s.single_sensor || s.plan == core::ScanSequenceKind::single,
+          "a plan other than single needs single_sensor = true (one sensor moved to the "
+          "configurations, one traverse each)");
   r.get("d_mm", s.d_mm);
   r.get_int("displacement_points", s.displacement_points, 0, 10000000);
   r.get("workpiece_sensor", s.workpiece_sensor);

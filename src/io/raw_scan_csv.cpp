@@ -1,7 +1,9 @@
 #include "errsep/io/raw_scan_csv.hpp"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <sstream>
 #include <stdexcept>
 
@@ -71,6 +73,46 @@ int parse_int_meta(const CsvTable& t, const std::string& key, const std::filesys
   return out;
 }
 
+// The sequence of the header's file comment: "traverses: T", one "traverse_K: configuration c,
+// forward|backward, start_s t" line and the columns kK_um, kK_t_s for each.
+RawSequence read_sequence(const CsvTable& t, const std::filesystem::path& file, bool complete) {
+  RawSequence q;
+  q.plan = t.meta("plan").value_or("custom");
+  const int T = parse_int_meta(t, "traverses", file);
+  if (T < 4 || T > 64)
+    throw CsvError(file, 0, "metadata 'traverses: " + std::to_string(T) + "': must be 4..64");
+  for (int k = 1; k <= T; ++k) {
+    const std::string key = "traverse_" + std::to_string(k);
+    const auto v = t.meta(key);
+    if (!v)
+      throw CsvError(file, 0,
+                     "metadata '" + key + "' missing (traverses: " + std::to_string(T) + ")");
+    core::Traverse tr;
+    char dir[16] = {0};
+    int c = 0;
+    double start = 0;
+    if (std::sscanf(v->c_str(), "configuration %d, %15[a-z], start_s %lf", &c, dir, &start) != 3 ||
+        c < 1 || c > 4 || (std::string(dir) != "forward" && std::string(dir) != "backward"))
+      throw CsvError(file, 0,
+                     "metadata '" + key + ": " + *v +
+                         "': expected 'configuration 1..4, forward|backward, start_s <s>'");
+    tr.configuration = c - 1;
+    tr.direction = std::string(dir) == "forward" ? core::TraverseDirection::forward
+                                                 : core::TraverseDirection::backward;
+    tr.start_s = start;
+    q.traverses.push_back(tr);
+    const std::string m = "k" + std::to_string(k), mc = m + "_um", tc = m + "_t_s";
+    // The sensor of configuration c reads it: its recorded range applies.
+    check_readings(t, mc, reading_range(t, "m" + std::to_string(c), file), file, !complete);
+    q.m_um.push_back(t.column(mc, file));
+    q.t_s.push_back(t.column(tc, file));
+  }
+  core::ScanSequence seq;
+  seq.traverses = q.traverses;
+  if (std::string why; !seq.is_valid(&why)) throw CsvError(file, 0, "scan sequence: " + why);
+  return q;
+}
+
 }  // namespace
 
 std::optional<std::string> RawFourSensorScan::meta(const std::string& key) const {
@@ -107,7 +149,92 @@ CsvTable to_csv_table(const RawFourSensorScan& scan) {
       check_len((*scan.t_s)[static_cast<std::size_t>(i)], n, col);
       t.add_column(col, (*scan.t_s)[static_cast<std::size_t>(i)]);
     }
+  if (scan.sequence) {
+    const RawSequence& q = *scan.sequence;
+    const std::size_t T = q.traverses.size();
+    if (q.m_um.size() != T || q.t_s.size() != T)
+      throw std::invalid_argument("raw scan: the sequence has " + std::to_string(T) +
+                                  " traverses but " + std::to_string(q.m_um.size()) +
+                                  " reading and " + std::to_string(q.t_s.size()) + " time columns");
+    t.set_meta("plan", q.plan);
+    t.set_meta("traverses", std::to_string(T));
+    for (std::size_t k = 0; k < T; ++k) {
+      const auto& tr = q.traverses[k];
+      const std::string K = std::to_string(k + 1);
+      t.set_meta("traverse_" + K,
+                 "configuration " + std::to_string(tr.configuration + 1) + ", " +
+                     (tr.direction == core::TraverseDirection::forward ? "forward" : "backward") +
+                     ", start_s " + fmt(tr.start_s));
+      check_len(q.m_um[k], n, "k" + K + "_um");
+      check_len(q.t_s[k], n, "k" + K + "_t_s");
+      t.add_column("k" + K + "_um", q.m_um[k]);
+      t.add_column("k" + K + "_t_s", q.t_s[k]);
+    }
+  }
   return t;
+}
+
+void set_sequence(RawFourSensorScan& scan, const core::ScanSequence& seq,
+                  const Eigen::MatrixXd& m_um, const Eigen::MatrixXd& t_s) {
+  const auto P = static_cast<Eigen::Index>(scan.positions());
+  const auto T = static_cast<Eigen::Index>(seq.size());
+  if (m_um.rows() != P || m_um.cols() != T || t_s.rows() != P || t_s.cols() != T)
+    throw std::invalid_argument("set_sequence: readings and times must be P x T (" +
+                                std::to_string(P) + " x " + std::to_string(T) + ")");
+  RawSequence q;
+  q.plan = seq.name;
+  q.traverses = seq.traverses;
+  auto column = [P](const Eigen::MatrixXd& M, Eigen::Index k) {
+    return std::vector<double>(M.col(k).data(), M.col(k).data() + P);
+  };
+  scan.t_s.emplace();
+  std::array<bool, 4> done{};
+  for (Eigen::Index k = 0; k < T; ++k) {
+    q.m_um.push_back(column(m_um, k));
+    q.t_s.push_back(column(t_s, k));
+    const auto c =
+        static_cast<std::size_t>(seq.traverses[static_cast<std::size_t>(k)].configuration);
+    if (done[c]) continue;
+    done[c] = true;
+    scan.m_um[c] = q.m_um.back();
+    (*scan.t_s)[c] = q.t_s.back();
+  }
+  scan.sequence = std::move(q);
+}
+
+std::pair<core::ScanSequence, Eigen::MatrixXd> scan_sequence_of(const RawFourSensorScan& scan) {
+  if (!scan.geometry)
+    throw std::invalid_argument("raw scan has no geometry (dx_mm, s2, s3, s4, N)");
+  const auto P = static_cast<Eigen::Index>(scan.positions());
+  core::ScanSequence seq;
+  Eigen::MatrixXd m;
+  if (!scan.sequence) {
+    seq = core::ScanSequence::make(core::ScanSequenceKind::single, *scan.geometry);
+    m.resize(P, 4);
+    for (int c = 0; c < 4; ++c)
+      for (Eigen::Index n = 0; n < P; ++n)
+        m(n, c) = scan.m_um[static_cast<std::size_t>(c)][static_cast<std::size_t>(n)];
+    return {seq, m};
+  }
+  const RawSequence& q = *scan.sequence;
+  seq.traverses = q.traverses;
+  seq.name = q.plan;
+  const auto T = static_cast<Eigen::Index>(q.traverses.size());
+  m.resize(P, T);
+  for (Eigen::Index k = 0; k < T; ++k)
+    for (Eigen::Index n = 0; n < P; ++n)
+      m(n, k) = q.m_um[static_cast<std::size_t>(k)][static_cast<std::size_t>(n)];
+  // The slide speed of core's time model, from the first traverse's recorded times; the
+  // recorded times themselves where every one is known (a complete scan).
+  const auto& t0 = q.t_s.front();
+  const double dt = std::abs(t0.back() - t0.front());
+  if (P > 1 && dt > 0) seq.speed_mm_per_s = std::abs(scan.x_mm.back() - scan.x_mm.front()) / dt;
+  Eigen::MatrixXd t(P, T);
+  for (Eigen::Index k = 0; k < T; ++k)
+    for (Eigen::Index n = 0; n < P; ++n)
+      t(n, k) = q.t_s[static_cast<std::size_t>(k)][static_cast<std::size_t>(n)];
+  if (t.allFinite()) seq.recorded_times_s = t;
+  return {seq, m};
 }
 
 CsvTable to_csv_table(const RawDisplacementScan& scan) {
@@ -204,7 +331,11 @@ RawFourSensorScan read_raw_four_sensor_csv(const std::filesystem::path& file,
                          " rows");
     s.geometry = g;
   }
+  if (t.meta("traverses")) s.sequence = read_sequence(t, file, s.complete);
   s.metadata = other_meta(t, {"format", "complete", "units", "dx_mm", "s2", "s3", "s4", "N"});
+  std::erase_if(s.metadata, [](const auto& kv) {
+    return kv.first == "plan" || kv.first == "traverses" || kv.first.rfind("traverse_", 0) == 0;
+  });
   return s;
 }
 

@@ -279,4 +279,57 @@ HtmlTable refine_steps_table(const CsvTable& t, const std::filesystem::path& fil
   return h;
 }
 
+CsvTable sequence_refine_csv(const core::SequenceRefineResult& r, const std::vector<double>& x_mm) {
+  const auto P = static_cast<std::size_t>(r.before.S_um.size());
+  if (x_mm.size() != P)
+    throw std::invalid_argument("sequence_refine_csv: " + std::to_string(x_mm.size()) +
+                                " positions for " + std::to_string(P) + " values of S");
+  CsvTable t;
+  t.set_meta("format", "errsep sequence refine");
+  t.set_meta("units", "x in mm, S and u in um (k = 1, about the best-fit constant, line and bow)");
+  t.set_meta("plan", r.plan);
+  std::string added;
+  for (const auto& a : r.added)
+    added += (added.empty() ? "" : ", ") + std::string(core::to_string(a.kind));
+  t.set_meta("added", added.empty() ? "none" : added);
+  t.set_meta("findings", std::to_string(r.report.size()));
+  for (std::size_t k = 0; k < r.report.size(); ++k)
+    t.set_meta("finding_" + std::to_string(k + 1), r.report[k]);
+  auto col = [P](const Eigen::VectorXd& v) {
+    std::vector<double> c(P, 0.0);
+    for (std::size_t n = 0; n < P && n < static_cast<std::size_t>(v.size()); ++n)
+      c[n] = v(static_cast<Eigen::Index>(n));
+    return c;
+  };
+  t.add_column("x_mm", x_mm);
+  t.add_column("S_before_um", col(r.before.S_um));
+  t.add_column("u_S_before_um", col(r.before.u_S_um));
+  t.add_column("S_after_um", col(r.after.S_um));
+  t.add_column("u_S_after_um", col(r.after.u_S_um));
+  t.add_column("u_S_widening_um", col(r.u_S_widening_um));
+  return t;
+}
+
+HtmlTable sequence_findings_table(const CsvTable& t, const std::filesystem::path& file) {
+  if (t.meta("format") != std::optional<std::string>("errsep sequence refine"))
+    throw CsvError(file, 0, "not a sequence refine file ('# format: errsep sequence refine')");
+  HtmlTable out;
+  out.id = "sequence_refine";
+  out.caption = "Scan sequence (plan: " + t.meta("plan").value_or("unknown") +
+                "): what the redundant traverses show; added to the model: " +
+                t.meta("added").value_or("none");
+  out.header = {"finding"};
+  const auto n = t.meta("findings");
+  if (!n) throw CsvError(file, 0, "metadata 'findings' missing");
+  const int count = std::atoi(n->c_str());
+  for (int k = 1; k <= count; ++k) {
+    const auto f = t.meta("finding_" + std::to_string(k));
+    if (!f) throw CsvError(file, 0, "metadata 'finding_" + std::to_string(k) + "' missing");
+    out.rows.push_back({*f});
+  }
+  if (out.rows.empty())
+    out.rows.push_back({"nothing detected: no drift, thermal drift or non-repeating traverse"});
+  return out;
+}
+
 }  // namespace errsep::io

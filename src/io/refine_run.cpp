@@ -71,6 +71,13 @@ FourSensorInputs four_sensor_inputs(const RawFourSensorScan& raw, const fs::path
         in.t_s(n, j) = v;
       }
   }
+  if (raw.sequence) {
+    RawFourSensorScan r = raw;
+    r.geometry = cfg;
+    in.sequence = scan_sequence_of(r);
+    if (!in.sequence->second.allFinite())
+      throw CsvError(file, 0, "a traverse column (kK_um) holds a value that is not finite");
+  }
   return in;
 }
 
@@ -168,6 +175,20 @@ RefineRunResult run_refine(const FourSensorInputs& in, const fs::path& out_dir,
         compare_with_reference(r.before, r.after, in.x_mm, in.cfg.dx_mm, *opts.reference_csv);
   out.text = format_refine_text(r);
   if (out.reference) out.text += format_reference_text(*out.reference);
+  if (in.sequence) {
+    // The redundant traverses (issue 16 item 2): drift, thermal drift and a non-repeating
+    // traverse, applied only where the plan identifies them, said where it does not.
+    core::SequenceRefineOptions so;
+    so.alpha = opts.refine.alpha;
+    out.sequence =
+        core::refine_four_sensor_sequence(in.cfg, in.sequence->first, in.sequence->second, so);
+    out.text += "\nScan sequence (plan: " + out.sequence->plan + ", " +
+                std::to_string(in.sequence->first.size()) + " traverses):\n";
+    for (const auto& line : out.sequence->report)
+      out.text += "  " + line + "\n";
+    if (out.sequence->report.empty())
+      out.text += "  nothing detected: no drift, thermal drift or non-repeating traverse\n";
+  }
 
   // One result set: the files appear in DIR only when all are written, replacing an earlier
   // refine result whole (io/staged_directory.hpp).
@@ -178,6 +199,13 @@ RefineRunResult run_refine(const FourSensorInputs& in, const fs::path& out_dir,
   steps.set_meta("run_id", stage.run_id());
   write_csv(stage.dir() / "refine_steps.csv", steps);
   write_file_atomic(stage.dir() / "refine_report.txt", out.text);
+  if (out.sequence) {
+    std::vector<double> x(in.x_mm.data(), in.x_mm.data() + in.x_mm.size());
+    CsvTable sq = sequence_refine_csv(*out.sequence, x);
+    sq.set_meta("source", opts.source);
+    sq.set_meta("run_id", stage.run_id());
+    write_csv(stage.dir() / "sequence_refine.csv", sq);
+  }
   ResultWriteInfo info{opts.source, "X", "Y", {}};
   info.extra_metadata = {{"run_id", stage.run_id()},
                          {"model", r.model_name},

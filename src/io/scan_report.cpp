@@ -861,6 +861,19 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
                              "effects rejected): see refine_report.txt beside it.");
     break;
   }
+  // A scan sequence's findings (service::FourSensorPipeline with refine on): what drift or
+  // non-repeat the redundant traverses show, and what the plan could not identify.
+  for (const fs::path& rel :
+       {fs::path("sequence_refine.csv"), fs::path("refine") / "sequence_refine.csv"}) {
+    const fs::path sf = dir / rel;
+    if (!fs::exists(sf)) continue;
+    const auto t = read_csv(sf, {.allow_non_finite = true, .min_rows = 1});
+    html.tables.push_back(sequence_findings_table(t, sf));
+    html.files.emplace_back(
+        (opts.output_subdir.empty() ? fs::path() : fs::path("..")) / rel,
+        "the scan sequence's fit: S and u_S before and after its refine, and its findings");
+    break;
+  }
   // The particulars a customer's report states; what the inputs do not say is said to be unknown.
   const ReportParticulars& pt = opts.particulars;
   auto stated = [](const std::string& v, const char* none) { return v.empty() ? none : v; };

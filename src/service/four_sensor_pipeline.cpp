@@ -79,6 +79,11 @@ FourSensorPipelineResult FourSensorPipeline::separate(const io::RawFourSensorSca
           "see refine/refine_report.txt");
     out.refine = std::move(run.result);
     out.files.push_back("refine/");
+    if (run.sequence) {
+      for (const auto& line : run.sequence->report)
+        out.warnings.push_back("scan sequence (" + run.sequence->plan + "): " + line);
+      out.sequence_refine = std::move(run.sequence);
+    }
   }
   return out;
 }

@@ -362,3 +362,59 @@ TEST_CASE("devices that do not fit the scan are refused before anything moves") 
   CHECK_THROWS_WITH(run_scan(m.devices(), opts), Catch::Contains("averages = 0"));
   CHECK(m.slide.moves() == 0);
 }
+
+// Issue 16 item 2: the scan runs the traverses of its plan in order (configuration, direction)
+// and records each with its readings' times; m1..m4 hold each configuration's first traverse.
+TEST_CASE("a reversed plan: each configuration forward and back, every traverse recorded") {
+  FakeMachine m;
+  m.add_single();
+  auto o = m.options();
+  o.plan = core::ScanSequenceKind::reversed;
+  int calls = 0;
+  ScanHooks hooks;
+  hooks.progress = [&](const ScanProgress& p) {
+    ++calls;
+    CHECK(p.points_total == 72);
+  };
+  const auto res = run_scan(m.devices(), o, hooks);
+  INFO(res.brief_report());
+  REQUIRE(res.complete());
+  CHECK(calls == 72);
+  REQUIRE(res.four_sensor);
+  const auto& raw = *res.four_sensor;
+  REQUIRE(raw.sequence);
+  const auto& q = *raw.sequence;
+  CHECK(q.plan == "reversed");
+  REQUIRE(q.traverses.size() == 8);
+  for (std::size_t k = 0; k < 8; ++k) {
+    INFO("traverse " << k + 1);
+    const int c = q.traverses[k].configuration;
+    CHECK(c == static_cast<int>(k / 2));
+    const bool fwd = q.traverses[k].direction == core::TraverseDirection::forward;
+    CHECK(fwd == (k % 2 == 0));
+    for (int n = 0; n < 9; ++n)
+      CHECK(q.m_um[k][static_cast<std::size_t>(n)] == Approx(m.expected_um(c, n)).margin(1e-9));
+    // Forward reads x_0 first, backward x_{P-1} first; the recorded start is the first reading.
+    CHECK((fwd ? q.t_s[k].front() < q.t_s[k].back() : q.t_s[k].front() > q.t_s[k].back()));
+    CHECK(q.traverses[k].start_s == (fwd ? q.t_s[k].front() : q.t_s[k].back()));
+    if (k > 0) CHECK(q.traverses[k].start_s > q.traverses[k - 1].start_s);
+  }
+  for (std::size_t c = 0; c < 4; ++c)
+    CHECK(raw.m_um[c] == q.m_um[2 * c]);
+  // The file round-trips and core reads the plan back.
+  test::TempDir tmp;
+  io::write_raw_four_sensor_csv(tmp / "raw.csv", raw);
+  const auto back = io::read_raw_four_sensor_csv(tmp / "raw.csv");
+  const auto [seq, mq] = io::scan_sequence_of(back);
+  CHECK(seq.size() == 8);
+  CHECK(seq.traverses[3].direction == core::TraverseDirection::backward);
+  CHECK(mq.cols() == 8);
+}
+
+TEST_CASE("a plan other than single is refused for four fixed sensors") {
+  FakeMachine m;
+  m.add_fixed();
+  auto o = m.options();
+  o.plan = core::ScanSequenceKind::closing_pass;
+  CHECK_THROWS_WITH(run_scan(m.devices(), o, {}), Catch::Contains("needs one sensor"));
+}

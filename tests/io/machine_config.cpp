@@ -412,3 +412,24 @@ TEST_CASE("[report]: particulars, tolerance and PDF switch") {
   CHECK(m.find("t.toml:" + std::to_string(line_after_minimal() + 1) +
                ": report.straightness_tolerance_um: must be > 0") == 0);
 }
+
+// Issue 16 item 2: [scan] plan names the order of the traverses (core/scan_sequence.hpp).
+TEST_CASE("[scan] plan: single by default, the scan sequence's names, errors with file:line") {
+  const auto path = errsep::test::source_dir() / "config" / "simulator.toml";
+  const std::string text = errsep::test::read_file(path);
+  CHECK(parse_machine_config(text, "s.toml").scan.plan == errsep::core::ScanSequenceKind::single);
+  auto with = [&](const std::string& plan) {
+    std::string t = text;
+    t.replace(t.find("[scan]\n"), 7, "[scan]\nplan = \"" + plan + "\"\n");
+    return t;
+  };
+  CHECK(parse_machine_config(with("reversed"), "s.toml").scan.plan ==
+        errsep::core::ScanSequenceKind::reversed);
+  CHECK(parse_machine_config(with("closing"), "s.toml").scan.plan ==
+        errsep::core::ScanSequenceKind::closing_pass);
+  CHECK(parse_machine_config(with("interleaved"), "s.toml").scan.plan ==
+        errsep::core::ScanSequenceKind::interleaved);
+  const std::string m = error_of(with("sideways"));
+  CHECK(m.find("t.toml:127: scan.plan") == 0);  // the line of the key
+  CHECK(m.find("single, closing, reversed, interleaved") != std::string::npos);
+}

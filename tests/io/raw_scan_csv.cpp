@@ -241,3 +241,62 @@ TEST_CASE("impossible values of a displacement raw scan are refused with file:li
       read_raw_displacement_csv(file),
       Catch::StartsWith(where(file, 1)) && Catch::Contains("positions must increase"));
 }
+
+// Issue 16 item 2: a scan sequence's traverses are recorded per reading (traverse, direction,
+// time), and today's files read as the single plan.
+TEST_CASE("a scan sequence round-trips, and a file without traverses is the single plan") {
+  TempDir dir;
+  auto s = sample_scan(true);
+  const auto seq = errsep::core::ScanSequence::make(errsep::core::ScanSequenceKind::reversed,
+                                                    *s.geometry, 4.0, 1.5);
+  const Eigen::MatrixXd t = seq.times_s(*s.geometry);
+  Eigen::MatrixXd m(9, seq.size());
+  for (Eigen::Index k = 0; k < m.cols(); ++k)
+    for (Eigen::Index n = 0; n < 9; ++n)
+      m(n, k) = 0.5 * static_cast<double>(k) + 1e-3 * static_cast<double>(n * n);
+  set_sequence(s, seq, m, t);
+  write_raw_four_sensor_csv(dir / "seq.csv", s);
+  const auto r = read_raw_four_sensor_csv(dir / "seq.csv");
+  REQUIRE(r.sequence);
+  CHECK(r.sequence->plan == "reversed");
+  REQUIRE(r.sequence->traverses.size() == 8);
+  CHECK(r.sequence->traverses[1].configuration == 0);
+  CHECK(r.sequence->traverses[1].direction == errsep::core::TraverseDirection::backward);
+  CHECK(r.sequence->traverses[3].start_s == Approx(seq.traverses[3].start_s));
+  CHECK(r.sequence->m_um[5] == s.sequence->m_um[5]);
+  CHECK(r.sequence->t_s[1].front() == Approx(t(0, 1)));  // backward: x_0 read last
+  CHECK(r.m_um[1] == s.sequence->m_um[2]);  // m2: the first traverse of configuration 2
+  CHECK_FALSE(r.meta("traverse_1"));        // sequence lines are not "other" metadata
+  const auto [rseq, rm] = scan_sequence_of(r);
+  CHECK(rseq.name == "reversed");
+  CHECK(rseq.size() == 8);
+  CHECK(rseq.speed_mm_per_s == Approx(4.0));
+  CHECK((rm - m).cwiseAbs().maxCoeff() < 1e-9);
+  // Today's file: no traverses -> the single plan from m1..m4.
+  write_raw_four_sensor_csv(dir / "plain.csv", sample_scan(true));
+  const auto plain = read_raw_four_sensor_csv(dir / "plain.csv");
+  CHECK_FALSE(plain.sequence);
+  const auto [pseq, pm] = scan_sequence_of(plain);
+  CHECK(pseq.name == "single");
+  CHECK(pm.cols() == 4);
+  CHECK(pm(3, 2) == plain.m_um[2][3]);
+}
+
+TEST_CASE("a bad traverse line is refused with file and what is wrong") {
+  TempDir dir;
+  auto s = sample_scan(true);
+  const auto seq =
+      errsep::core::ScanSequence::make(errsep::core::ScanSequenceKind::closing_pass, *s.geometry);
+  set_sequence(s, seq, Eigen::MatrixXd::Zero(9, 5), seq.times_s(*s.geometry));
+  auto t = to_csv_table(s);
+  t.set_meta("traverse_3", "configuration 7, sideways, start_s 1");
+  errsep::io::write_csv(dir / "bad.csv", t);
+  try {
+    read_raw_four_sensor_csv(dir / "bad.csv");
+    FAIL("accepted a bad traverse line");
+  } catch (const CsvError& e) {
+    const std::string w = e.what();
+    CHECK(w.find("bad.csv") != std::string::npos);
+    CHECK(w.find("traverse_3") != std::string::npos);
+  }
+}

@@ -49,6 +49,10 @@ struct ScanOptions {
   double sensor_stage_origin_mm = 0.0;  ///< sensor-stage position of configuration 1
   int averages = 100;                   ///< K ok readings averaged per point
   int settle_ms = 50;                   ///< wait after in-position before averaging
+  /// The order of the traverses (core/scan_sequence.hpp), one sensor on the sensor stage only.
+  /// Other than single, the raw record holds every traverse (io::RawSequence: configuration,
+  /// direction, start time, each reading's time); a backward traverse reads x_{P-1} first.
+  core::ScanSequenceKind plan = core::ScanSequenceKind::single;
   // displacement method
   double d_mm = 5.0;                 ///< displacement of the reference piece (also the spacing)
   int displacement_points = 25;      ///< slide positions per pass, x_k = k·d

@@ -36,6 +36,11 @@ struct Traverse {
 
 enum class ScanSequenceKind { single, closing_pass, reversed, interleaved };
 const char* to_string(ScanSequenceKind k);
+/// The plan names a config or command line gives: "single", "closing" (or "closing pass"),
+/// "reversed", "interleaved".  Throws std::invalid_argument naming the accepted names.
+ScanSequenceKind scan_sequence_kind_from_string(const std::string& name);
+/// "single, closing, reversed, interleaved" (for help texts and error messages).
+const char* scan_sequence_kind_names();
 
 struct ScanSequence {
   std::vector<Traverse> traverses;
@@ -47,11 +52,16 @@ struct ScanSequence {
   /// away and back.
   bool repeat_keeps_zero = false;
 
+  /// The reading times as measured (P × T, s since the start of the scan), or empty: then
+  /// times_s() models them from start_s and the speed.  A scan's raw file records them
+  /// (io::scan_sequence_of); a time-dependent effect is modelled on what was measured.
+  Eigen::MatrixXd recorded_times_s;
+
   int size() const { return static_cast<int>(traverses.size()); }
   /// More traverses than configurations: some configuration is measured more than once.
   bool redundant() const { return size() > 4; }
-  /// Reading times t(n, k) in s, P × T: traverse k reads x_n at start_s + (distance travelled
-  /// since its first reading)/speed.
+  /// Reading times t(n, k) in s, P × T: recorded_times_s when it has that shape, else traverse k
+  /// reads x_n at start_s + (distance travelled since its first reading)/speed.
   Eigen::MatrixXd times_s(const FourSensorConfig& cfg) const;
   /// Every configuration at least once, configurations in 0..3, traverse 0 is configuration 1
   /// (its zero adjustment is the reference e_1 = 0), start times non-decreasing, speed > 0.

@@ -42,6 +42,17 @@
 // 7.1 (all weakly determined); closing pass drift 2.2, thermal 0.89, traverse 0; reversed drift
 // 0, thermal 0.06, traverse 0; interleaved drift 1.2, thermal 0.73, traverse 0.  The threshold
 // undetermined_S_max = 0.1 separates them.
+//
+// An effect detected (significant on the directions the data see) that the plan cannot identify
+// is not applied, and u_S is widened by what it could do to S (issue 16 item 1: "widen the
+// uncertainty instead of applying it").  Its fitted coefficients along the directions the data
+// determine, each at its size plus its standard uncertainty ((|uⱼᵀr| + σ̂)/svⱼ), give (a) the S
+// change of that visible part, which the unrefined fit keeps, and (b) a per-direction size s²
+// (their mean) taken for each undetermined direction, whose S change the data cannot bound
+// otherwise:
+//   u_add(x)² = (toS·V_seen·c)(x)² + s²·Σ_undetermined (toS·v_j)(x)²,
+// toS being what the fit puts into Ŝ (after the gauge) from readings along the effect's columns.
+// u_S = sqrt(u_S² + Σ_effects u_add²).
 #include <Eigen/Core>
 #include <string>
 #include <vector>
@@ -113,6 +124,9 @@ struct SequenceCandidate {
   std::string description;
   int identifiable = 0;
   double F = 0, p_value = 1, delta_rss_um2 = 0;
+  double tau_s = 0;  ///< thermal: the time constant of the best score
+  /// Detected but not identifiable: the RMS over x of what it adds to u_S (widen_u_S_um).
+  double u_S_added_um = 0;
 };
 
 struct SequenceRefineResult {
@@ -120,14 +134,19 @@ struct SequenceRefineResult {
   SequenceFit before, after;                   ///< without effects; with the added ones
   std::vector<SequenceCandidate> added;        ///< in order
   std::vector<SequenceCandidate> first_round;  ///< every candidate's score in round 1
-  /// Significant, but the plan cannot identify them: not added, reported.
+  /// Significant, but the plan cannot identify them: not added, reported, and `after.u_S_um`
+  /// widened by what each could do to S (file comment).
   std::vector<SequenceCandidate> detected_not_identifiable;
+  /// P: the part of after.u_S_um that the detected-but-unidentifiable effects add (quadrature);
+  /// zero when there are none.
+  Eigen::VectorXd u_S_widening_um;
   /// Significant candidates the data cannot tell apart (one explains the other's signal): not
   /// applied; one line each, also in `report`.
   std::vector<std::string> ambiguous;
   std::vector<SequenceIdentifiability> plan_identifiability;  ///< drift, thermal, traverse
-  /// One line per added effect and one per effect this plan cannot identify, e.g.
-  /// "drift: not identifiable from this plan (single): ...".  The report prints them.
+  /// One line per added effect and one per effect detected that this plan cannot identify, e.g.
+  /// "drift: not identifiable from this plan (single): ...".  The report prints them.  An effect
+  /// the plan cannot identify and the data do not suggest gets no line (a clean run says nothing).
   std::vector<std::string> report;
   bool identified(SequenceEffectKind k) const;
   bool identifiable_from_plan(SequenceEffectKind k) const;

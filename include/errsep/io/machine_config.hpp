@@ -21,6 +21,7 @@
 #include "errsep/core/four_sensor.hpp"
 #include "errsep/core/four_sensor_config.hpp"
 #include "errsep/core/machine_axes.hpp"
+#include "errsep/core/scan_sequence.hpp"
 #include "errsep/io/cnc/compensation_export.hpp"
 #include "errsep/io/config_error.hpp"
 #include "errsep/io/register_spec.hpp"
@@ -112,6 +113,10 @@ struct ScanConfig {
   double sensor_stage_origin_mm = 0.0;  ///< sensor-stage position of configuration 1
   int averages = 100;  ///< K readings averaged per point (Zhao 2019's experiment used 100)
   int settle_ms = 50;  ///< wait after in-position before averaging
+  /// The order of the traverses (core/scan_sequence.hpp; "plan" = single, closing, reversed,
+  /// interleaved): a plan other than single measures configurations again so that drift and a
+  /// non-repeating traverse show (issue 16 item 2); single_sensor set-ups only.
+  core::ScanSequenceKind plan = core::ScanSequenceKind::single;
   // displacement method (Haramiishi 2024, section 2.1)
   double d_mm = 5.0;             ///< displacement of the reference piece between the scans
   int displacement_points = 0;   ///< points per scan, spaced d_mm (0 = geometry.N)

@@ -11,6 +11,20 @@
 //   x_mm,m1_um,m2_um,m3_um,m4_um[,t1_s,t2_s,t3_s,t4_s]
 //
 // t_i_s: mean time of the K averaged readings of configuration i, seconds since scan start.
+//
+// A scan measured as a sequence of traverses (core/scan_sequence.hpp: closing pass, reversed,
+// interleaved; issue 16 item 2) records every traverse, in the order measured, as two more
+// columns and one metadata line each:
+//
+//   # plan: reversed
+//   # traverses: 8
+//   # traverse_2: configuration 1, backward, start_s 34.0
+//   x_mm,m1_um,...,m4_um[,t1_s..t4_s],k1_um,k1_t_s,k2_um,k2_t_s,...,k8_um,k8_t_s
+//
+// kK_um is traverse K's reading at x_n (whatever the direction, the row is the position) and
+// kK_t_s its time.  m1..m4 (and t1..t4) hold the first traverse of each configuration, so a
+// tool that knows no sequences still reads a valid four-sensor scan.  A file without "traverses"
+// is the single plan (today's files).
 // A scan also records each column's sensor range ("# range_min_m1_um: -2000", "# range_max_m1_um:
 // 2000", ...; io/plausibility.hpp): the readers refuse, with "file:line:", a reading outside it
 // (outside +-1e5 um when the file records none), inf anywhere, nan in a complete scan, positions
@@ -30,7 +44,10 @@
 #include <utility>
 #include <vector>
 
+#include <Eigen/Core>
+
 #include "errsep/core/four_sensor_config.hpp"
+#include "errsep/core/scan_sequence.hpp"
 #include "errsep/io/csv.hpp"
 
 namespace errsep::io {
@@ -38,12 +55,21 @@ namespace errsep::io {
 inline constexpr const char* kRawFourSensorFormat = "errsep raw four-sensor scan";
 inline constexpr const char* kRawDisplacementFormat = "errsep raw displacement scan";
 
+/// The traverses of a scan sequence as recorded (file comment).
+struct RawSequence {
+  std::string plan = "custom";            ///< core::ScanSequence::name
+  std::vector<core::Traverse> traverses;  ///< T, in the order measured
+  std::vector<std::vector<double>> m_um;  ///< T columns of P: traverse k's reading at x_n
+  std::vector<std::vector<double>> t_s;   ///< T columns of P: its reading times, s
+};
+
 struct RawFourSensorScan {
   std::vector<double> x_mm;                 ///< P slide positions
   std::array<std::vector<double>, 4> m_um;  ///< m_i(x_n), P each; nan where not measured
   std::optional<std::array<std::vector<double>, 4>> t_s;  ///< reading times, s since start
   std::optional<core::FourSensorConfig> geometry;         ///< from metadata dx_mm, s2, s3, s4, N
-  bool complete = false;                                  ///< "# complete: true" (absent = false)
+  std::optional<RawSequence> sequence;  ///< a scan sequence's traverses; none = single plan
+  bool complete = false;                ///< "# complete: true" (absent = false)
   /// Other "# key: value" lines (counts, timestamps, config, ...), in order, written after the
   /// format/complete/geometry lines.
   std::vector<std::pair<std::string, std::string>> metadata;
@@ -72,6 +98,17 @@ struct RawDisplacementScan {
 /// columns' lengths differ.
 CsvTable to_csv_table(const RawFourSensorScan& scan);
 CsvTable to_csv_table(const RawDisplacementScan& scan);
+
+/// The sequence as core's fit takes it: the traverses (speed from the first traverse's recorded
+/// times, or 10 mm/s when it has one reading) and the P × T readings; for a file without a
+/// sequence, the single plan from m1..m4.  Throws std::invalid_argument without a geometry.
+std::pair<core::ScanSequence, Eigen::MatrixXd> scan_sequence_of(const RawFourSensorScan& scan);
+
+/// Records readings m (P × T, column k = traverse k of `seq`) and their times t (P × T) as
+/// scan.sequence, and m1..m4, t1..t4 as the first traverse of each configuration (file comment).
+/// Throws std::invalid_argument for shapes that do not match.
+void set_sequence(RawFourSensorScan& scan, const core::ScanSequence& seq,
+                  const Eigen::MatrixXd& m_um, const Eigen::MatrixXd& t_s);
 
 /// Writes atomically (write_csv).  Throws std::runtime_error / std::invalid_argument.
 void write_raw_four_sensor_csv(const std::filesystem::path& file, const RawFourSensorScan& scan);

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "errsep/core/refine.hpp"
+#include "errsep/core/sequence_refine.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/html_report.hpp"
 
@@ -32,5 +33,17 @@ std::string format_refine_text(const core::RefineResult& r);
 /// the errors against the truth before -> after where the run had one, and the verdict.  Throws
 /// CsvError naming `file` when a column or a step's metadata is missing.
 HtmlTable refine_steps_table(const CsvTable& steps, const std::filesystem::path& file);
+
+/// A scan sequence's refine (core/sequence_refine.hpp) as CSV: columns x_mm, S_before_um,
+/// u_S_before_um, S_after_um, u_S_after_um, u_S_widening_um (u at k = 1, S about its best-fit
+/// constant, line and bow); metadata "format: errsep sequence refine", plan, added effects, and
+/// one "finding_<k>" line per finding (an effect identified, ambiguous, or detected and not
+/// identifiable from the plan, with what to measure instead).  Throws std::invalid_argument when
+/// x_mm does not have one value per position.
+CsvTable sequence_refine_csv(const core::SequenceRefineResult& r, const std::vector<double>& x_mm);
+
+/// A sequence_refine.csv read back as the report's table of findings (one row each; a run that
+/// found nothing says so).  Throws CsvError naming `file` when it is not such a file.
+HtmlTable sequence_findings_table(const CsvTable& t, const std::filesystem::path& file);
 
 }  // namespace errsep::io

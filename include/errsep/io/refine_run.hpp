@@ -24,6 +24,7 @@
 
 #include "errsep/core/reference_comparison.hpp"
 #include "errsep/core/refine.hpp"
+#include "errsep/core/sequence_refine.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 
 namespace errsep::io {
@@ -34,6 +35,9 @@ struct FourSensorInputs {
   Eigen::VectorXd x_mm;  ///< P slide positions from the file
   Eigen::MatrixXd m_um;  ///< P × 4
   Eigen::MatrixXd t_s;   ///< P × 4 reading times, or empty when the file has none
+  /// A recorded scan sequence (raw_scan_csv.hpp) and its P × T readings; run_refine then also
+  /// runs core::refine_four_sensor_sequence and writes sequence_refine.csv.
+  std::optional<std::pair<core::ScanSequence, Eigen::MatrixXd>> sequence;
 };
 
 /// Geometry overrides (0 = from the file's metadata, Δx from x_mm when there is none).
@@ -65,6 +69,9 @@ struct ReferenceReport {
 
 struct RefineRunResult {
   core::RefineResult result;
+  /// With a recorded scan sequence: its refine, whose findings (result.report) are appended to
+  /// `text` and written to sequence_refine.csv (refine_report.hpp).
+  std::optional<core::SequenceRefineResult> sequence;
   std::optional<ReferenceReport> reference;
   std::string text;                          ///< the readable report written to the text file
   std::vector<std::filesystem::path> files;  ///< written, in DIR

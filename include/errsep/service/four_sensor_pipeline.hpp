@@ -10,7 +10,9 @@
 //   lcurve.csv              the λ search
 //   residuals.csv           the residuals of the redundant equations
 //   summary.txt             λ, σ̂, straightness, the rule that chose λ
-//   refine/                 with refine on: the refine step's set of its own (io/refine_run)
+//   refine/                 with refine on: the refine step's set of its own (io/refine_run);
+//                           with a raw scan that records a scan sequence (io/raw_scan_csv.hpp)
+//                           also refine/sequence_refine.csv (core/sequence_refine.hpp)
 //
 // write_result_set() makes the whole folder one result set (io/staged_directory.hpp): written
 // beside the target and moved into place in one rename, so a kill at any moment leaves the earlier
@@ -24,6 +26,7 @@
 
 #include "errsep/core/four_sensor.hpp"
 #include "errsep/core/refine.hpp"
+#include "errsep/core/sequence_refine.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 
@@ -49,6 +52,8 @@ FourSensorPipelineOptions pipeline_options(const io::MachineConfig& cfg, const s
 struct FourSensorPipelineResult {
   std::optional<core::FourSensorResult> separation;  ///< none when it failed (see error)
   std::optional<core::RefineResult> refine;          ///< with refine on
+  /// With refine on and a recorded scan sequence; its findings are also in `warnings`.
+  std::optional<core::SequenceRefineResult> sequence_refine;
   std::vector<std::string> files;     ///< written, relative to the folder ("refine/" for the set)
   std::vector<std::string> warnings;  ///< for the user (λ fallbacks, an incomplete refined model)
   std::string error;                  ///< why the separation failed (write_result_set only)
