@@ -2,7 +2,6 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
-#include <boost/math/distributions/fisher_f.hpp>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
@@ -11,6 +10,7 @@
 #include "errsep/core/effect_traverse.hpp"
 #include "errsep/core/four_sensor_system.hpp"
 #include "errsep/core/refine.hpp"
+#include "errsep/core/step_decision.hpp"
 
 namespace errsep::core {
 
@@ -109,12 +109,6 @@ Eigen::VectorXd flatten(const Eigen::MatrixXd& m) {
   for (Eigen::Index k = 0; k < m.cols(); ++k)
     y.segment(k * m.rows(), m.rows()) = m.col(k);
   return y;
-}
-
-double p_value_F(double F, int k, int dof) {
-  if (k <= 0 || dof <= 0 || !(F > 0)) return 1.0;
-  boost::math::fisher_f_distribution<double> dist(k, dof);
-  return boost::math::cdf(boost::math::complement(dist, F));
 }
 
 Eigen::MatrixXd thin_q(const Eigen::MatrixXd& X) {
@@ -399,7 +393,7 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
         for (int j = 0; j < kid; ++j)
           d += std::pow(pj.U.col(j).dot(r), 2);
         const double F = (d / kid) / ((rss - d) / (dof - kid));
-        const double p = p_value_F(F, kid, dof - kid);
+        const double p = f_test_p_value(F, kid, dof - kid);
         if (best_dirs.size() == 0 || p < best.p_value) {
           best.description = cols.description;
           best.tau_s = kind == SequenceEffectKind::thermal ? tau : 0.0;
@@ -456,7 +450,7 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
       for (int j = 0; j < kb; ++j)
         d += std::pow(pb.U.col(j).dot(rr), 2);
       const double F = kb > 0 && dof_r > 0 ? (d / kb) / ((rr.squaredNorm() - d) / dof_r) : 0.0;
-      if (!(p_value_F(F, kb, dof_r) < threshold)) rival = to_string(scored[i].kind);
+      if (!(f_test_p_value(F, kb, dof_r) < threshold)) rival = to_string(scored[i].kind);
     }
     if (!rival.empty()) {
       char amb[300];
