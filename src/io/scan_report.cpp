@@ -278,8 +278,10 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
   std::vector<std::pair<std::string, std::string>> raw_meta;  // when and with what it was measured
   if (fs::exists(dir / "raw.csv"))
     raw_meta = read_raw_four_sensor_csv(dir / "raw.csv", inspect).metadata;
-  if (fs::exists(dir / "raw_displacement.csv"))
-    (void)read_raw_displacement_csv(dir / "raw_displacement.csv", inspect);
+  if (fs::exists(dir / "raw_displacement.csv")) {
+    auto meta = read_raw_displacement_csv(dir / "raw_displacement.csv", inspect).metadata;
+    if (raw_meta.empty()) raw_meta = std::move(meta);  // a displacement scan's own date, machine
+  }
   const double k = opts.evaluation.coverage_factor;
   std::vector<Row> rows;
   HtmlReport html;
@@ -879,7 +881,9 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
   auto stated = [](const std::string& v, const char* none) { return v.empty() ? none : v; };
   html.measurement = {
       {"Date and time of the measurement (UTC)",
-       raw_value("started_utc").value_or("not recorded (no raw.csv with '# started_utc:')") +
+       raw_value("started_utc")
+               .value_or(
+                   "not recorded (no raw.csv or raw_displacement.csv with '# started_utc:')") +
            (raw_value("finished_utc") ? " to " + *raw_value("finished_utc") : "")},
       {"Machine", stated(pt.machine, "not stated")},
       {"Axis", axis_line},

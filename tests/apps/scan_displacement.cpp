@@ -71,6 +71,12 @@ TEST_CASE("scan --method displacement: result folder with u, the report, errsep-
   CHECK_FALSE(ev.columns.empty());
   const std::string evtxt = test::read_file(out / "report" / "evaluation.txt");
   CHECK_THAT(evtxt, Catch::Contains("table motion error m(x)"));
+  // The report states when the displacement scan was measured (its raw file's started_utc).
+  const std::string raw_text = test::read_file(out / "raw_displacement.csv");
+  const auto at = raw_text.find("# started_utc: ");
+  REQUIRE(at != std::string::npos);
+  const std::string started = raw_text.substr(at + 15, raw_text.find('\n', at) - at - 15);
+  CHECK_THAT(test::read_file(out / "report" / "report.html"), Catch::Contains(started));
 
   // errsep-report reads the folder (again, into the folder itself).
   std::string rep;
