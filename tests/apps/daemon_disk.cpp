@@ -53,13 +53,7 @@ TEST_CASE("disk full: write_failed in the register map, a clear journal line, no
   rig.start_daemon({"--min-free-mb", "1e9", "--checkpoint-ms", "100"});
   REQUIRE(rig.notify->wait_for("READY=1", 15s));
 
-  REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1) == 0);
-  auto r = rig.wait_regs(
-      [](const std::vector<long>& x) {
-        return x[test::reg_last_scan_id] == 1 && x[test::reg_state] == 1;
-      },
-      20s);
-  REQUIRE(r.size() == test::kRegisterCount);
+  auto r = rig.trigger_and_wait(1, 20s);
   CHECK(r[test::reg_last_outcome] == 5);  // write failed
   CHECK(r[test::reg_scans_completed] == 0);
   CHECK(r[test::reg_state] == 1);  // idle: a full disk is not a device fault
@@ -130,13 +124,7 @@ TEST_CASE("disk full for real: ENOSPC on a tmpfs, reported, the last checkpoint 
   const auto dir = std::filesystem::path("/proc") / std::to_string(rig.daemon->pid()) / "root" /
                    rig.results.relative_path();
 
-  REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1) == 0);
-  auto r = rig.wait_regs(
-      [](const std::vector<long>& x) {
-        return x[test::reg_last_scan_id] == 1 && x[test::reg_state] == 1;
-      },
-      20s);
-  REQUIRE(r.size() == test::kRegisterCount);
+  auto r = rig.trigger_and_wait(1, 20s);
   CHECK(r[test::reg_last_outcome] == 5);  // write failed
   CHECK(r[test::reg_state] == 1);
   CHECK(rig.notify->wait_for("STATUS=idle: last scan 1 write_failed (disk full)", 2s));

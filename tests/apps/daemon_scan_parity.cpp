@@ -20,7 +20,6 @@
 #include <string>
 
 #include "errsep/io/raw_scan_csv.hpp"
-#include "errsep/io/staged_directory.hpp"
 #include "support/daemon_rig.hpp"
 #include "support/result_files.hpp"
 
@@ -59,11 +58,7 @@ TEST_CASE("the daemon and errsep-scan write the same result folder, errsep-repor
 
   rig.start_daemon();
   REQUIRE(rig.notify->wait_for("READY=1", 15s));
-  std::string out;
-  REQUIRE(test::mbpoll_write_coil(rig.modbus_port, 0, 1, &out) == 0);
-  const auto r = rig.wait_regs(
-      [](const std::vector<long>& x) { return x[test::reg_last_scan_id] == 1 && x[0] == 1; }, 60s);
-  REQUIRE(r.size() == test::kRegisterCount);
+  const auto r = rig.trigger_and_wait(1, 60s);
   REQUIRE(r[test::reg_last_outcome] == 1);  // complete
   const auto store_raw = rig.find_file(1, "raw");
   REQUIRE(store_raw);
@@ -84,13 +79,12 @@ TEST_CASE("the daemon and errsep-scan write the same result folder, errsep-repor
   REQUIRE(rc == 0);
 
   // The same files, refine/ included, each folder a whole result set.
+  // The same files, each folder whole, the same columns in every CSV.
+  CHECK(test::check_same_result_files(daemon_dir, scan_dir) >= 5);
   const auto daemon_files = files_under(daemon_dir), scan_files = files_under(scan_dir);
-  CHECK(daemon_files == scan_files);
   for (const char* f : {"raw.csv", "motion.csv", "reference.csv", "lcurve.csv", "residuals.csv",
                         "summary.txt", "refine/refine_report.txt"})
     CHECK(daemon_files.count(f) == 1);
-  CHECK(io::check_result_set(daemon_dir).whole());
-  CHECK(io::check_result_set(scan_dir).whole());
   // The report after the scan, in both folders: the same file names under report/, the
   // evaluation and the HTML report among them (the PDF too where Chromium printed it).
   const auto under_report = [](const std::set<std::string>& files) {
@@ -115,17 +109,6 @@ TEST_CASE("the daemon and errsep-scan write the same result folder, errsep-repor
     CHECK(logs.find("<6>" + daemon_dir.filename().string() + ": report: ") != std::string::npos);
     CHECK(logs.find("the report failed") == std::string::npos);
   }
-
-  // The same columns in every CSV.
-  int csvs = 0;
-  for (const auto& f : scan_files)
-    if (f.size() > 4 && f.substr(f.size() - 4) == ".csv" && daemon_files.count(f)) {
-      INFO(f);
-      CHECK(header_of(daemon_dir / f) == header_of(scan_dir / f));
-      CHECK_FALSE(header_of(scan_dir / f).empty());
-      ++csvs;
-    }
-  CHECK(csvs >= 5);
 
   // The daemon's raw file (in its store and in its folder) carries every metadata line of
   // errsep-scan's: the sampler's counters among them.
@@ -152,11 +135,7 @@ TEST_CASE("the daemon and errsep-scan write the same result folder, errsep-repor
 
   // errsep-report reads both.
   for (const fs::path& dir : {daemon_dir, scan_dir}) {
-    std::string rep;
-    const int rrc = test::run_command(
-        test::app_path("report").string() + " " + dir.string() + " --no-plots", &rep);
-    INFO(dir.string() << "\n" << rep);
-    CHECK(rrc == 0);
+    test::check_report_reads(dir);
     CHECK(fs::exists(dir / "evaluation.csv"));
   }
 }

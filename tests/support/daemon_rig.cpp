@@ -1,5 +1,7 @@
 #include "support/daemon_rig.hpp"
 
+#include <catch2/catch.hpp>
+
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
@@ -291,6 +293,20 @@ std::optional<std::filesystem::path> DaemonRig::result_folder(std::uint64_t id) 
   const auto dir = results / f->stem;
   if (!std::filesystem::is_directory(dir)) return std::nullopt;
   return dir;
+}
+
+std::vector<long> DaemonRig::trigger_and_wait(std::uint64_t id, std::chrono::milliseconds timeout) {
+  std::string out;
+  const int rc = mbpoll_write_coil(modbus_port, 0, 1, &out);
+  INFO("mbpoll: " << out);
+  REQUIRE(rc == 0);
+  const auto r = wait_regs(
+      [id](const std::vector<long>& x) {
+        return x[reg_last_scan_id] == static_cast<long>(id) && x[reg_state] == 1;
+      },
+      timeout);
+  REQUIRE(r.size() == kRegisterCount);
+  return r;
 }
 
 namespace {

@@ -112,6 +112,9 @@ struct DaemonRig {
   std::optional<std::filesystem::path> find_file(std::uint64_t id, const std::string& kind) const;
   /// The result folder of scan `id` (results/<stem>/ beside its complete raw file), if there.
   std::optional<std::filesystem::path> result_folder(std::uint64_t id) const;
+  /// Starts scan `id` as a PLC would (the start coil, through mbpoll) and waits until the map
+  /// shows it ended and the daemon idle; returns the registers then (checked to be whole).
+  std::vector<long> trigger_and_wait(std::uint64_t id, std::chrono::milliseconds timeout);
   /// Contents of the daemon's and devsim's stderr logs, for failure messages.
   std::string logs() const;
   /// Prints logs() to stderr when a REQUIRE failed (an exception leaves the test).

@@ -2,6 +2,7 @@
 // What the tests that compare two result folders (errsep-daemon's and errsep-scan's) read of
 // them, the files under a folder and the header line of a CSV, and the quick simulated machine
 // they scan.
+#include <catch2/catch.hpp>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -27,6 +28,14 @@ inline std::string header_of(const std::filesystem::path& csv) {
     if (!line.empty() && line[0] != '#') return line;
   return {};
 }
+
+/// Two result folders of the same kind of scan (the daemon's and errsep-scan's) hold the same
+/// files, each a whole result set, and every CSV in both has the same (non-empty) header line.
+/// Returns how many CSVs were compared.
+int check_same_result_files(const std::filesystem::path& a, const std::filesystem::path& b);
+
+/// errsep-report reads the result folder `dir` (exit 0; plots off, for speed).
+void check_report_reads(const std::filesystem::path& dir);
 
 /// The shipped simulator config (config/simulator.toml) with its stages 10-20 times faster, for
 /// scans that take about a second.
