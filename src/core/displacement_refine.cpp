@@ -2,6 +2,7 @@
 
 #include <Eigen/QR>
 #include <Eigen/SVD>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -77,7 +78,7 @@ LsFit least_squares(const Eigen::MatrixXd& X, const Eigen::VectorXd& y) {
 std::string family_hint(const std::string& family, bool s0_repeat) {
   if (family == "drift")
     return "scan 2 in the order of scan 1 makes the scan difference one constant per sensor, "
-           "absorbed by r's slope and sensor 0's offset; run scan 2 backwards";
+           "absorbed by r's slope and sensor 0's offset; run scan 2 y fastest (and backwards)";
   if (family == "tilt" && !s0_repeat)
     return "only sensor 0's repeat sees it: record sensor 0 in scan 2";
   return "its scan differences are absorbed by the joint model";
@@ -132,6 +133,26 @@ void complete_effect(DisplacementEffect& e, const TwoAxisScan& zero, const TwoAx
   const Eigen::JacobiSVD<Eigen::MatrixXd> svd(e.residual_columns * scale.asDiagonal());
   e.relative_singular_value = zero_column ? 0.0 : svd.singularValues().minCoeff();
   e.identifiable = e.relative_singular_value > tolerance;
+  // How well the plan determines what each group does to w (no data): every reading at σ = 1, a
+  // scan difference's variance 2; C = 2(XᵀX)⁻¹ of the residual columns, the w change of the group
+  // (gauge: its constant removed) carried through the group's block of C (rotation off).
+  e.group_u_w_per_sigma.clear();
+  if (!e.identifiable) return;
+  const Eigen::MatrixXd C = 2.0 * (e.residual_columns.transpose() * e.residual_columns)
+                                      .completeOrthogonalDecomposition()
+                                      .pseudoInverse();
+  for (const auto& g : e.groups) {
+    const auto kg = static_cast<Eigen::Index>(g.size());
+    Eigen::MatrixXd gw(N, kg), cg(kg, kg);
+    for (Eigen::Index a = 0; a < kg; ++a) {
+      const auto ia = g[static_cast<std::size_t>(a)];
+      gw.col(a) = e.d_w[0].col(ia).array() - e.d_w[0].col(ia).mean();
+      for (Eigen::Index b = 0; b < kg; ++b)
+        cg(a, b) = C(ia, g[static_cast<std::size_t>(b)]);
+    }
+    e.group_u_w_per_sigma.push_back(
+        std::sqrt(std::max(0.0, (gw * cg).cwiseProduct(gw).rowwise().sum().mean())));
+  }
 }
 
 /// Sensor 0; the reference X sensors 1, 2; the reference Y sensors 3, 4.
@@ -330,15 +351,19 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
   };
   const TwoAxisScan zero = zero_scan(scan.x_mm, scan.y_mm, lib.s0_repeat);
 
-  // Forward selection (one variant per family).  Ranked by p, then (p underflowing to 0 for
-  // strong effects) by F.
+  // Forward selection (one variant per family).  Candidates are ranked by what their columns
+  // explain beyond their number (Akaike: Δχ² − 2k, χ² in units of the candidate's residual
+  // variance), a thermal drift counting its τ as a parameter: a long τ makes it a linear drift with
+  // one parameter more, and ranked by F alone (or by p, which underflows to 0 for strong effects)
+  // the best of its τ grid beat a true linear drift by fitting the noise.  The winner's F-test
+  // (τ counted in its numerator degrees of freedom) decides whether it is taken.
   std::vector<DisplacementEffect> chosen;
   std::vector<double> taken_F, taken_p;
   for (;;) {
     const auto taken = pointers(chosen);
     const double rss_t = least_squares(columns(taken), y).rss;
     int tried = 0;
-    double best_p = 2, best_F = 0;
+    double best_p = 2, best_F = 0, best_score = -std::numeric_limits<double>::infinity();
     const DisplacementEffect* best = nullptr;
     for (const auto& e : lib.effects) {
       bool family_taken = false;
@@ -350,13 +375,14 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
       fx.push_back(&e);
       const Eigen::MatrixXd X = columns(fx);
       const double rss = least_squares(X, y).rss;
-      const int kc = static_cast<int>(e.residual_columns.cols());
-      const int dof = dof0 - static_cast<int>(X.cols());
+      const int kc = static_cast<int>(e.residual_columns.cols()) + (e.family == "thermal" ? 1 : 0);
+      const int dof = dof0 - static_cast<int>(X.cols()) - (e.family == "thermal" ? 1 : 0);
       if (dof <= 0 || !(rss > 0)) continue;
       const double F = ((rss_t - rss) / kc) / (rss / dof);
-      const double p = f_test_p_value(F, kc, dof);
-      if (p < best_p || (p == best_p && F > best_F)) {
-        best_p = p;
+      const double score = (rss_t - rss) / (rss / dof) - 2.0 * kc;
+      if (score > best_score) {
+        best_score = score;
+        best_p = f_test_p_value(F, kc, dof);
         best_F = F;
         best = &e;
       }
@@ -546,11 +572,22 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
     out.refined = separate_two_axis(corrected, fixed);
   }
   // The refined u: the separation's with the applied parameters' covariance and the bias of the
-  // ones left out (step_decision.hpp).
-  const Eigen::VectorXd uw =
-      refined_uncertainty(flatten(out.refined.u_w_um), Dw, cov, fit.beta, applied);
-  const Eigen::VectorXd um =
-      refined_uncertainty(flatten(out.refined.u_m_w_um), Dm, cov, fit.beta, applied);
+  // ones left out (step_decision.hpp), and for those also their fitted size's own scatter.  An
+  // effect is left out because it is poorly determined, so its fitted size D·p̂ may be small where
+  // the true D·p is not (p̂ − p has covariance C): the bias is bounded by (D p̂)² + diag(D C Dᵀ),
+  // not by (D p̂)² alone (with it alone, the cells where an effect was detected and not applied
+  // covered 0.64-0.93 within 2u).
+  std::vector<bool> left_out(applied.size());
+  for (std::size_t j = 0; j < applied.size(); ++j)
+    left_out[j] = !applied[j];
+  const Eigen::VectorXd no_bias = Eigen::VectorXd::Zero(K);
+  auto widened = [&](const Eigen::MatrixXd& u_sep, const Eigen::MatrixXd& D) {
+    const Eigen::VectorXd u = refined_uncertainty(flatten(u_sep), D, cov, fit.beta, applied);
+    // refined_uncertainty with the roles swapped adds diag(D_L C_LL D_Lᵀ) (no bias term).
+    return refined_uncertainty(u, D, cov, no_bias, left_out);
+  };
+  const Eigen::VectorXd uw = widened(out.refined.u_w_um, Dw);
+  const Eigen::VectorXd um = widened(out.refined.u_m_w_um, Dm);
   out.refined.u_w_um = Eigen::Map<const Eigen::MatrixXd>(uw.data(), lib.nx, lib.ny);
   out.refined.u_m_w_um = Eigen::Map<const Eigen::MatrixXd>(um.data(), lib.nx, lib.ny);
   return out;

@@ -180,7 +180,8 @@ TwoAxisSimData simulate_two_axis(const TwoAxisTruth& tr, const TwoAxisSimOptions
   const double ay =
       opts.displacement_y_mm + opts.displacement_bias_mm + rng.normal(opts.displacement_sigma_mm);
   // Scan 2 (Eqs. 16-19).
-  const TwoAxisScanOrder order{T, opts.timing.pause_between_scans_s, opts.reverse_scan2};
+  const TwoAxisScanOrder order{T, opts.timing.pause_between_scans_s, opts.reverse_scan2,
+                               opts.y_fastest_scan2};
   for (int j = 0; j < ny; ++j)
     for (int i = 0; i < nx; ++i) {
       const double x = s.x_mm(i), y = s.y_mm(j), t = order.time_s(2, i, j, nx, ny);

@@ -105,6 +105,8 @@ struct TwoAxisSimOptions {
   bool record_s0_scan2 = false;
   /// Scan 2 runs the raster backwards (TwoAxisScanOrder); the drift above follows its times.
   bool reverse_scan2 = false;
+  /// Scan 2's raster runs y fastest (TwoAxisScanOrder::y_fastest_scan2).
+  bool y_fastest_scan2 = false;
   /// Undeclared effects (displacement_effects.hpp) added after every draw: they change no draw.
   DisplacementDisturbance disturbance;
   bool is_valid(std::string* why = nullptr) const;
