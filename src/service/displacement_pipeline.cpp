@@ -142,6 +142,14 @@ DisplacementPipelineResult DisplacementPipeline::compute(const std::vector<io::O
   return out;
 }
 
+core::OneAxisRefineResult DisplacementPipeline::refine(const io::OneAxisInput& in,
+                                                       const Eigen::VectorXd& t1_s,
+                                                       const Eigen::VectorXd& t2_s,
+                                                       const std::string& input) const {
+  return core::refine_one_axis(in.s1_1_um, in.s2_1_um, in.s2_2_um, in.s1_2_um, t1_s, t2_s,
+                               separation_options(opts_, in, input), opts_.refine_options);
+}
+
 DisplacementPipelineResult DisplacementPipeline::separate(const fs::path& dir,
                                                           const fs::path& raw_csv,
                                                           const std::string& source,
@@ -170,9 +178,7 @@ DisplacementPipelineResult DisplacementPipeline::separate(const fs::path& dir,
   if (opts_.refine) {
     // The loop (issue 16 item 4) on the recorded readings and their recorded times: its account
     // and the refined profile with its widened u, in refine/ of the same set.
-    out.refine = core::refine_one_axis(in.s1_1_um, in.s2_1_um, in.s2_2_um, in.s1_2_um,
-                                       vector_of(raw.t_scan1_s), vector_of(raw.t_scan2_s),
-                                       separation_options(opts_, in, source), opts_.refine_options);
+    out.refine = refine(in, vector_of(raw.t_scan1_s), vector_of(raw.t_scan2_s), source);
     fs::create_directories(dir / "refine");
     io::CsvTable steps = io::displacement_refine_csv(*out.refine);
     steps.set_meta("source", source);

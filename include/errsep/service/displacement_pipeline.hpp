@@ -100,6 +100,12 @@ class DisplacementPipeline {
                                               const std::filesystem::path& out,
                                               const std::string& writer) const;
 
+  /// The loop (core/displacement_refine_one_axis.hpp) on one recorded run with its reading times
+  /// (empty: equal steps in the paper's order); `input` names the run in messages.  Throws as
+  /// compute().
+  core::OneAxisRefineResult refine(const io::OneAxisInput& in, const Eigen::VectorXd& t1_s,
+                                   const Eigen::VectorXd& t2_s, const std::string& input) const;
+
   const DisplacementPipelineOptions& options() const noexcept { return opts_; }
 
  private:
