@@ -148,11 +148,12 @@ TEST_CASE(
                           " --method displacement --averages 5 --settle-ms 0 --no-mqtt "
                           "--no-report",
                       &output) == 0);
-  // Sensor 1 warms up: + a(1 - exp(-t/tau)) at the times the scan recorded, tau half the scan.
+  // Sensor 1 warms up: + a(1 - exp(-t/tau)) at the times the scan recorded, tau a quarter of the
+  // scan.
   auto raw = io::read_raw_displacement_csv(out / "raw_displacement.csv");
   REQUIRE(raw.t_scan1_s);
   REQUIRE(raw.t_scan2_s);
-  const double tau = 0.5 * raw.t_scan2_s->back(), a = 0.3;
+  const double tau = 0.25 * raw.t_scan2_s->back(), a = 1.0;
   for (std::size_t k = 0; k < raw.x_mm.size(); ++k) {
     raw.s1_scan1_um[k] += a * (1 - std::exp(-(*raw.t_scan1_s)[k] / tau));
     raw.s1_scan2_um[k] += a * (1 - std::exp(-(*raw.t_scan2_s)[k] / tau));
@@ -178,7 +179,7 @@ TEST_CASE(
   }
   CHECK(named);
   // Against the separation of the scan without the drift: the refined w is nearer than the
-  // uncorrected one, and within 4 u of the refined result at every point.
+  // uncorrected one (at most half its error), and within 4 u of the refined result at every point.
   const auto clean = io::read_csv(dir / "clean.csv");
   const auto before = io::read_csv(dir / "thermal_res.csv");
   const auto after = io::read_csv(dir / "thermal_res.refined.csv");
@@ -189,7 +190,7 @@ TEST_CASE(
       "thermal drift of sensor 1, a = %.2f um, tau = %.2f s: w error (RMS, shape) %.4f -> "
       "%.4f um\n",
       a, tau, eb, ea);
-  CHECK(ea < eb);
+  CHECK(ea <= 0.5 * eb);  // halved (measured 0.12 -> 0.011-0.018 um in 6 runs)
   double mean = 0;
   for (std::size_t k = 0; k < wa.size(); ++k)
     mean += (wa[k] - wc[k]) / static_cast<double>(wa.size());
