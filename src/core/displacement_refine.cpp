@@ -1,5 +1,7 @@
 #include "errsep/core/displacement_refine.hpp"
 
+#include "displacement_effect_selection.hpp"
+
 #include <Eigen/QR>
 #include <Eigen/SVD>
 #include <algorithm>
@@ -56,23 +58,6 @@ void project(Eigen::Ref<Eigen::MatrixXd> d, Eigen::Index nx, Eigen::Index ny) {
       else
         g.array() -= g.mean();
     }
-}
-
-struct LsFit {
-  Eigen::VectorXd beta;
-  double rss = 0;
-};
-
-LsFit least_squares(const Eigen::MatrixXd& X, const Eigen::VectorXd& y) {
-  LsFit f;
-  if (X.cols() == 0) {
-    f.rss = y.squaredNorm();
-    return f;
-  }
-  const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(X);
-  f.beta = qr.solve(y);
-  f.rss = (y - X * f.beta).squaredNorm();
-  return f;
 }
 
 std::string family_hint(const std::string& family, bool s0_repeat) {
@@ -351,48 +336,22 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
   };
   const TwoAxisScan zero = zero_scan(scan.x_mm, scan.y_mm, lib.s0_repeat);
 
-  // Forward selection (one variant per family).  Candidates are ranked by what their columns
-  // explain beyond their number (Akaike: Δχ² − 2k, χ² in units of the candidate's residual
-  // variance), a thermal drift counting its τ as a parameter: a long τ makes it a linear drift with
-  // one parameter more, and ranked by F alone (or by p, which underflows to 0 for strong effects)
-  // the best of its τ grid beat a true linear drift by fitting the noise.  The winner's F-test
-  // (τ counted in its numerator degrees of freedom) decides whether it is taken.
+  // Forward selection, one variant per family (displacement_effect_selection.hpp).
+  std::vector<detail::SelectionCandidate> sc;
+  for (const auto& e : lib.effects)
+    sc.push_back({e.family, e.identifiable, e.family == "thermal"});
+  auto columns_of = [&](const std::vector<std::size_t>& idx) {
+    std::vector<const DisplacementEffect*> fx;
+    for (const auto i : idx)
+      fx.push_back(&lib.effects[i]);
+    return columns(fx);
+  };
   std::vector<DisplacementEffect> chosen;
   std::vector<double> taken_F, taken_p;
-  for (;;) {
-    const auto taken = pointers(chosen);
-    const double rss_t = least_squares(columns(taken), y).rss;
-    int tried = 0;
-    double best_p = 2, best_F = 0, best_score = -std::numeric_limits<double>::infinity();
-    const DisplacementEffect* best = nullptr;
-    for (const auto& e : lib.effects) {
-      bool family_taken = false;
-      for (const auto* t : taken)
-        family_taken = family_taken || t->family == e.family;
-      if (family_taken || !e.identifiable) continue;
-      ++tried;
-      auto fx = taken;
-      fx.push_back(&e);
-      const Eigen::MatrixXd X = columns(fx);
-      const double rss = least_squares(X, y).rss;
-      const int kc = static_cast<int>(e.residual_columns.cols()) + (e.family == "thermal" ? 1 : 0);
-      const int dof = dof0 - static_cast<int>(X.cols()) - (e.family == "thermal" ? 1 : 0);
-      if (dof <= 0 || !(rss > 0)) continue;
-      const double F = ((rss_t - rss) / kc) / (rss / dof);
-      const double score = (rss_t - rss) / (rss / dof) - 2.0 * kc;
-      if (score > best_score) {
-        best_score = score;
-        best_p = f_test_p_value(F, kc, dof);
-        best_F = F;
-        best = &e;
-      }
-    }
-    if (tried == 0 || best == nullptr) break;
-    const double p_adj = std::min(1.0, best_p * tried);  // Bonferroni over the variants tried
-    if (!(p_adj < o.alpha)) break;
-    chosen.push_back(*best);
-    taken_F.push_back(best_F);
-    taken_p.push_back(p_adj);
+  for (const auto& sel : detail::forward_select(sc, columns_of, y, dof0, o.alpha)) {
+    chosen.push_back(lib.effects[sel.index]);
+    taken_F.push_back(sel.F);
+    taken_p.push_back(sel.p_value);
   }
 
   // The thermal time constant between the grid's neighbours of the chosen variant: golden
@@ -414,7 +373,7 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
       auto fx = pointers(chosen);
       for (auto*& q : fx)
         if (q == &e) q = &trial;
-      return least_squares(columns(fx), y).rss;
+      return detail::least_squares(columns(fx), y).rss;
     };
     const double g = 0.5 * (std::sqrt(5.0) - 1.0);
     double a = std::log(lo), b = std::log(hi);
@@ -441,7 +400,7 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
     // τ is estimated too, and the amplitudes trade with it (a long τ's slope is what no scan
     // difference sees): a Gauss–Newton column dtau_s, Σ â_k ∂E_k/∂τ by central differences, in
     // the fit and in every group's decision, so that the decision carries τ's uncertainty.
-    const LsFit f0 = least_squares(columns(pointers(chosen)), y);
+    const detail::LsFit f0 = detail::least_squares(columns(pointers(chosen)), y);
     Eigen::Index off = 0;
     for (const auto& other : chosen) {
       if (&other == &e) break;
@@ -483,7 +442,7 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
     return out;
   }
   const Eigen::MatrixXd X = columns(pointers(chosen));
-  const LsFit fit = least_squares(X, y);
+  const detail::LsFit fit = detail::least_squares(X, y);
   const auto K = X.cols();
   // The values applied: the fit at τ̂ without the dtau_s column (a Gauss–Newton direction for the
   // decision's covariance, not a step: a τ̂ at the edge of its bracket can leave dtau_s far from
@@ -501,7 +460,7 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
       Eigen::MatrixXd X0(X.rows(), static_cast<Eigen::Index>(keep.size()));
       for (std::size_t j = 0; j < keep.size(); ++j)
         X0.col(static_cast<Eigen::Index>(j)) = X.col(keep[j]);
-      const LsFit f0 = least_squares(X0, y);
+      const detail::LsFit f0 = detail::least_squares(X0, y);
       applied_value.setZero();
       for (std::size_t j = 0; j < keep.size(); ++j)
         applied_value(keep[j]) = f0.beta(static_cast<Eigen::Index>(j));

@@ -1,5 +1,7 @@
 #include "errsep/core/displacement_refine_one_axis.hpp"
 
+#include "displacement_effect_selection.hpp"
+
 #include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
@@ -44,23 +46,6 @@ Eigen::VectorXd centred(const Eigen::VectorXd& v) {
   return (v.array() - v.mean()).matrix();
 }
 
-struct LsFit {
-  Eigen::VectorXd beta;
-  double rss = 0;
-};
-
-LsFit least_squares(const Eigen::MatrixXd& X, const Eigen::VectorXd& y) {
-  LsFit f;
-  if (X.cols() == 0) {
-    f.rss = y.squaredNorm();
-    return f;
-  }
-  const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(X);
-  f.beta = qr.solve(y);
-  f.rss = (y - X * f.beta).squaredNorm();
-  return f;
-}
-
 /// Fills a candidate's columns: `cols` unit readings at t1 and t2 (one per parameter).
 void fill(Candidate& c, const std::vector<Eigen::VectorXd>& e1,
           const std::vector<Eigen::VectorXd>& e2, const DisplacementOptions& sep) {
@@ -102,25 +87,6 @@ double rms(const Eigen::VectorXd& v) {
 }
 
 }  // namespace
-
-bool OneAxisRefineOptions::is_valid(std::string* why) const {
-  auto fail = [&](const std::string& m) {
-    if (why) *why = m;
-    return false;
-  };
-  if (!(alpha > 0 && alpha < 1))
-    return fail("alpha = " + std::to_string(alpha) + ": not in (0, 1)");
-  if (thermal_tau_scans.empty()) return fail("thermal_tau_scans is empty");
-  for (const double t : thermal_tau_scans)
-    if (!(std::isfinite(t) && t > 0))
-      return fail("thermal_tau_scans has " + std::to_string(t) + ": must be > 0");
-  if (!(identifiable_tolerance > 0 && identifiable_tolerance < 1))
-    return fail("identifiable_tolerance = " + std::to_string(identifiable_tolerance) +
-                ": not in (0, 1)");
-  std::string sub;
-  if (!decision.is_valid(&sub)) return fail("decision." + sub);
-  return true;
-}
 
 bool OneAxisRefineResult::applied_any() const {
   return std::any_of(steps.begin(), steps.end(),
@@ -216,12 +182,9 @@ OneAxisRefineResult refine_one_axis(const Eigen::VectorXd& s1_1, const Eigen::Ve
     out.steps.push_back(st);
   }
 
-  // Forward selection, ranked by Akaike (a thermal drift's τ counted), taken by its F-test with
-  // Bonferroni over the candidates tried (as displacement_refine.cpp).
+  // Forward selection (displacement_effect_selection.hpp), as the two-axis loop.
   const Eigen::VectorXd y = centred(s1_2 - s1_1);
   const int dof0 = static_cast<int>(n) - 1;
-  std::vector<Candidate> chosen;
-  std::vector<double> taken_F, taken_p;
   auto columns = [&](const std::vector<const Candidate*>& fx) {
     Eigen::Index k = 0;
     for (const auto* c : fx)
@@ -240,40 +203,21 @@ OneAxisRefineResult refine_one_axis(const Eigen::VectorXd& s1_1, const Eigen::Ve
       p.push_back(&c);
     return p;
   };
-  for (;;) {
-    const auto taken = pointers(chosen);
-    const double rss_t = least_squares(columns(taken), y).rss;
-    int tried = 0;
-    double best_score = -std::numeric_limits<double>::infinity(), best_F = 0, best_p = 1;
-    const Candidate* best = nullptr;
-    for (const auto& c : cands) {
-      if (!(c.relative > o.identifiable_tolerance)) continue;
-      if (std::any_of(taken.begin(), taken.end(),
-                      [&](const Candidate* t) { return t->family == c.family; }))
-        continue;
-      ++tried;
-      auto fx = taken;
-      fx.push_back(&c);
-      const Eigen::MatrixXd X = columns(fx);
-      const double rss = least_squares(X, y).rss;
-      const int kc = static_cast<int>(c.residual.cols()) + (c.family == "thermal" ? 1 : 0);
-      const int dof = dof0 - static_cast<int>(X.cols()) - (c.family == "thermal" ? 1 : 0);
-      if (dof <= 0 || !(rss > 0)) continue;
-      const double F = ((rss_t - rss) / kc) / (rss / dof);
-      const double score = (rss_t - rss) / (rss / dof) - 2.0 * kc;
-      if (score > best_score) {
-        best_score = score;
-        best_F = F;
-        best_p = f_test_p_value(F, kc, dof);
-        best = &c;
-      }
-    }
-    if (tried == 0 || best == nullptr) break;
-    const double p_adj = std::min(1.0, best_p * tried);
-    if (!(p_adj < o.alpha)) break;
-    chosen.push_back(*best);
-    taken_F.push_back(best_F);
-    taken_p.push_back(p_adj);
+  std::vector<detail::SelectionCandidate> sc;
+  for (const auto& c : cands)
+    sc.push_back({c.family, c.relative > o.identifiable_tolerance, c.family == "thermal"});
+  auto columns_of = [&](const std::vector<std::size_t>& idx) {
+    std::vector<const Candidate*> fx;
+    for (const auto i : idx)
+      fx.push_back(&cands[i]);
+    return columns(fx);
+  };
+  std::vector<Candidate> chosen;
+  std::vector<double> taken_F, taken_p;
+  for (const auto& sel : detail::forward_select(sc, columns_of, y, dof0, o.alpha)) {
+    chosen.push_back(cands[sel.index]);
+    taken_F.push_back(sel.F);
+    taken_p.push_back(sel.p_value);
   }
   if (chosen.empty()) return out;
 
@@ -281,7 +225,7 @@ OneAxisRefineResult refine_one_axis(const Eigen::VectorXd& s1_1, const Eigen::Ve
   // the values applied), so the decision and u carry τ's uncertainty.
   std::vector<Eigen::Index> value_cols;  // columns whose fitted values are applied
   {
-    const LsFit f0 = least_squares(columns(pointers(chosen)), y);
+    const detail::LsFit f0 = detail::least_squares(columns(pointers(chosen)), y);
     Eigen::Index off = 0;
     for (auto& c : chosen) {
       if (c.family == "thermal") {
@@ -301,7 +245,7 @@ OneAxisRefineResult refine_one_axis(const Eigen::VectorXd& s1_1, const Eigen::Ve
   }
   const Eigen::MatrixXd X = columns(pointers(chosen));
   const auto K = X.cols();
-  const LsFit fit = least_squares(X, y);
+  const detail::LsFit fit = detail::least_squares(X, y);
   const int dof = dof0 - static_cast<int>(K);
   const double s2 = fit.rss / std::max(dof, 1);  // variance of a difference: 2σ²
   const Eigen::MatrixXd cov =
@@ -312,7 +256,7 @@ OneAxisRefineResult refine_one_axis(const Eigen::VectorXd& s1_1, const Eigen::Ve
     Eigen::MatrixXd X0(n, static_cast<Eigen::Index>(value_cols.size()));
     for (std::size_t j = 0; j < value_cols.size(); ++j)
       X0.col(static_cast<Eigen::Index>(j)) = X.col(value_cols[j]);
-    const LsFit f0 = least_squares(X0, y);
+    const detail::LsFit f0 = detail::least_squares(X0, y);
     for (std::size_t j = 0; j < value_cols.size(); ++j)
       applied_value(value_cols[j]) = f0.beta(static_cast<Eigen::Index>(j));
   }

@@ -26,19 +26,17 @@
 #include <vector>
 
 #include "errsep/core/displacement_joint.hpp"
+#include "errsep/core/displacement_refine.hpp"
 #include "errsep/core/step_decision.hpp"
 
 namespace errsep::core {
 
-struct OneAxisRefineOptions {
-  double alpha = 0.01;  ///< significance of a step's F-test (after Bonferroni)
-  /// Time constants tried for the thermal drift, as multiples of one scan's duration.
-  std::vector<double> thermal_tau_scans = {0.2, 0.3, 0.45, 0.7, 1.0, 1.5, 2.2, 3.3, 5.0};
-  /// An effect is identifiable when its residual column keeps more than this fraction of its
-  /// scan difference's norm (a paper-order plan's timing jitter leaves ~1e-3 of a linear drift).
-  double identifiable_tolerance = 0.05;
-  StepDecisionOptions decision;
-  bool is_valid(std::string* why = nullptr) const;
+/// The two-axis loop's options (alpha, the τ grid, the decision rule) with the one-axis
+/// identifiability threshold: an effect is identifiable when its residual column keeps more than
+/// 5 % of its scan difference's norm (a paper-order plan's timing jitter leaves ~3e-3–7e-3 of a
+/// linear drift in recorded simulator scans).
+struct OneAxisRefineOptions : DisplacementRefineOptions {
+  OneAxisRefineOptions() { identifiable_tolerance = 0.05; }
 };
 
 /// One row of the refine's account: an effect taken (applied or detected) or one the plan cannot
