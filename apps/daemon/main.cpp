@@ -151,16 +151,18 @@ int main(int argc, char** argv) {
     };
 
     // A displacement scan ([scan] method = "displacement"): its pipeline, as errsep-scan's.
-    opts.write_displacement_result_set = [](const errsep::io::RawDisplacementScan& raw,
-                                            const std::filesystem::path& dir) {
-      const auto r = errsep::service::DisplacementPipeline({}).write_result_set(
-          raw, dir, std::string("errsep-daemon ") + errsep::kVersion);
+    auto dpipeline = std::make_shared<errsep::service::DisplacementPipelineOptions>();
+    opts.write_displacement_result_set = [dpipeline](const errsep::io::RawDisplacementScan& raw,
+                                                     const std::filesystem::path& dir) {
+      const auto r =
+          errsep::service::DisplacementPipeline(*dpipeline)
+              .write_result_set(raw, dir, std::string("errsep-daemon ") + errsep::kVersion);
       if (!r.separation) throw std::runtime_error(r.error);
       return *r.separation;
     };
 
     // Reads the file again on every call: SIGHUP picks up an edited config.
-    auto factory = [config_path, device_port, pipeline,
+    auto factory = [config_path, device_port, pipeline, dpipeline,
                     report]() -> std::unique_ptr<errsep::acq::ScanBackend> {
       errsep::io::MachineConfig cfg = errsep::io::load_machine_config(config_path);
       if (device_port > 0) errsep::io::apply_simulator_port(cfg, device_port);
@@ -169,6 +171,7 @@ int main(int argc, char** argv) {
           throw std::runtime_error(config_path + ": bus '" + b.name +
                                    "' has port 0: give --device-port (the simulator's port)");
       *pipeline = errsep::service::pipeline_options(cfg, "");  // [separation], as errsep-scan
+      *dpipeline = errsep::service::displacement_pipeline_options(cfg);  // [refine] too
       *report = errsep::service::result_report_options(cfg);
       return std::make_unique<errsep::drivers::DeviceScanBackend>(std::move(cfg));
     };

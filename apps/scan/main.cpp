@@ -164,7 +164,8 @@ int main(int argc, char** argv) {
   auto* no_sep = app.add_flag("--no-separate", no_separate, "record the raw scan only");
   app.add_flag("--refine", refine,
                "after the four-sensor separation, run the refine step (as errsep-refine) and write "
-               "its report and refined results to OUT/refine/")
+               "its report and refined results to OUT/refine/; after a displacement separation, "
+               "its loop (refine/displacement_refine.csv, refine/displacement.csv)")
       ->excludes(no_sep);
   app.add_option("--refine-reference", refine_reference,
                  "reference trace CSV (x_mm,S_um[,gamma_urad] or x_mm,f_um) for the refine step's "
@@ -359,11 +360,18 @@ int main(int argc, char** argv) {
         } else {
           // The displacement pipeline (service/displacement_pipeline.hpp), as errsep-daemon and
           // errsep-separate-displacement run it: the joint estimate with its u, the residuals.
-          const auto run = service::DisplacementPipeline({}).separate(
+          // --refine / [refine] enabled: its loop too (refine/displacement_refine.csv).
+          auto dpo = service::displacement_pipeline_options(cfg);
+          if (refine) dpo.refine = true;
+          const auto run = service::DisplacementPipeline(dpo).separate(
               work, work / raw_name, raw_file.string(), stage.run_id());
           std::cout << "separation (displacement method): " << run.brief_report() << "\n";
           written.push_back("results: " + out.string() + "/ (" + service::kDisplacementResultCsv +
-                            ", " + service::kDisplacementResidualsCsv + ")");
+                            ", " + service::kDisplacementResidualsCsv +
+                            (run.refine ? std::string(", ") + service::kDisplacementRefineCsv +
+                                              ", " + service::kDisplacementRefinedCsv
+                                        : std::string()) +
+                            ")");
         }
         report_due = true;
       } catch (const std::exception& e) {

@@ -19,6 +19,8 @@
 #include "errsep/core/two_axis_displacement.hpp"
 #include "errsep/core/two_axis_yaw.hpp"
 #include "errsep/io/displacement_csv.hpp"
+#include "errsep/io/displacement_refine_csv.hpp"
+#include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/staged_directory.hpp"
 #include "errsep/service/displacement_pipeline.hpp"
 #include "errsep/version.hpp"
@@ -116,6 +118,11 @@ int main(int argc, char** argv) {
   int s1 = 1, s2 = 1;
 
   auto* one = app.add_subcommand("one-axis", "one-axis displacement method, Eqs. (1)-(9)");
+  bool refine = false;
+  one->add_flag("--refine", refine,
+                "close the loop on one run (as errsep-scan --refine): its account to "
+                "<out>.refine.csv, the refined w, m with their u to <out>.refined.csv; the reading "
+                "times of a raw scan are used, else equal steps");
   auto* two =
       app.add_subcommand("two-axis", "x-y stage with roll/pitch correction, Eqs. (10)-(27)");
   auto* three = app.add_subcommand("three-point", "generalised three-point method");
@@ -240,6 +247,38 @@ int main(int argc, char** argv) {
       errsep::io::write_csv(rpath, res.residual_table);
       errsep::io::write_csv(output, res.profile);
       std::cout << res.brief_report() << "\nwrote " << output << " and " << rpath << "\n";
+      if (refine) {
+        if (inputs.size() != 1)
+          throw std::invalid_argument("--refine takes one run (-i once), not " +
+                                      std::to_string(inputs.size()));
+        // The reading times, when the input is a raw scan that recorded them.
+        Eigen::VectorXd t1, t2;
+        try {
+          const auto raw = errsep::io::read_raw_displacement_csv(inputs.front(), {false});
+          if (raw.t_scan1_s && raw.t_scan2_s) {
+            t1 = Eigen::Map<const Eigen::VectorXd>(
+                raw.t_scan1_s->data(), static_cast<Eigen::Index>(raw.t_scan1_s->size()));
+            t2 = Eigen::Map<const Eigen::VectorXd>(
+                raw.t_scan2_s->data(), static_cast<Eigen::Index>(raw.t_scan2_s->size()));
+          }
+        } catch (const errsep::io::CsvError&) {
+          // Not a raw scan (a hand-made CSV of the four columns): no times recorded.
+        }
+        const auto rr =
+            errsep::service::DisplacementPipeline(po).refine(all.front(), t1, t2, inputs.front());
+        const std::filesystem::path o(output);
+        const auto stem = (o.parent_path() / o.stem()).string();
+        errsep::io::CsvTable steps = errsep::io::displacement_refine_csv(rr);
+        steps.set_meta("source", inputs.front());
+        errsep::io::CsvTable refined =
+            errsep::io::one_axis_result_csv(all.front().x_mm, rr.refined);
+        refined.set_meta("source", inputs.front());
+        refined.set_meta("refine", stem + ".refine.csv");
+        errsep::io::write_csv(stem + ".refine.csv", steps);
+        errsep::io::write_csv(stem + ".refined.csv", refined);
+        std::cout << rr.brief_report() << "wrote " << stem << ".refine.csv and " << stem
+                  << ".refined.csv\n";
+      }
     } else if (two->parsed()) {
       const std::string& input = inputs.front();
       std::vector<errsep::io::TwoAxisInput> all;

@@ -12,11 +12,19 @@ constexpr double kUmPerUradMm = 1e-3;
 }  // namespace
 
 double TwoAxisScanOrder::time_s(int scan, int i, int j, int nx, int ny) const {
-  const int k = j * nx + i;  // raster index, x fastest
-  if (scan == 1) return k * sample_period_s;
+  if (scan == 1) return (j * nx + i) * sample_period_s;  // raster index, x fastest
+  const int k = y_fastest_scan2 ? i * ny + j : j * nx + i;
   const int n = nx * ny;
   const double t0 = n * sample_period_s + pause_between_scans_s;
   return t0 + (reverse_scan2 ? n - 1 - k : k) * sample_period_s;
+}
+
+std::string TwoAxisScanOrder::plan_name() const {
+  if (!reverse_scan2 && !y_fastest_scan2) return "scan 2 as scan 1 (paper)";
+  std::string s;
+  if (y_fastest_scan2) s += ", y fastest";
+  if (reverse_scan2) s += ", backwards";
+  return "scan 2" + s.substr(1);
 }
 
 bool TwoAxisScanOrder::is_valid(std::string* why) const {

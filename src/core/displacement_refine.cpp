@@ -1,7 +1,10 @@
 #include "errsep/core/displacement_refine.hpp"
 
+#include "displacement_effect_selection.hpp"
+
 #include <Eigen/QR>
 #include <Eigen/SVD>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -57,27 +60,10 @@ void project(Eigen::Ref<Eigen::MatrixXd> d, Eigen::Index nx, Eigen::Index ny) {
     }
 }
 
-struct LsFit {
-  Eigen::VectorXd beta;
-  double rss = 0;
-};
-
-LsFit least_squares(const Eigen::MatrixXd& X, const Eigen::VectorXd& y) {
-  LsFit f;
-  if (X.cols() == 0) {
-    f.rss = y.squaredNorm();
-    return f;
-  }
-  const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(X);
-  f.beta = qr.solve(y);
-  f.rss = (y - X * f.beta).squaredNorm();
-  return f;
-}
-
 std::string family_hint(const std::string& family, bool s0_repeat) {
   if (family == "drift")
     return "scan 2 in the order of scan 1 makes the scan difference one constant per sensor, "
-           "absorbed by r's slope and sensor 0's offset; run scan 2 backwards";
+           "absorbed by r's slope and sensor 0's offset; run scan 2 y fastest (and backwards)";
   if (family == "tilt" && !s0_repeat)
     return "only sensor 0's repeat sees it: record sensor 0 in scan 2";
   return "its scan differences are absorbed by the joint model";
@@ -132,6 +118,26 @@ void complete_effect(DisplacementEffect& e, const TwoAxisScan& zero, const TwoAx
   const Eigen::JacobiSVD<Eigen::MatrixXd> svd(e.residual_columns * scale.asDiagonal());
   e.relative_singular_value = zero_column ? 0.0 : svd.singularValues().minCoeff();
   e.identifiable = e.relative_singular_value > tolerance;
+  // How well the plan determines what each group does to w (no data): every reading at σ = 1, a
+  // scan difference's variance 2; C = 2(XᵀX)⁻¹ of the residual columns, the w change of the group
+  // (gauge: its constant removed) carried through the group's block of C (rotation off).
+  e.group_u_w_per_sigma.clear();
+  if (!e.identifiable) return;
+  const Eigen::MatrixXd C = 2.0 * (e.residual_columns.transpose() * e.residual_columns)
+                                      .completeOrthogonalDecomposition()
+                                      .pseudoInverse();
+  for (const auto& g : e.groups) {
+    const auto kg = static_cast<Eigen::Index>(g.size());
+    Eigen::MatrixXd gw(N, kg), cg(kg, kg);
+    for (Eigen::Index a = 0; a < kg; ++a) {
+      const auto ia = g[static_cast<std::size_t>(a)];
+      gw.col(a) = e.d_w[0].col(ia).array() - e.d_w[0].col(ia).mean();
+      for (Eigen::Index b = 0; b < kg; ++b)
+        cg(a, b) = C(ia, g[static_cast<std::size_t>(b)]);
+    }
+    e.group_u_w_per_sigma.push_back(
+        std::sqrt(std::max(0.0, (gw * cg).cwiseProduct(gw).rowwise().sum().mean())));
+  }
 }
 
 /// Sensor 0; the reference X sensors 1, 2; the reference Y sensors 3, 4.
@@ -330,43 +336,22 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
   };
   const TwoAxisScan zero = zero_scan(scan.x_mm, scan.y_mm, lib.s0_repeat);
 
-  // Forward selection (one variant per family).  Ranked by p, then (p underflowing to 0 for
-  // strong effects) by F.
+  // Forward selection, one variant per family (displacement_effect_selection.hpp).
+  std::vector<detail::SelectionCandidate> sc;
+  for (const auto& e : lib.effects)
+    sc.push_back({e.family, e.identifiable, e.family == "thermal"});
+  auto columns_of = [&](const std::vector<std::size_t>& idx) {
+    std::vector<const DisplacementEffect*> fx;
+    for (const auto i : idx)
+      fx.push_back(&lib.effects[i]);
+    return columns(fx);
+  };
   std::vector<DisplacementEffect> chosen;
   std::vector<double> taken_F, taken_p;
-  for (;;) {
-    const auto taken = pointers(chosen);
-    const double rss_t = least_squares(columns(taken), y).rss;
-    int tried = 0;
-    double best_p = 2, best_F = 0;
-    const DisplacementEffect* best = nullptr;
-    for (const auto& e : lib.effects) {
-      bool family_taken = false;
-      for (const auto* t : taken)
-        family_taken = family_taken || t->family == e.family;
-      if (family_taken || !e.identifiable) continue;
-      ++tried;
-      auto fx = taken;
-      fx.push_back(&e);
-      const Eigen::MatrixXd X = columns(fx);
-      const double rss = least_squares(X, y).rss;
-      const int kc = static_cast<int>(e.residual_columns.cols());
-      const int dof = dof0 - static_cast<int>(X.cols());
-      if (dof <= 0 || !(rss > 0)) continue;
-      const double F = ((rss_t - rss) / kc) / (rss / dof);
-      const double p = f_test_p_value(F, kc, dof);
-      if (p < best_p || (p == best_p && F > best_F)) {
-        best_p = p;
-        best_F = F;
-        best = &e;
-      }
-    }
-    if (tried == 0 || best == nullptr) break;
-    const double p_adj = std::min(1.0, best_p * tried);  // Bonferroni over the variants tried
-    if (!(p_adj < o.alpha)) break;
-    chosen.push_back(*best);
-    taken_F.push_back(best_F);
-    taken_p.push_back(p_adj);
+  for (const auto& sel : detail::forward_select(sc, columns_of, y, dof0, o.alpha)) {
+    chosen.push_back(lib.effects[sel.index]);
+    taken_F.push_back(sel.F);
+    taken_p.push_back(sel.p_value);
   }
 
   // The thermal time constant between the grid's neighbours of the chosen variant: golden
@@ -388,7 +373,7 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
       auto fx = pointers(chosen);
       for (auto*& q : fx)
         if (q == &e) q = &trial;
-      return least_squares(columns(fx), y).rss;
+      return detail::least_squares(columns(fx), y).rss;
     };
     const double g = 0.5 * (std::sqrt(5.0) - 1.0);
     double a = std::log(lo), b = std::log(hi);
@@ -415,7 +400,7 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
     // τ is estimated too, and the amplitudes trade with it (a long τ's slope is what no scan
     // difference sees): a Gauss–Newton column dtau_s, Σ â_k ∂E_k/∂τ by central differences, in
     // the fit and in every group's decision, so that the decision carries τ's uncertainty.
-    const LsFit f0 = least_squares(columns(pointers(chosen)), y);
+    const detail::LsFit f0 = detail::least_squares(columns(pointers(chosen)), y);
     Eigen::Index off = 0;
     for (const auto& other : chosen) {
       if (&other == &e) break;
@@ -457,7 +442,7 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
     return out;
   }
   const Eigen::MatrixXd X = columns(pointers(chosen));
-  const LsFit fit = least_squares(X, y);
+  const detail::LsFit fit = detail::least_squares(X, y);
   const auto K = X.cols();
   // The values applied: the fit at τ̂ without the dtau_s column (a Gauss–Newton direction for the
   // decision's covariance, not a step: a τ̂ at the edge of its bracket can leave dtau_s far from
@@ -475,7 +460,7 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
       Eigen::MatrixXd X0(X.rows(), static_cast<Eigen::Index>(keep.size()));
       for (std::size_t j = 0; j < keep.size(); ++j)
         X0.col(static_cast<Eigen::Index>(j)) = X.col(keep[j]);
-      const LsFit f0 = least_squares(X0, y);
+      const detail::LsFit f0 = detail::least_squares(X0, y);
       applied_value.setZero();
       for (std::size_t j = 0; j < keep.size(); ++j)
         applied_value(keep[j]) = f0.beta(static_cast<Eigen::Index>(j));
@@ -546,11 +531,22 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
     out.refined = separate_two_axis(corrected, fixed);
   }
   // The refined u: the separation's with the applied parameters' covariance and the bias of the
-  // ones left out (step_decision.hpp).
-  const Eigen::VectorXd uw =
-      refined_uncertainty(flatten(out.refined.u_w_um), Dw, cov, fit.beta, applied);
-  const Eigen::VectorXd um =
-      refined_uncertainty(flatten(out.refined.u_m_w_um), Dm, cov, fit.beta, applied);
+  // ones left out (step_decision.hpp), and for those also their fitted size's own scatter.  An
+  // effect is left out because it is poorly determined, so its fitted size D·p̂ may be small where
+  // the true D·p is not (p̂ − p has covariance C): the bias is bounded by (D p̂)² + diag(D C Dᵀ),
+  // not by (D p̂)² alone (with it alone, the cells where an effect was detected and not applied
+  // covered 0.64-0.93 within 2u).
+  std::vector<bool> left_out(applied.size());
+  for (std::size_t j = 0; j < applied.size(); ++j)
+    left_out[j] = !applied[j];
+  const Eigen::VectorXd no_bias = Eigen::VectorXd::Zero(K);
+  auto widened = [&](const Eigen::MatrixXd& u_sep, const Eigen::MatrixXd& D) {
+    const Eigen::VectorXd u = refined_uncertainty(flatten(u_sep), D, cov, fit.beta, applied);
+    // refined_uncertainty with the roles swapped adds diag(D_L C_LL D_Lᵀ) (no bias term).
+    return refined_uncertainty(u, D, cov, no_bias, left_out);
+  };
+  const Eigen::VectorXd uw = widened(out.refined.u_w_um, Dw);
+  const Eigen::VectorXd um = widened(out.refined.u_m_w_um, Dm);
   out.refined.u_w_um = Eigen::Map<const Eigen::MatrixXd>(uw.data(), lib.nx, lib.ny);
   out.refined.u_m_w_um = Eigen::Map<const Eigen::MatrixXd>(um.data(), lib.nx, lib.ny);
   return out;

@@ -52,6 +52,9 @@ bool OneAxisSimOptions::is_valid(std::string* why) const {
   if (!reference_sensor.is_valid(&sub)) return fail("reference_sensor." + sub);
   if (!finite_nonneg(timing.sample_period_s) || !finite_nonneg(timing.pause_between_scans_s))
     return fail("timing: sample_period_s and pause_between_scans_s must be >= 0");
+  if (!std::isfinite(workpiece_thermal_um) || !std::isfinite(reference_thermal_um) ||
+      !(std::isfinite(thermal_tau_s) && thermal_tau_s > 0))
+    return fail("workpiece_thermal_um, reference_thermal_um must be finite, thermal_tau_s > 0");
   return true;
 }
 
@@ -71,6 +74,9 @@ OneAxisSimData simulate_one_axis(const OneAxisTruth& truth, const OneAxisSimOpti
   d.s2_1_um.resize(n);
   d.s2_2_um.resize(n);
   const double T = opts.timing.sample_period_s;
+  auto t2 = [&](Eigen::Index k) {
+    return (n + (opts.reverse_scan2 ? n - 1 - k : k)) * T + opts.timing.pause_between_scans_s;
+  };
   for (Eigen::Index k = 0; k < n; ++k) {
     const double x = k * opts.sample_interval_mm;
     d.x_mm(k) = x;
@@ -88,7 +94,7 @@ OneAxisSimData simulate_one_axis(const OneAxisTruth& truth, const OneAxisSimOpti
       opts.displacement_mm + opts.displacement_bias_mm + rng.normal(opts.displacement_sigma_mm);
   for (Eigen::Index k = 0; k < n; ++k) {
     // Eq. (3): scan 2, reference traversed; the motion error repeats.
-    const double t = (n + k) * T + opts.timing.pause_between_scans_s;
+    const double t = t2(k);
     d.s2_2_um(k) = truth.r_um(d.x_mm(k) + d.applied_displacement_mm) + d.m_um(k) +
                    opts.reference_sensor.drift_um_per_s * t +
                    rng.normal(opts.reference_sensor.noise_sigma_um);
@@ -96,9 +102,24 @@ OneAxisSimData simulate_one_axis(const OneAxisTruth& truth, const OneAxisSimOpti
   d.s1_2_um.resize(n);
   for (Eigen::Index k = 0; k < n; ++k) {
     // Eq. (1) in scan 2, read with the reference sensor's scan-2 reading.
-    const double t = (n + k) * T + opts.timing.pause_between_scans_s;
+    const double t = t2(k);
     d.s1_2_um(k) = d.w_um(k) + d.m_um(k) + opts.workpiece_sensor.drift_um_per_s * t +
                    rng.normal(opts.workpiece_sensor.noise_sigma_um);
+  }
+  d.t1_s.resize(n);
+  d.t2_s.resize(n);
+  for (Eigen::Index k = 0; k < n; ++k) {
+    d.t1_s(k) = k * T;
+    d.t2_s(k) = t2(k);
+  }
+  auto thermal = [&](double a, double t) {
+    return a == 0 ? 0.0 : a * (1.0 - std::exp(-t / opts.thermal_tau_s));
+  };
+  for (Eigen::Index k = 0; k < n; ++k) {
+    d.s1_1_um(k) += thermal(opts.workpiece_thermal_um, d.t1_s(k));
+    d.s1_2_um(k) += thermal(opts.workpiece_thermal_um, d.t2_s(k));
+    d.s2_1_um(k) += thermal(opts.reference_thermal_um, d.t1_s(k));
+    d.s2_2_um(k) += thermal(opts.reference_thermal_um, d.t2_s(k));
   }
   return d;
 }
@@ -180,7 +201,8 @@ TwoAxisSimData simulate_two_axis(const TwoAxisTruth& tr, const TwoAxisSimOptions
   const double ay =
       opts.displacement_y_mm + opts.displacement_bias_mm + rng.normal(opts.displacement_sigma_mm);
   // Scan 2 (Eqs. 16-19).
-  const TwoAxisScanOrder order{T, opts.timing.pause_between_scans_s, opts.reverse_scan2};
+  const TwoAxisScanOrder order{T, opts.timing.pause_between_scans_s, opts.reverse_scan2,
+                               opts.y_fastest_scan2};
   for (int j = 0; j < ny; ++j)
     for (int i = 0; i < nx; ++i) {
       const double x = s.x_mm(i), y = s.y_mm(j), t = order.time_s(2, i, j, nx, ny);

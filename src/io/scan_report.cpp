@@ -14,6 +14,7 @@
 
 #include "errsep/io/atomic_file.hpp"
 #include "errsep/io/csv.hpp"
+#include "errsep/io/displacement_refine_csv.hpp"
 #include "errsep/io/html_report.hpp"
 #include "errsep/io/machine_axes_metadata.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
@@ -82,7 +83,7 @@ struct GridData {
 bool is_other_result_file(const std::string& stem) {
   for (const char* known :
        {"motion", "reference", "lcurve", "residuals", "evaluation", "refine_steps",
-        "refine_residual", "reference_comparison", "verification", "trend"})
+        "refine_residual", "reference_comparison", "verification", "trend", "displacement_refine"})
     if (stem == known) return true;
   return false;
 }
@@ -790,6 +791,21 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
       plot_line(p,
                 "Workpiece profile w(x) and table motion error m(x) (cf. Haramiishi et al. "
                 "2024, Figs. 8-9)");
+      // The loop's account (service::DisplacementPipeline with refine on, issue 16 item 4).
+      for (const fs::path& rel :
+           {fs::path("displacement_refine.csv"), fs::path("refine") / "displacement_refine.csv"}) {
+        const fs::path rf = dir / rel;
+        if (!fs::exists(rf)) continue;
+        const auto t = read_csv(rf, {.allow_non_finite = true, .min_rows = 1});
+        HtmlTable rt = displacement_refine_table(t, rf);
+        rt.caption = rel.string() + ": " + rt.caption;
+        html.tables.push_back(std::move(rt));
+        html.files.emplace_back(
+            (opts.output_subdir.empty() ? fs::path() : fs::path("..")) / rel,
+            "the displacement loop's account; the refined w, m with their u in " +
+                (rel.parent_path() / "displacement.csv").string());
+        break;
+      }
     }
   }
 

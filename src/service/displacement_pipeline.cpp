@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include "errsep/io/displacement_refine_csv.hpp"
 #include "errsep/io/machine_axes_metadata.hpp"
 #include "errsep/io/staged_directory.hpp"
 
@@ -26,6 +27,30 @@ bool same_axis(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
   return true;
 }
 
+/// The separation's options for a run, from the pipeline's and the file's (d, Δx).
+core::DisplacementOptions separation_options(const DisplacementPipelineOptions& po,
+                                             const io::OneAxisInput& in, const std::string& input) {
+  core::DisplacementOptions o;
+  o.sample_interval_mm = in.dx_mm;
+  const auto& d = po.displacement_mm;
+  if (d && in.d_mm && std::abs(*d - *in.d_mm) > 1e-9 * std::max(1.0, *d))
+    throw std::invalid_argument(input + ": --d-mm " + std::to_string(*d) +
+                                " contradicts the file's d_mm " + std::to_string(*in.d_mm));
+  o.displacement_mm = d ? *d : in.d_mm.value_or(in.dx_mm);
+  o.initial_um = po.initial_um;
+  o.chain_join = po.chain_join;
+  o.displacement_sigma_mm = po.displacement_sigma_mm;
+  if (po.reading_sigma_um) o.reading_sigma_um = *po.reading_sigma_um;
+  std::string why;
+  if (!o.is_valid(&why)) throw std::invalid_argument(input + ": " + why);
+  return o;
+}
+
+Eigen::VectorXd vector_of(const std::optional<std::vector<double>>& v) {
+  if (!v) return {};
+  return Eigen::Map<const Eigen::VectorXd>(v->data(), static_cast<Eigen::Index>(v->size()));
+}
+
 }  // namespace
 
 bool DisplacementPipelineOptions::is_valid(std::string* why) const {
@@ -42,6 +67,8 @@ bool DisplacementPipelineOptions::is_valid(std::string* why) const {
     return fail("reading_sigma_um = " + std::to_string(*reading_sigma_um) +
                 ": must be finite and > 0");
   if (!std::isfinite(initial_um)) return fail("initial_um: must be finite");
+  std::string sub;
+  if (!refine_options.is_valid(&sub)) return fail("refine_options." + sub);
   return residuals.is_valid(why);
 }
 
@@ -53,7 +80,15 @@ std::string DisplacementPipelineResult::brief_report() const {
                              " um, sigma " + fmt(j.sigma_um) + " um (" + j.sigma_source + ")"
                        : "no uncertainty: " + j.sigma_source;
   s += "\ngauge: " + j.gauge + "\n" + residuals.brief_report();
+  if (refine) s += "\n" + refine->brief_report();
   return s;
+}
+
+DisplacementPipelineOptions displacement_pipeline_options(const io::MachineConfig& cfg) {
+  DisplacementPipelineOptions o;
+  o.refine = cfg.refine.enabled;
+  o.refine_options.alpha = cfg.refine.alpha;
+  return o;
 }
 
 void set_residual_metadata(io::CsvTable& t, const core::DisplacementResiduals& r,
@@ -90,19 +125,7 @@ DisplacementPipelineResult DisplacementPipeline::compute(const std::vector<io::O
       throw std::invalid_argument(names[k] + ": d_mm " + std::to_string(*a.d_mm) +
                                   " differs from " + input + "'s " + std::to_string(*in.d_mm));
   }
-  core::DisplacementOptions o;
-  o.sample_interval_mm = in.dx_mm;
-  const auto& d = opts_.displacement_mm;
-  if (d && in.d_mm && std::abs(*d - *in.d_mm) > 1e-9 * std::max(1.0, *d))
-    throw std::invalid_argument(input + ": --d-mm " + std::to_string(*d) +
-                                " contradicts the file's d_mm " + std::to_string(*in.d_mm));
-  o.displacement_mm = d ? *d : in.d_mm.value_or(in.dx_mm);
-  o.initial_um = opts_.initial_um;
-  o.chain_join = opts_.chain_join;
-  o.displacement_sigma_mm = opts_.displacement_sigma_mm;
-  if (opts_.reading_sigma_um) o.reading_sigma_um = *opts_.reading_sigma_um;
-  std::string why;
-  if (!o.is_valid(&why)) throw std::invalid_argument(input + ": " + why);
+  const core::DisplacementOptions o = separation_options(opts_, in, input);
 
   std::vector<core::OneAxisRun> runs;
   for (const auto& a : all)
@@ -117,6 +140,14 @@ DisplacementPipelineResult DisplacementPipeline::compute(const std::vector<io::O
   set_residual_metadata(out.profile, out.residuals, residuals_file);
   out.residual_table = io::displacement_residuals_csv(out.residuals, false);
   return out;
+}
+
+core::OneAxisRefineResult DisplacementPipeline::refine(const io::OneAxisInput& in,
+                                                       const Eigen::VectorXd& t1_s,
+                                                       const Eigen::VectorXd& t2_s,
+                                                       const std::string& input) const {
+  return core::refine_one_axis(in.s1_1_um, in.s2_1_um, in.s2_2_um, in.s1_2_um, t1_s, t2_s,
+                               separation_options(opts_, in, input), opts_.refine_options);
 }
 
 DisplacementPipelineResult DisplacementPipeline::separate(const fs::path& dir,
@@ -144,6 +175,26 @@ DisplacementPipelineResult DisplacementPipeline::separate(const fs::path& dir,
   io::write_csv(dir / kDisplacementResidualsCsv, out.residual_table);
   io::write_csv(dir / kDisplacementResultCsv, out.profile);
   out.files = {kDisplacementResultCsv, kDisplacementResidualsCsv};
+  if (opts_.refine) {
+    // The loop (issue 16 item 4) on the recorded readings and their recorded times: its account
+    // and the refined profile with its widened u, in refine/ of the same set.
+    out.refine = refine(in, vector_of(raw.t_scan1_s), vector_of(raw.t_scan2_s), source);
+    fs::create_directories(dir / "refine");
+    io::CsvTable steps = io::displacement_refine_csv(*out.refine);
+    steps.set_meta("source", source);
+    steps.set_meta("run_id", run_id);
+    io::write_csv(dir / kDisplacementRefineCsv, steps);
+    io::CsvTable refined = io::one_axis_result_csv(in.x_mm, out.refine->refined);
+    refined.set_meta("source", source);
+    refined.set_meta("run_id", run_id);
+    refined.set_meta("refine",
+                     (fs::path("..") / kDisplacementRefineCsv).string() + ": " +
+                         (out.refine->applied_any() ? "corrections applied" : "nothing applied") +
+                         "; u widened by what was detected and not applied");
+    io::write_csv(dir / kDisplacementRefinedCsv, refined);
+    out.files.push_back(kDisplacementRefineCsv);
+    out.files.push_back(kDisplacementRefinedCsv);
+  }
   return out;
 }
 

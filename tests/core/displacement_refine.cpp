@@ -1,6 +1,7 @@
 // Closing the loop for the two-axis displacement method (issue 16 item 4): random stages, noise
 // on every reading, one undeclared effect per cell (displacement_effects.hpp) at a size that at
-// least doubles the clean error, two scan plans (scan 2 as scan 1, the paper's; scan 2 backwards).
+// least doubles the clean error, three scan plans (scan 2 as scan 1, the paper's; scan 2
+// backwards; scan 2 y fastest and backwards, the plan where drift shows).
 // Per cell: taken (any effect significant), ident (the injected effect's family taken), appl
 // (a correction applied), error of w and m_w (shape: constant removed) before and after (median,
 // worst), halved (w error at most half), worse (w error grown by more than the refined u's RMS),
@@ -87,11 +88,18 @@ struct CellStats {
   int runs = 0, taken = 0, applied = 0, halved = 0, worse = 0, identified = 0;
   std::vector<double> w_before, w_after, m_before, m_after;
   long covered = 0, points = 0;
+  /// Over the runs where an effect was detected and not (or not wholly) applied.
+  long covered_na = 0, points_na = 0;
 };
 
 struct Plan {
-  bool reverse = false;
+  TwoAxisScanOrder order;
   DisplacementEffectLibrary lib;
+  /// A short column label.
+  std::string label() const {
+    if (order.y_fastest_scan2) return order.reverse_scan2 ? "y-fast-bw" : "y-fast";
+    return order.reverse_scan2 ? "backward" : "paper";
+  }
 };
 
 CellStats run_cell(const Plan& plan, Effect effect, double sigma) {
@@ -99,7 +107,8 @@ CellStats run_cell(const Plan& plan, Effect effect, double sigma) {
   for (int s = 0; s < kSeeds; ++s) {
     const std::uint64_t seed =
         5000 + static_cast<std::uint64_t>(s) + 100 * static_cast<std::uint64_t>(effect) +
-        static_cast<std::uint64_t>(1000 * sigma) * 13 + (plan.reverse ? 50000 : 0);
+        static_cast<std::uint64_t>(1000 * sigma) * 13 + (plan.order.reverse_scan2 ? 50000 : 0) +
+        (plan.order.y_fastest_scan2 ? 70000 : 0);
     TwoAxisSimOptions so;
     so.nx = so.ny = kN;
     so.eddy_sensor.noise_sigma_um = sigma;
@@ -107,7 +116,8 @@ CellStats run_cell(const Plan& plan, Effect effect, double sigma) {
     so.record_s0_scan2 = true;
     so.timing.sample_period_s = 1.0;
     so.timing.pause_between_scans_s = kPauseS;
-    so.reverse_scan2 = plan.reverse;
+    so.reverse_scan2 = plan.order.reverse_scan2;
+    so.y_fastest_scan2 = plan.order.y_fastest_scan2;
     so.disturbance = random_disturbance(effect, sigma, seed);
     so.seed = seed;
     const auto truth = random_two_axis_truth(seed, 0.0);
@@ -143,43 +153,59 @@ CellStats run_cell(const Plan& plan, Effect effect, double sigma) {
     const Eigen::ArrayXXd err = (r.refined.w_um - wt).array().abs();
     c.covered += (err <= 2.0 * r.refined.u_w_um.array()).count();
     c.points += err.size();
+    bool left_out = false;
+    for (const auto& st : r.steps)
+      left_out = left_out || !st.applied;
+    if (left_out) {
+      c.covered_na += (err <= 2.0 * r.refined.u_w_um.array()).count();
+      c.points_na += err.size();
+    }
   }
   return c;
 }
 
-Plan make_plan(bool reverse) {
+Plan make_plan(bool reverse, bool y_fastest = false) {
   Plan p;
-  p.reverse = reverse;
+  p.order = TwoAxisScanOrder{1.0, kPauseS, reverse, y_fastest};
   const Eigen::VectorXd x = Eigen::VectorXd::LinSpaced(kN, 0.0, (kN - 1) * kStepMm);
-  TwoAxisScanOrder order{1.0, kPauseS, reverse};
   TwoAxisOptions o;
-  p.lib = make_displacement_effect_library(x, x, true, order, o);
+  p.lib = make_displacement_effect_library(x, x, true, p.order, o);
   return p;
 }
 
 }  // namespace
 
 TEST_CASE("which effects each scan plan can identify, computed without data") {
-  const Plan same = make_plan(false), rev = make_plan(true);
+  const Plan same = make_plan(false), rev = make_plan(true), yf = make_plan(false, true),
+             yfr = make_plan(true, true);
   auto identifiable = [](const Plan& p, const std::string& family) {
     bool any = false;
     for (const auto& e : p.lib.effects)
       if (e.family == family) any = any || e.identifiable;
     return any;
   };
-  for (const Plan* p : {&same, &rev}) {
-    std::printf("plan %s:\n", p->reverse ? "scan 2 backwards" : "scan 2 as scan 1 (paper)");
-    for (const auto& e : p->lib.effects)
-      std::printf("  %-24s identifiable %d (relative singular value %.2e)\n", e.name.c_str(),
+  for (const Plan* p : {&same, &rev, &yf, &yfr}) {
+    std::printf(
+        "plan %s:   u of the fitted correction on w per um of noise: sensor 0 | 1-2 | 3-4\n",
+        p->order.plan_name().c_str());
+    for (const auto& e : p->lib.effects) {
+      std::printf("  %-24s identifiable %d (relative singular value %.2e)", e.name.c_str(),
                   e.identifiable, e.relative_singular_value);
+      for (const double u : e.group_u_w_per_sigma)
+        std::printf(" %7.3f", u);
+      std::printf("\n");
+    }
     for (const auto& n : p->lib.not_identifiable)
       std::printf("  %s\n", n.c_str());
   }
   CHECK_FALSE(identifiable(same, "drift"));
-  CHECK(identifiable(rev, "drift"));
+  for (const Plan* p : {&rev, &yf, &yfr}) {
+    CHECK(identifiable(*p, "drift"));
+    CHECK(identifiable(*p, "thermal"));
+    CHECK(identifiable(*p, "tilt"));
+  }
   CHECK(identifiable(same, "thermal"));
   CHECK(identifiable(same, "tilt"));
-  CHECK(identifiable(rev, "tilt"));
   // Without sensor 0's repeat nothing sees a tilt between the scans.
   const Eigen::VectorXd x = Eigen::VectorXd::LinSpaced(kN, 0.0, (kN - 1) * kStepMm);
   const auto lib = make_displacement_effect_library(x, x, false, TwoAxisScanOrder{1.0, kPauseS},
@@ -191,18 +217,19 @@ TEST_CASE("which effects each scan plan can identify, computed without data") {
 }
 
 TEST_CASE("displacement refine: the closing-the-loop table, sigma 0.05/0.1/0.2 um, 20 seeds") {
-  const Plan plans[2] = {make_plan(false), make_plan(true)};
+  const Plan plans[3] = {make_plan(false), make_plan(true), make_plan(true, true)};
   std::printf(
       "25 x 25 grid, 5 mm, sensor 0 at 1.8 sigma and read in both scans, rotation off; w and m_w "
       "errors RMS after the constant, um\n"
-      "%-7s %-9s %-8s %5s %5s %5s  %-24s %-24s %6s %6s %6s\n",
+      "%-7s %-9s %-8s %5s %5s %5s  %-24s %-24s %6s %6s %6s %s\n",
       "sigma", "plan", "effect", "taken", "ident", "appl", "w before->after med (worst)",
-      "m_w before->after med", "halved", "worse", "cover");
-  long cov_in = 0, pts_in = 0;
+      "m_w before->after med", "halved", "worse", "cover",
+      "cover where detected, not applied (runs)");
+  long cov_in = 0, pts_in = 0, cov_na = 0, pts_na = 0;
   int not_met = 0;
   for (const double sigma : {0.05, 0.1, 0.2}) {
-    double clean_median[2] = {0, 0};
-    for (int pi = 0; pi < 2; ++pi) {
+    double clean_median[3] = {0, 0, 0};
+    for (int pi = 0; pi < 3; ++pi) {
       const Plan& plan = plans[pi];
       for (const Effect e : {Effect::none, Effect::thermal, Effect::tilt, Effect::drift}) {
         const CellStats c = run_cell(plan, e, sigma);
@@ -211,12 +238,15 @@ TEST_CASE("displacement refine: the closing-the-loop table, sigma 0.05/0.1/0.2 u
         const double wworst_a = *std::max_element(c.w_after.begin(), c.w_after.end());
         std::printf(
             "%-7.2f %-9s %-8s %2d/%-2d %2d/%-2d %2d/%-2d  %5.3f->%5.3f (%5.2f->%5.2f)  "
-            "%5.3f->%5.3f     %3d/%-2d %2d/%-2d %6.3f\n",
-            sigma, plan.reverse ? "backward" : "paper", name(e), c.taken, c.runs, c.identified,
-            c.runs, c.applied, c.runs, wb, wa, wworst_b, wworst_a, median(c.m_before),
-            median(c.m_after), c.halved, c.runs, c.worse, c.runs,
-            static_cast<double>(c.covered) / c.points);
-        const bool identifiable = e != Effect::none && !(e == Effect::drift && !plan.reverse);
+            "%5.3f->%5.3f     %3d/%-2d %2d/%-2d %6.3f %6.3f (%ld)\n",
+            sigma, plan.label().c_str(), name(e), c.taken, c.runs, c.identified, c.runs, c.applied,
+            c.runs, wb, wa, wworst_b, wworst_a, median(c.m_before), median(c.m_after), c.halved,
+            c.runs, c.worse, c.runs, static_cast<double>(c.covered) / c.points,
+            c.points_na ? static_cast<double>(c.covered_na) / c.points_na : 1.0,
+            c.points_na / (kN * kN));
+        const bool identifiable =
+            e != Effect::none &&
+            !(e == Effect::drift && plan.order.plan_name() == TwoAxisScanOrder{}.plan_name());
         if (e == Effect::none) {
           clean_median[pi] = wb;
           // Clean runs add nothing in <= 5 %.
@@ -227,21 +257,31 @@ TEST_CASE("displacement refine: the closing-the-loop table, sigma 0.05/0.1/0.2 u
         }
         // A correction never makes w worse by more than its stated u.
         CHECK(c.worse == 0);
-        if (e == Effect::tilt) {
+        // The plan made for drift (scan 2 y fastest, backwards): every sensor's drift shows along
+        // rows and columns alike (the identifiability table above), so it is asserted there.
+        const bool drift_plan = plan.order.y_fastest_scan2 && plan.order.reverse_scan2;
+        if (e == Effect::tilt || (e == Effect::drift && drift_plan)) {
           CHECK(c.halved >= 0.8 * c.runs);
         } else if (identifiable && c.halved < 0.8 * c.runs) {
-          // Issue 16 asks for >= 80 %: not met for drift and thermal (printed, not asserted).  The
-          // part of a drift that moves w is its slow part, which the scan differences see only
-          // through the reference X sensors (sensors 3-4 are read along the raster's fast axis)
-          // and, for thermal drift, only with τ, which trades with the amplitudes: the decision
-          // rule applies the well-determined groups and widens u for the rest.
+          // Issue 16 asks for >= 80 %: not met for thermal drift on any plan, nor for linear drift
+          // scanned backwards x fastest (printed, not asserted).  Backwards, the reference Y
+          // sensors 3-4 compare readings along the raster's fast axis and see only the fast part
+          // of their drift (u of the correction on w ~20 per um of noise, against ~1.5 y fastest).
+          // A thermal drift's correction carries τ, which trades with the amplitudes: at the sizes
+          // here (3 sigma per sensor) it moves w by ~5x the clean error while its correction's u
+          // is 2-5 per um of noise for sensors 3-4 even on the best plan.
           std::printf("        NOT MET: halved in %d/%d (issue 16 asks >= 80 %%)\n", c.halved,
                       c.runs);
           ++not_met;
-        } else if (e == Effect::drift) {
+        } else if (!identifiable && e == Effect::drift) {
           // Not identifiable from this plan: nothing applied for it (said once by the library).
           CHECK(c.identified == 0);
         }
+        cov_na += c.covered_na;
+        pts_na += c.points_na;
+        if (c.points_na && c.covered_na < 0.9 * c.points_na)
+          std::printf("        below 0.90 where detected and not applied: %.3f over %ld run(s)\n",
+                      static_cast<double>(c.covered_na) / c.points_na, c.points_na / (kN * kN));
         if (identifiable || e == Effect::none) {
           cov_in += c.covered;
           pts_in += c.points;
@@ -255,4 +295,13 @@ TEST_CASE("displacement refine: the closing-the-loop table, sigma 0.05/0.1/0.2 u
   std::printf("coverage of the refined u_w (2u), clean and identifiable cells: %.3f\n", cover);
   CHECK(cover >= 0.90);
   CHECK(cover <= 0.99);
+  // Where an effect was detected and (in part) not applied, its fitted size and that size's
+  // scatter widen u (displacement_refine.cpp): pooled over those runs.
+  const double cover_na = static_cast<double>(cov_na) / pts_na;
+  std::printf(
+      "coverage of the refined u_w (2u) where an effect was detected and not applied: "
+      "%.3f over %ld runs\n",
+      cover_na, pts_na / (kN * kN));
+  CHECK(cover_na >= 0.90);
+  CHECK(cover_na <= 0.99);
 }

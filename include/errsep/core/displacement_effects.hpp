@@ -16,10 +16,14 @@
 //                    not modelled: a constant between the scans is what a zero shift of sensor 0
 //                    does too (displacement_residuals.hpp), and the joint model absorbs it.
 //
-// Times: a raster of n_x·n_y readings per scan, x fastest, at sample_period_s each; scan 2 starts
-// pause_between_scans_s after scan 1 ended and runs the raster forwards (the paper) or backwards
-// (reverse_scan2: every grid point is then read at a different time offset in the two scans,
-// which is what makes a linear drift visible in the redundancy; see displacement_refine.hpp).
+// Times: a raster of n_x·n_y readings per scan at sample_period_s each, scan 1 x fastest (the
+// paper); scan 2 starts pause_between_scans_s after scan 1 ended and runs its raster x fastest
+// (the paper) or y fastest (y_fastest_scan2), forwards or backwards (reverse_scan2).  In the
+// paper's plan every grid point is read the same time after its scan-1 reading, so a linear drift
+// is one constant in every scan difference (invisible); backwards, the offset varies along the
+// raster's slow axis (y) by ~2·n_x·n_y samples but along its fast axis (x, what the reference Y
+// sensors 3-4 compare) only by ~2·n_x; y fastest, it varies by ~n_x·n_y along both axes, so the
+// drift of every sensor shows in its redundancy (see displacement_refine.hpp).
 #include <Eigen/Core>
 #include <array>
 #include <string>
@@ -32,10 +36,13 @@ namespace errsep::core {
 struct TwoAxisScanOrder {
   double sample_period_s = 1.0;
   double pause_between_scans_s = 0.0;
-  bool reverse_scan2 = false;  ///< scan 2 runs the raster from its last point back to its first
+  bool reverse_scan2 = false;    ///< scan 2 runs the raster from its last point back to its first
+  bool y_fastest_scan2 = false;  ///< scan 2's raster runs y fastest (scan 1's: x fastest)
   /// Time (s) of the reading at grid point (i, j) in scan 1 or 2, t = 0 at the first reading.
   double time_s(int scan, int i, int j, int nx, int ny) const;
   bool is_valid(std::string* why = nullptr) const;
+  /// "scan 2 as scan 1 (paper)", "scan 2 backwards", "scan 2 y fastest, backwards", …
+  std::string plan_name() const;
 };
 
 /// Sizes of the effects (0 = absent).  Sensors are indexed 0..4 as in the paper.

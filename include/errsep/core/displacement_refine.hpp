@@ -27,7 +27,10 @@
 // difference is the same constant at every point: absorbed by r's slope and by sensor 0's
 // offset), nor an error of the traverse d or a yaw between the scans (functions of the piece's
 // coordinate alone: absorbed by r; the traverse's u is in the separation's).  Running scan 2
-// backwards (TwoAxisScanOrder::reverse_scan2) makes linear drift identifiable.
+// backwards (TwoAxisScanOrder::reverse_scan2) makes linear drift identifiable, but for sensors 3-4
+// only through its fast part (below); running scan 2 y fastest (y_fastest_scan2) makes the
+// offset between a point's two readings vary by ~n_x·n_y samples along rows and columns alike, so
+// every sensor's drift is determined about as well (group_u_w_per_sigma states it per plan).
 //
 // Selection, forward (as refine.hpp): in each round every identifiable effect not yet taken
 // (thermal once, the variant of its τ grid that fits best) is tested by the F-test of its columns
@@ -74,6 +77,11 @@ struct DisplacementEffect {
   Eigen::MatrixXd d_w[2], d_m_w[2];
   bool identifiable = false;
   double relative_singular_value = 0;
+  /// Per group (identifiable effects only): the RMS standard uncertainty its fitted correction
+  /// adds to w (constant removed, rotation off) per µm of reading noise, every sensor at one σ.
+  /// Computed from the plan alone: a correction can halve an effect's error of w only when the
+  /// effect moves w by several times this·σ.
+  std::vector<double> group_u_w_per_sigma;
 };
 
 struct DisplacementEffectLibrary {

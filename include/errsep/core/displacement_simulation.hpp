@@ -53,6 +53,11 @@ struct OneAxisSimOptions {
   SensorErrorModel reference_sensor;   ///< sensor 2
   ScanTiming timing;
   std::uint64_t seed = 1;
+  /// Scan 2 runs from the last point back to the first (times only: the draws are unchanged).
+  bool reverse_scan2 = false;
+  /// Undeclared first-order thermal drift a·(1 − exp(−t/τ)) of the workpiece sensor 1 and the
+  /// reference sensor 2 (displacement_refine_one_axis.hpp), added after every draw.
+  double workpiece_thermal_um = 0, reference_thermal_um = 0, thermal_tau_s = 600.0;
   bool is_valid(std::string* why = nullptr) const;
 };
 
@@ -64,6 +69,7 @@ struct OneAxisSimData {
   /// The workpiece sensor during scan 2 (Eq. 1 again: the workpiece is not traversed), as
   /// errsep-scan records it.  Drawn after every other reading, so the others do not depend on it.
   Eigen::VectorXd s1_2_um;
+  Eigen::VectorXd t1_s, t2_s;  ///< time of each reading of scan 1 and scan 2 (s)
 };
 
 /// Throws std::invalid_argument if the options are invalid or a truth function is empty.
@@ -105,6 +111,8 @@ struct TwoAxisSimOptions {
   bool record_s0_scan2 = false;
   /// Scan 2 runs the raster backwards (TwoAxisScanOrder); the drift above follows its times.
   bool reverse_scan2 = false;
+  /// Scan 2's raster runs y fastest (TwoAxisScanOrder::y_fastest_scan2).
+  bool y_fastest_scan2 = false;
   /// Undeclared effects (displacement_effects.hpp) added after every draw: they change no draw.
   DisplacementDisturbance disturbance;
   bool is_valid(std::string* why = nullptr) const;

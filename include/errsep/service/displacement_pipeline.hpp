@@ -12,6 +12,9 @@
 //                               with '# source:', the gauge, σ and where it came from: the one-axis
 //                               result errsep-report reads
 //   displacement_residuals.csv  the residuals of the redundant equations, σ̂ and whiteness
+//   refine/displacement_refine.csv, refine/displacement.csv   with refine on: the loop's account
+//                               (effect, decision, size ± u, predicted errors of w) and the
+//                               refined profile with its u
 //
 // write_result_set() makes the whole folder one result set (io/staged_directory.hpp), as
 // FourSensorPipeline does: a kill at any moment leaves the earlier set or the new one; a
@@ -23,9 +26,11 @@
 
 #include "errsep/core/displacement_joint.hpp"
 #include "errsep/core/displacement_method.hpp"
+#include "errsep/core/displacement_refine_one_axis.hpp"
 #include "errsep/core/displacement_residuals.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/displacement_csv.hpp"
+#include "errsep/io/machine_config.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 
 namespace errsep::service {
@@ -34,6 +39,9 @@ namespace errsep::service {
 inline constexpr const char* kDisplacementRawCsv = "raw_displacement.csv";
 inline constexpr const char* kDisplacementResultCsv = "displacement.csv";
 inline constexpr const char* kDisplacementResidualsCsv = "displacement_residuals.csv";
+/// With refine on: the loop's account (io/displacement_refine_csv.hpp) and the refined profile.
+inline constexpr const char* kDisplacementRefineCsv = "refine/displacement_refine.csv";
+inline constexpr const char* kDisplacementRefinedCsv = "refine/displacement.csv";
 
 struct DisplacementPipelineOptions {
   /// The traverse d of the reference piece; none: the scan's d_mm, else its sampling interval.
@@ -43,6 +51,10 @@ struct DisplacementPipelineOptions {
   double displacement_sigma_mm = 0.0;      ///< u(d), added to the stated u (0 = d exact)
   std::optional<double> reading_sigma_um;  ///< σ of one reading; none: from the redundant ones
   core::DisplacementResidualOptions residuals;  ///< whiteness test of the residuals
+  /// Close the loop (core/displacement_refine_one_axis.hpp) in separate() and write_result_set():
+  /// errsep-scan --refine, [refine] enabled, the daemon with it.
+  bool refine = false;
+  core::OneAxisRefineOptions refine_options;
   bool is_valid(std::string* why = nullptr) const;
 };
 
@@ -54,6 +66,7 @@ struct DisplacementPipelineResult {
   io::CsvTable residual_table;     ///< displacement_residuals.csv's table
   std::vector<std::string> files;  ///< written, relative to the folder
   std::string error;               ///< why the separation failed (write_result_set only)
+  std::optional<core::OneAxisRefineResult> refine;  ///< with options().refine
   /// The lines a program prints: the estimate, u(w) and σ (or why there is none), the gauge, the
   /// residual verdict.
   std::string brief_report() const;
@@ -87,11 +100,21 @@ class DisplacementPipeline {
                                               const std::filesystem::path& out,
                                               const std::string& writer) const;
 
+  /// The loop (core/displacement_refine_one_axis.hpp) on one recorded run with its reading times
+  /// (empty: equal steps in the paper's order); `input` names the run in messages.  Throws as
+  /// compute().
+  core::OneAxisRefineResult refine(const io::OneAxisInput& in, const Eigen::VectorXd& t1_s,
+                                   const Eigen::VectorXd& t2_s, const std::string& input) const;
+
   const DisplacementPipelineOptions& options() const noexcept { return opts_; }
 
  private:
   DisplacementPipelineOptions opts_;
 };
+
+/// The options a machine config gives (its [refine]: enabled, alpha), as pipeline_options does
+/// for the four-sensor pipeline: errsep-scan (--refine over it) and errsep-daemon.
+DisplacementPipelineOptions displacement_pipeline_options(const io::MachineConfig& cfg);
 
 /// The residual verdict in a result table's metadata ('residuals': the residual file,
 /// 'residual_verdict': white or not, σ̂ and the whiteness p of each family).  Also used for the
