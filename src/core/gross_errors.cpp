@@ -146,7 +146,8 @@ void finish(GrossErrorScan* out, int P, double cfg_dx_mm, double attribution_chi
         for (int i = 0; i < 4; ++i)
           out->correction_um(n, i) += e.size_um * out->columns(4 * n + i, c);
     } else if (e.alternatives.size() <= 1) {
-      out->carried(c, c) += e.size_um * e.size_um;  // left in: its fitted size goes into u
+      // Left in: its size goes into u (the larger of this scan's fit and another measurement's).
+      out->carried(c, c) += std::max(e.size_um * e.size_um, e.known_size_um * e.known_size_um);
     }  // else: carried through each plausible configuration's column (separate_without_...)
     char buf[900];
     std::string what =
@@ -179,6 +180,13 @@ void finish(GrossErrorScan* out, int P, double cfg_dx_mm, double attribution_chi
                     "%.2g um (robust z = %.3g, p = %.2g); %s",
                     e.configuration + 1, e.x_mm, e.size_um, e.u_size_um, e.robust_z, e.p_value,
                     what.c_str());
+    else if (!e.attributed_by.empty())
+      std::snprintf(buf, sizeof buf,
+                    "step: configuration %d reads %+.3g +- %.2g um off from x = %.4g mm on (a "
+                    "knocked sensor named by %s, which differ by %.3g um there; z = %.3g in this "
+                    "scan alone); %s",
+                    e.configuration + 1, e.size_um, e.u_size_um, e.x_mm, e.attributed_by.c_str(),
+                    e.known_size_um, e.robust_z, what.c_str());
     else
       std::snprintf(buf, sizeof buf,
                     "step: configuration %d reads %+.3g +- %.2g um off from x = %.4g mm on "
@@ -235,6 +243,35 @@ GrossErrorScan find_gross_errors(const ResidualSpace& space_in, const Eigen::Mat
   std::mt19937_64 rng(opts.seed);
   std::normal_distribution<double> g(0.0, 1.0);
   std::vector<std::pair<int, int>> spikes_found;
+  // Steps another measurement names (repeat_steps.hpp) go into the model first, whether or not
+  // this scan alone could find them: a step of configuration 4 is nearly fitted by γ and shows
+  // little here, yet it moves S by its full size.
+  for (const AttributedStep& a : opts.attributed_steps) {
+    if (a.configuration < 0 || a.configuration > 3 || a.position < 1 || a.position >= P)
+      throw std::invalid_argument("find_gross_errors: attributed step at configuration " +
+                                  std::to_string(a.configuration) + ", position " +
+                                  std::to_string(a.position) + " is outside the scan");
+    const Eigen::VectorXd col = step_column(P, a.position, a.configuration);
+    const Eigen::VectorXd zp = space.project_out(reduce_columns(cfg, Eigen::MatrixXd(col)));
+    const Eigen::VectorXd r = space.project_out(y);
+    if (space.add(reduce_columns(cfg, Eigen::MatrixXd(col))) == 0) continue;
+    GrossError e;
+    e.kind = GrossErrorKind::step;
+    e.configuration = a.configuration;
+    e.position = a.position;
+    e.x_mm = a.position * cfg.dx_mm;
+    const int dof = std::max(1, space.dof());
+    const double c = zp.dot(r) / zp.norm();
+    e.robust_z = std::abs(c) / std::sqrt(std::max(r.squaredNorm() - c * c, 1e-300) / dof);
+    e.alternatives.push_back({a.configuration, a.position, 0.0, 0.0});
+    e.attributed_by = a.by;
+    e.known_size_um = std::abs(a.size_um);
+    e.known_u_size_um = a.u_size_um;
+    Eigen::MatrixXd C(4 * P, out.columns.cols() + 1);
+    C << out.columns, col;
+    out.columns = std::move(C);
+    out.errors.push_back(e);
+  }
   for (int round = 0; round < opts.max_errors && space.dof() > 2; ++round) {
     const Eigen::VectorXd r = space.project_out(y);
     const Eigen::MatrixXd d = reading_projector_diagonal(space);
@@ -319,7 +356,7 @@ GrossErrorScan find_gross_errors(const ResidualSpace& space_in, const Eigen::Mat
     // Which sensor position it was: the best candidate of another configuration must explain
     // clearly less (likelihood ratio of the two one-column models above χ²₁(0.99)); otherwise
     // the error is reported but not removed (removing the wrong one moves S by its full size).
-    e.applied = e.robust_z * e.robust_z - e.rival_z * e.rival_z >= opts.attribution_chi2;
+    e.applied = e.alternatives.size() == 1;
     // Near the detection threshold the largest of many candidates is mostly the largest noise
     // (the winner's curse): its fitted size is inflated and removing it makes S worse.  Removed
     // only when the statistic clears the threshold by `apply_margin` (in its own units, ~σ).
@@ -362,7 +399,25 @@ GrossErrorScan find_gross_errors(const ResidualSpace& space_in, const Eigen::Mat
       alt.size_um = z.dot(rest) / z.squaredNorm();
       alt.u_size_um = std::sqrt(s2) / z.norm();
     }
-    if (!e.applied)
+    if (!e.attributed_by.empty()) {
+      // Named by another measurement: the step is in the traverse this scan uses (size ±k, k
+      // the known size) or in another traverse of that configuration (no step here); only this
+      // scan tells which, and it can only when the two hypotheses lie far apart against its
+      // uncertainty u (k >= 5u: choosing the nearer one then errs in < 1 % of scans).  Removed
+      // when they do and |size| is nearer k than 0; otherwise left in, k bounding its bias.
+      const double u = std::hypot(e.u_size_um, e.known_u_size_um);
+      const double a = std::abs(e.size_um), k = e.known_size_um;
+      e.applied = k >= 5.0 * u && std::abs(a - k) < a;
+      if (!e.applied) {
+        char b[300];
+        std::snprintf(b, sizeof b,
+                      "this scan cannot tell whether the knock fell in the traverse it uses "
+                      "(a step of %.3g um) or in another one of the configuration (none here): "
+                      "%+.3g +- %.2g um here",
+                      e.known_size_um, e.size_um, e.u_size_um);
+        e.not_applied = b;
+      }
+    } else if (!e.applied)
       e.not_applied = e.kind == GrossErrorKind::spike
                           ? "another configuration's reading explains it almost as well"
                           : "a step of another configuration explains it almost as well";

@@ -22,6 +22,7 @@
 // step's configuration is determined (and the step removed) in only 9, 3, 1 of 20 (steps of the
 // four positions at one place differ only by the readings between their offsets: the rest is a
 // step of f, S or γ), the others are reported as ambiguous and carried in u_S.
+#include <array>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdio>
@@ -30,8 +31,11 @@
 #include <string>
 #include <vector>
 
+#include "errsep/core/four_sensor_sequence_simulation.hpp"
+#include "errsep/core/four_sensor_simulation.hpp"
 #include "errsep/core/gross_errors.hpp"
 #include "errsep/core/refine.hpp"
+#include "errsep/core/repeat_steps.hpp"
 #include "errsep/core/residual_trace.hpp"
 #include "errsep/core/undeclared_effect_simulation.hpp"
 
@@ -413,4 +417,159 @@ TEST_CASE("the refine reports a spike on its finding line and separates without 
   const RefineResult rc = refine_four_sensor(c.cfg, c.m_um, c.t_s, o, &truth);
   CHECK_FALSE(rc.gross.found());
   CHECK(rc.brief_report().find("spike") == std::string::npos);
+}
+
+namespace {
+
+// A reversed-plan sequence (each configuration forward, then back) with a knock: during a random
+// traverse (of configuration `ci`) the sensor is offset by `a` from position n0 on in its
+// direction of travel (a backward traverse: positions n <= n0), and it stays offset for every
+// later traverse.  `in_first` says whether the knocked traverse is its configuration's first
+// (the one the single scan uses).
+struct KnockCase {
+  FourSensorConfig cfg;
+  ScanSequence seq;
+  Eigen::MatrixXd M;  // P × T, the sequence's readings
+  Eigen::MatrixXd m;  // P × 4, each configuration's first traverse (the single scan)
+  Eigen::MatrixXd m_clean;
+  Eigen::VectorXd S_um;
+};
+
+KnockCase knock_case(double sigma, std::uint64_t seed, bool knock, int* ci_out, int* n0_out,
+                     bool* in_first = nullptr) {
+  KnockCase k;
+  const SlidewayTruth truth =
+      random_smooth_truth(k.cfg, seed, UndeclaredCaseOptions::wavy_reference());
+  k.seq = ScanSequence::make(ScanSequenceKind::reversed, k.cfg);
+  SequenceSimOptions so;
+  so.sigma_um = sigma;
+  so.seed = seed;
+  const SequenceSimData d = simulate_four_sensor_sequence(k.cfg, truth, k.seq, so);
+  k.M = d.m_um;
+  k.S_um = d.S_um;
+  const int P = k.cfg.positions(), T = k.seq.size();
+  std::mt19937_64 rng(seed * 7 + 3);
+  const int K = std::uniform_int_distribution<int>(0, T - 1)(rng);
+  const int ci = k.seq.traverses[static_cast<std::size_t>(K)].configuration;
+  const bool backward =
+      k.seq.traverses[static_cast<std::size_t>(K)].direction == TraverseDirection::backward;
+  const int n0 = std::uniform_int_distribution<int>(P / 5, 4 * P / 5)(rng);
+  const double a = (rng() % 2 ? 1.0 : -1.0) * std::uniform_real_distribution<double>(0.5, 1.5)(rng);
+  std::array<int, 4> first{-1, -1, -1, -1};
+  for (int t = 0; t < T; ++t) {
+    const int c = k.seq.traverses[static_cast<std::size_t>(t)].configuration;
+    if (first[static_cast<std::size_t>(c)] < 0) first[static_cast<std::size_t>(c)] = t;
+  }
+  k.m.resize(P, 4);
+  k.m_clean.resize(P, 4);
+  for (int c = 0; c < 4; ++c)
+    k.m_clean.col(c) = k.M.col(first[static_cast<std::size_t>(c)]);
+  if (knock) {
+    if (backward)
+      k.M.block(0, K, n0 + 1, 1).array() += a;
+    else
+      k.M.block(n0, K, P - n0, 1).array() += a;
+    for (int t = K + 1; t < T; ++t)
+      k.M.col(t).array() += a;
+  }
+  for (int c = 0; c < 4; ++c)
+    k.m.col(c) = k.M.col(first[static_cast<std::size_t>(c)]);
+  if (ci_out) *ci_out = ci;
+  if (n0_out) *n0_out = backward ? n0 + 1 : n0;  // the first position the two traverses differ
+  if (in_first) *in_first = K == first[static_cast<std::size_t>(ci)];
+  return k;
+}
+
+}  // namespace
+
+TEST_CASE("a knocked sensor: measuring each configuration twice names its configuration") {
+  constexpr int kSeeds = 20;
+  const FourSensorOptions solve;
+  // Calibration: clean reversed-plan sequences, alpha = 0.05.
+  {
+    RepeatStepOptions o;
+    o.alpha = 0.05;
+    int runs = 0, alarms = 0;
+    for (double sigma : {0.05, 0.1, 0.2})
+      for (std::uint64_t s = 1; s <= 40; ++s) {
+        const KnockCase k = knock_case(sigma, 3000 + s, false, nullptr, nullptr);
+        alarms += find_repeat_steps(k.cfg, k.seq, k.M, o).found ? 1 : 0;
+        ++runs;
+      }
+    const double bound = 0.05 + 2.0 * std::sqrt(0.05 * 0.95 / runs);
+    std::printf(
+        "repeat-step search on %d clean reversed-plan scans at alpha 0.05: %d alarms "
+        "(%.3f, bound %.3f)\n",
+        runs, alarms, double(alarms) / runs, bound);
+    CHECK(double(alarms) / runs <= bound);
+  }
+  std::printf("knock 0.5-1.5 um during one traverse of a reversed plan\n");
+  print_header();
+  for (double sigma : {0.05, 0.1, 0.2}) {
+    Cell alone, with;
+    int named = 0, single_right = 0, repeat_right = 0, clean_alarms = 0, firsts = 0;
+    for (int s = 1; s <= kSeeds; ++s) {
+      int ci = 0, n0 = 0;
+      bool in_first = false;
+      const KnockCase k =
+          knock_case(sigma, 900 + static_cast<std::uint64_t>(s), true, &ci, &n0, &in_first);
+      firsts += in_first ? 1 : 0;
+      const ResidualSpace space(k.cfg);
+      const RepeatStepScan rs = find_repeat_steps(k.cfg, k.seq, k.M);
+      const bool right =
+          rs.found && rs.attributed && rs.configuration == ci && std::abs(rs.position - n0) <= 1;
+      named += right ? 1 : 0;
+      const FourSensorResult before = separate_four_sensor(k.cfg, k.m, solve);
+      // The single scan alone (its first traverses), then with the repeat's attribution.
+      GrossErrorScan g0 = find_gross_errors(space, k.m);
+      const FourSensorResult a0 = separate_without_gross_errors(k.cfg, k.m, &g0, before, solve);
+      GrossErrorOptions go;
+      if (rs.found && rs.attributed)
+        go.attributed_steps.push_back({rs.configuration, rs.position, rs.size_um, rs.u_size_um,
+                                       "the configuration's two traverses"});
+      GrossErrorScan g1 = find_gross_errors(space, k.m, go);
+      const FourSensorResult a1 = separate_without_gross_errors(k.cfg, k.m, &g1, before, solve);
+      alone.add(before, a0, k.S_um, g0.found());
+      with.add(before, a1, k.S_um, g1.found() || rs.found);
+      if (S_error(a1.S_um, k.S_um) > S_error(before.S_um, k.S_um) + rms(a1.u_S_um)) {
+        std::printf("    worse: knock sigma %.2f seed %d (configuration %d, first traverse %d):\n",
+                    sigma, 900 + s, ci + 1, in_first ? 1 : 0);
+        for (const auto& f : g1.findings)
+          std::printf("      %s\n", f.c_str());
+      }
+      auto removed_right = [&](const GrossErrorScan& g) {
+        for (const auto& e : g.errors)
+          if (e.applied && e.kind == GrossErrorKind::step && e.configuration == ci &&
+              std::abs(e.position - n0) <= 1)
+            return true;
+        return false;
+      };
+      single_right += in_first && removed_right(g0) ? 1 : 0;
+      repeat_right += in_first && removed_right(g1) ? 1 : 0;
+      const KnockCase c =
+          knock_case(sigma, 900 + static_cast<std::uint64_t>(s), false, nullptr, nullptr);
+      clean_alarms += find_repeat_steps(c.cfg, c.seq, c.M).found ? 1 : 0;
+      if (std::getenv("TRACE_DEBUG")) {
+        std::printf("  dbg knock s%.2f seed %d truth c%d n%d first %d: S %.3f -> %.3f / %.3f: %s\n",
+                    sigma, 900 + s, ci + 1, n0, in_first ? 1 : 0, S_error(before.S_um, k.S_um),
+                    S_error(a0.S_um, k.S_um), S_error(a1.S_um, k.S_um), rs.finding.c_str());
+        for (const auto& f : g1.findings)
+          std::printf("      %s\n", f.c_str());
+      }
+    }
+    char extra[200];
+    std::snprintf(extra, sizeof extra,
+                  "knock in a first traverse (what the single scan holds) %d; removed at the "
+                  "right place %d",
+                  firsts, single_right);
+    alone.print("knock: 1 scan", sigma, extra);
+    std::snprintf(extra, sizeof extra,
+                  "repeats name the configuration %d/%d (clean alarms %d/%d); removed right %d",
+                  named, kSeeds, clean_alarms, kSeeds, repeat_right);
+    with.print("+ repeats", sigma, extra);
+    CHECK(clean_alarms <= kSeeds / 20);
+    CHECK(named * 10 >= 8 * kSeeds);
+    CHECK(with.worse == 0);
+    CHECK(alone.worse == 0);
+  }
 }

@@ -37,6 +37,15 @@
 
 namespace errsep::core {
 
+/// A step whose configuration and place another measurement determined.
+struct AttributedStep {
+  int configuration = 0;  ///< 0-based
+  int position = 0;       ///< first position of the step
+  double size_um = 0;     ///< its size there (the sign is not used: only |size| bounds the bias)
+  double u_size_um = 0;   ///< its standard uncertainty
+  std::string by = "another measurement";  ///< for the report line
+};
+
 struct GrossErrorOptions {
   double alpha = 0.01;      ///< per round, split between spikes and steps
   int max_errors = 6;       ///< stop after this many detections
@@ -49,6 +58,10 @@ struct GrossErrorOptions {
   /// … and only when its statistic exceeds the detection threshold by this much (near the
   /// threshold the largest candidate is mostly noise and its fitted size inflated).
   double apply_margin = 1.0;
+  /// Steps another measurement names (find_repeat_steps, repeat_steps.hpp): each goes into the
+  /// model first, whether or not this scan alone shows it, and is removed or carried like a found
+  /// one (separate_without_gross_errors).
+  std::vector<AttributedStep> attributed_steps;
   bool is_valid(std::string* why = nullptr) const;
 };
 
@@ -79,9 +92,12 @@ struct GrossError {
   /// remain; an error with more than one is never removed, and each alternative's column is
   /// carried into u (separate_without_gross_errors).
   std::vector<GrossErrorAlternative> alternatives;
-  double u_S_added_um =
-      0;                ///< largest widening of u_S it causes when not removed (0: not computed)
-  bool applied = true;  ///< removed from the separation
+  std::string attributed_by;  ///< what named it, when not this scan alone
+  double known_size_um = 0;   ///< |size| that measurement gave (bounds the bias when left in)
+  double known_u_size_um = 0;
+  /// Largest widening of u_S it causes when not removed (0: not computed).
+  double u_S_added_um = 0;
+  bool applied = true;      ///< removed from the separation
   std::string not_applied;  ///< why not (attribution ambiguous, or removal would not help)
   std::string description;
 };
