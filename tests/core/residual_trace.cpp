@@ -1,27 +1,38 @@
 // The residual traced against what a scan records, and spikes and steps kept out of S (issue 16,
-// item 3): residual_trace.hpp, gross_errors.hpp and their use at the end of refine_four_sensor.
-// Random cases only (undeclared_effect_simulation.hpp: several harmonics of S, γ and f with random
-// phases and amplitudes per seed, independent noise on every reading).  What it asserts:
-//   - calibration: on 120 clean runs the trace (α = 0.05, Bonferroni over its tests) and the
-//     gross-error search (α = 0.05) call something in at most α plus two binomial standard
-//     deviations of the runs (the levels are exact or conservative; the seeds are fixed), and
-//     the single tests' p-values fall below α at about the rate α;
-//   - the must-show table, σ = 0.05, 0.1, 0.2 µm, 20 seeds per cell, the defaults (α = 0.01):
-//     clean false alarms <= 5 % (trace and gross errors); a spike (5-20 σ on one reading) found
-//     at its reading and removed in >= 80 % of the runs where the residual can show it (its size
-//     times ‖Π z‖ >= 6 σ: a reading of configuration 4, whose lever arm is 7 times the others',
-//     is nearly fitted by γ and shows 1-2.5 σ of a 20 σ spike); a step (one configuration
-//     offset by 0.5-1.5 µm from a random position on) located within one position in >= 80 % of
-//     those runs; removing them never makes S worse by more than its stated u (in no run).
+// item 3): residual_trace.hpp, gross_errors.hpp, repeat_steps.hpp and their use at the end of
+// refine_four_sensor.  Random cases only (undeclared_effect_simulation.hpp and random_smooth_truth:
+// several harmonics of S, γ and f with random phases and amplitudes per seed, independent noise
+// on every reading).  The tables print, per cell: found, the S error (bow removed) before and
+// after (median, worst), runs made worse beyond the stated u, runs with more than a fifth of
+// their points outside 2 u_S (and of them, runs where nothing was found), and the coverage of
+// u_S's shape (points within 2 u_S, bow removed from error and covariance) before and after.
+// What it asserts:
+//   - calibration: on 120 clean runs the trace (α = 0.05, Bonferroni over its ten tests), the
+//     gross-error search (α = 0.05) and the repeat-step search (120 clean reversed-plan scans)
+//     call something in at most α plus two binomial standard deviations of the runs, and the
+//     single tests' p-values fall below α at about the rate α;
+//   - non-linearity (not in the library; 40 seeds per σ, sized to double the clean S error):
+//     clean false alarms <= 5 %; found in >= 80 % of the runs where the residual can show it
+//     (δ = ‖Π·Δm‖/σ >= 4.5), and in each σ cell no less often than the most powerful test of the
+//     known signature would on average (minus three binomial sd); when found, corrected by
+//     separate_without_nonlinearity (sensor_nonlinearity.hpp) or carried in u, never worse
+//     beyond u.  NOT reached, printed: found in 45, 45, 40 % of all runs (the issue asks 80 %):
+//     only ~5 % of the effect's norm is outside what the model absorbs (δ median 2.7-2.9); in
+//     11-12 of 40 runs more than a fifth of S lies outside 2 u_S with nothing found (a
+//     non-linearity that does not show does hurt), coverage 0.66 before, 0.79-0.81 after.
+//   - spikes and steps, σ = 0.05, 0.1, 0.2 µm, 20 seeds per cell: a spike (5-20 σ on one reading)
+//     found at its reading and removed in >= 80 % of the runs where the residual can show it
+//     (size·‖Π z‖ >= 6 σ: configuration 4's readings are nearly fitted by γ); a step located
+//     within one position in >= 80 % of those runs; never worse beyond u; an ambiguous one
+//     reported with every plausible configuration ("in one of the configurations ...; this scan
+//     cannot tell which"), the truth among them in >= 80 %; the shape coverage of u_S pooled over
+//     the spike and step cells in 0.90-0.99.  Printed: a single scan attributes a step in 9, 3, 1
+//     of 20 runs (the four configurations' steps leave one residual direction away from the step,
+//     repeat_steps.hpp), step cells alone cover 0.82-0.89 (mostly steps not found at all);
+//   - a knock in a reversed plan (each configuration measured twice): its configuration named in
+//     >= 80 % of runs per σ, the single scan with that attribution never worse beyond u.
 //   - a recorded temperature that the residual follows is found, none is found without it; the
 //     refine's report line carries the spike and its `after` is the separation without it.
-// Printed, NOT reached (so not asserted beyond "found at all"): a sensor non-linearity at a
-// size that doubles the clean S error is found by the reading-level trace in 10, 8, 6 of 20 runs
-// at σ = 0.05, 0.1, 0.2 µm (most of a common non-linearity is a function of the reference
-// sample and is absorbed by f; what reaches S is the same small cross term the trace sees); a
-// step's configuration is determined (and the step removed) in only 9, 3, 1 of 20 (steps of the
-// four positions at one place differ only by the readings between their offsets: the rest is a
-// step of f, S or γ), the others are reported as ambiguous and carried in u_S.
 #include <array>
 #include <catch2/catch.hpp>
 #include <cmath>
@@ -37,6 +48,7 @@
 #include "errsep/core/refine.hpp"
 #include "errsep/core/repeat_steps.hpp"
 #include "errsep/core/residual_trace.hpp"
+#include "errsep/core/sensor_nonlinearity.hpp"
 #include "errsep/core/undeclared_effect_simulation.hpp"
 
 using namespace errsep::core;
@@ -83,6 +95,7 @@ TEST_CASE("on clean data the trace and the gross-error search call something in 
   GrossErrorOptions go;
   go.alpha = alpha;
   int runs = 0, trace_alarms = 0, gross_alarms = 0, tests = 0, single = 0;
+  int signature_tests = 0, signature = 0;  // the non-linearity's score tests alone
   for (double sigma : {0.05, 0.1, 0.2})
     for (std::uint64_t seed = 1; seed <= 40; ++seed) {
       const UndeclaredCase c = clean_case(sigma, 1000 + seed);
@@ -96,6 +109,10 @@ TEST_CASE("on clean data the trace and the gross-error search call something in 
         if (d.tested) {
           ++tests;
           single += d.p_value < alpha ? 1 : 0;
+          if (d.variable.find("non-linearity") != std::string::npos) {
+            ++signature_tests;
+            signature += d.p_value < alpha ? 1 : 0;
+          }
         }
     }
   const double bound = alpha + 2.0 * std::sqrt(alpha * (1 - alpha) / runs);
@@ -105,6 +122,11 @@ TEST_CASE("on clean data the trace and the gross-error search call something in 
       runs, alpha, trace_alarms, static_cast<double>(trace_alarms) / runs, gross_alarms,
       static_cast<double>(gross_alarms) / runs, bound, single, tests,
       static_cast<double>(single) / tests);
+  std::printf("the non-linearity score tests alone: %d of %d below alpha (%.3f, bound %.3f)\n",
+              signature, signature_tests, double(signature) / signature_tests,
+              alpha + 2.0 * std::sqrt(alpha * (1 - alpha) / signature_tests));
+  CHECK(double(signature) / signature_tests <=
+        alpha + 2.0 * std::sqrt(alpha * (1 - alpha) / signature_tests));
   CHECK(static_cast<double>(trace_alarms) / runs <= bound);
   CHECK(static_cast<double>(gross_alarms) / runs <= bound);
   // Each test alone at its nominal level (not only the Bonferroni family).
@@ -197,7 +219,7 @@ TEST_CASE("must-show: a non-linearity found where the residual can show it") {
   int shows_all = 0, shows_found_all = 0;
   for (double sigma : {0.05, 0.1, 0.2}) {
     Cell cell, clean;
-    int shows = 0, shows_found = 0, not_white = 0;
+    int shows = 0, shows_found = 0, not_white = 0, applied = 0;
     std::vector<double> delta, delta_rezero, visible;
     double expected = 0;
     for (int s = 1; s <= kSeeds; ++s) {
@@ -215,7 +237,11 @@ TEST_CASE("must-show: a non-linearity found where the residual can show it") {
       const FourSensorResult rc = separate_four_sensor(c.cfg, c.m_clean_um, solve);
       const FourSensorResult r = separate_four_sensor(c.cfg, c.m_um, solve);
       clean.add(rc, rc, c.S_um, tc.depends);
-      cell.add(r, r, c.S_um, found);  // nothing in the library to remove: after = before
+      NonlinearityStep step;
+      const FourSensorResult after =
+          separate_without_nonlinearity(c.cfg, c.m_um, t, r, solve, &step);
+      applied += step.applied ? 1 : 0;
+      cell.add(r, after, c.S_um, found);
       const Eigen::MatrixXd dm = c.m_um - c.m_clean_um;
       const double d =
           space.project_out(reduce_columns(c.cfg, Eigen::MatrixXd(stack_readings(dm)))).norm() /
@@ -243,16 +269,17 @@ TEST_CASE("must-show: a non-linearity found where the residual can show it") {
     clean.print("clean", sigma);
     char extra[200];
     std::snprintf(extra, sizeof extra,
-                  "not white %d/%d; S error x%.1f of clean; delta median %.2f sigma "
-                  "(%.0f %% of the effect visible)",
-                  not_white, kSeeds, median(cell.before) / median(clean.before), median(delta),
-                  100.0 * median(visible));
+                  "corrected %d; not white %d/%d; S error x%.1f of clean; delta median %.2f "
+                  "sigma (%.0f %% of the effect visible)",
+                  applied, not_white, kSeeds, median(cell.before) / median(clean.before),
+                  median(delta), 100.0 * median(visible));
     cell.print("nonlinearity", sigma, extra);
     std::printf(
         "    shows (delta >= %.1f): %d of %d runs, found in %d; the best test of this size finds "
         "%.1f of %d on average; a re-zeroed closing pass would show it at delta median %.0f\n",
         kShows, shows, kSeeds, shows_found, expected, kSeeds, median(delta_rezero));
     CHECK(clean.found <= kSeeds / 20);  // clean false alarms <= 5 %
+    CHECK(cell.worse == 0);             // the correction, when applied, never worse beyond u
     shows_all += shows;
     shows_found_all += shows_found;
     // Found no less often than the most powerful test of this alternative could on average
@@ -272,6 +299,7 @@ TEST_CASE("must-show: spikes and steps found, removed when attributed, else carr
   std::printf("spikes (5-20 sigma on one reading) and steps (one configuration, 0.5-1.5 um)\n");
   print_header();
   long points_all = 0, covered_all = 0;
+  int ambiguous_all = 0, holds_all = 0;
   for (double sigma : {0.05, 0.1, 0.2}) {
     for (const char* kind : {"spike", "step"}) {
       const bool is_spike = std::string(kind) == "spike";
@@ -317,6 +345,10 @@ TEST_CASE("must-show: spikes and steps found, removed when attributed, else carr
                  e.kind == (is_spike ? GrossErrorKind::spike : GrossErrorKind::step);
           if (e.alternatives.size() > 1) {
             ++ambiguous;
+            CHECK_FALSE(e.applied);
+            CHECK(e.description.find("in one of the configurations") != std::string::npos);
+            CHECK(e.description.find("cannot tell which") != std::string::npos);
+            CHECK(e.description.find("widened by up to") != std::string::npos);
             bool holds = false;
             for (const auto& a : e.alternatives)
               holds = holds || (a.configuration == ci &&
@@ -345,6 +377,8 @@ TEST_CASE("must-show: spikes and steps found, removed when attributed, else carr
                     ambiguous_holds_truth);
       cell.print(kind, sigma, extra);
       points_all += cell.points;
+      ambiguous_all += ambiguous;
+      holds_all += ambiguous_holds_truth;
       covered_all += cell.covered_after;
       // Where the residual can show it: found at the right place in >= 80 %; a spike also
       // attributed and removed (a step's configuration is often ambiguous: see the file comment).
@@ -353,6 +387,9 @@ TEST_CASE("must-show: spikes and steps found, removed when attributed, else carr
       CHECK(cell.worse == 0);  // never worse by more than the stated u
     }
   }
+  std::printf("ambiguous errors: the truth among the configurations named in %d of %d\n", holds_all,
+              ambiguous_all);
+  CHECK(holds_all * 10 >= 8 * ambiguous_all);
   const double cov = double(covered_all) / double(points_all);
   std::printf("coverage of u_S after the loop over the spike and step cells: %.3f (%ld points)\n",
               cov, points_all);
