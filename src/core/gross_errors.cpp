@@ -254,7 +254,7 @@ GrossErrorScan find_gross_errors(const ResidualSpace& space_in, const Eigen::Mat
     const Eigen::VectorXd col = step_column(P, a.position, a.configuration);
     const Eigen::VectorXd zp = space.project_out(reduce_columns(cfg, Eigen::MatrixXd(col)));
     const Eigen::VectorXd r = space.project_out(y);
-    if (space.add(reduce_columns(cfg, Eigen::MatrixXd(col))) == 0) continue;
+    if (space.add(reduce_columns(cfg, Eigen::MatrixXd(col))) == 0 || !(zp.norm() > 0)) continue;
     GrossError e;
     e.kind = GrossErrorKind::step;
     e.configuration = a.configuration;

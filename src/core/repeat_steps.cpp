@@ -152,6 +152,10 @@ RepeatStepScan find_repeat_steps(const FourSensorConfig& cfg, const ScanSequence
   out.found = out.p_value < opts.alpha;
   const int c = pairs[bp][0];
   const Best& b = per[static_cast<std::size_t>(c)];
+  if (b.j < 0) {  // every difference is exactly a polynomial: nothing to locate
+    out.found = false;
+    return out;
+  }
   out.configuration = c;
   out.position = search.first[static_cast<std::size_t>(b.j)];
   out.x_mm = out.position * cfg.dx_mm;
