@@ -3,6 +3,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/SVD>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -42,6 +43,10 @@ struct RoundStats {
   double sigma = 0;
   // The best rival of the other configurations: at the spike's position, and among the steps.
   double spike_rival = 0, step_rival = 0;
+  // Per configuration: |t| of its reading at the spike's position, and its best step (|t|, the
+  // candidate's index): where else the error may be.
+  std::array<double, 4> spike_t{}, step_t{};
+  std::array<int, 4> step_best_j{-1, -1, -1, -1};
   double rss = 0;
 };
 
@@ -64,10 +69,13 @@ RoundStats round_statistics(const FourSensorConfig& cfg, const Eigen::VectorXd& 
     }
   s.rss = r.squaredNorm();
   if (s.spike_n >= 0)
-    for (int i = 0; i < 4; ++i)
-      if (i != s.spike_c && d(s.spike_n, i) > 1e-9)
-        s.spike_rival = std::max(
-            s.spike_rival, std::abs(res(s.spike_n, i)) / std::sqrt(d(s.spike_n, i)) / s.sigma);
+    for (int i = 0; i < 4; ++i) {
+      if (!(d(s.spike_n, i) > 1e-9)) continue;
+      s.spike_t[static_cast<std::size_t>(i)] =
+          std::abs(res(s.spike_n, i)) / std::sqrt(d(s.spike_n, i)) / s.sigma;
+      if (i != s.spike_c)
+        s.spike_rival = std::max(s.spike_rival, s.spike_t[static_cast<std::size_t>(i)]);
+    }
   if (cand.W.cols() > 0) {
     // The likelihood ratio of a change-point: |c_j| over σ̂ of the model with that step in it,
     // so the step does not inflate its own scale (a MAD would be: it moves most readings).
@@ -79,9 +87,14 @@ RoundStats round_statistics(const FourSensorConfig& cfg, const Eigen::VectorXd& 
     s.step = cmax / sd;
     s.step_j = static_cast<int>(j);
     const int cj = cand.steps[static_cast<std::size_t>(j)].first;
-    for (Eigen::Index i = 0; i < c.size(); ++i)
-      if (cand.steps[static_cast<std::size_t>(i)].first != cj)
-        s.step_rival = std::max(s.step_rival, c(i));
+    for (Eigen::Index i = 0; i < c.size(); ++i) {
+      const auto ci = static_cast<std::size_t>(cand.steps[static_cast<std::size_t>(i)].first);
+      if (c(i) / sd > s.step_t[ci]) {
+        s.step_t[ci] = c(i) / sd;
+        s.step_best_j[ci] = static_cast<int>(i);
+      }
+      if (static_cast<int>(ci) != cj) s.step_rival = std::max(s.step_rival, c(i));
+    }
     s.step_rival /= sd;
   }
   return s;
@@ -100,6 +113,11 @@ Eigen::VectorXd step_column(int P, int k, int c) {
   return z;
 }
 
+Eigen::VectorXd error_column(GrossErrorKind kind, int P, int position, int configuration) {
+  return kind == GrossErrorKind::spike ? spike_column(P, position, configuration)
+                                       : step_column(P, position, configuration);
+}
+
 // The value exceeded by a fraction `level` of the draws.
 double upper_quantile(std::vector<double> v, double level) {
   if (v.empty()) return 0.0;
@@ -110,7 +128,13 @@ double upper_quantile(std::vector<double> v, double level) {
 }
 
 // The correction, the carried covariance and the report lines from the errors' applied flags.
-void finish(GrossErrorScan* out, int P) {
+std::string fmt(const char* f, double a, double b = 0, double c = 0) {
+  char buf[200];
+  std::snprintf(buf, sizeof buf, f, a, b, c);
+  return buf;
+}
+
+void finish(GrossErrorScan* out, int P, double cfg_dx_mm, double attribution_chi2) {
   out->correction_um = Eigen::MatrixXd::Zero(P, 4);
   out->carried = out->covariance;
   out->findings.clear();
@@ -121,20 +145,48 @@ void finish(GrossErrorScan* out, int P) {
       for (int n = 0; n < P; ++n)
         for (int i = 0; i < 4; ++i)
           out->correction_um(n, i) += e.size_um * out->columns(4 * n + i, c);
-    } else {
-      out->carried(c, c) += e.size_um * e.size_um;  // left in: its fitted size goes into u
-    }
-    char buf[600];
-    const std::string what =
+    } else if (e.alternatives.size() <= 1) {
+      // Left in: its size goes into u (the larger of this scan's fit and another measurement's).
+      out->carried(c, c) += std::max(e.size_um * e.size_um, e.known_size_um * e.known_size_um);
+    }  // else: carried through each plausible configuration's column (separate_without_...)
+    char buf[900];
+    std::string what =
         e.applied ? (e.kind == GrossErrorKind::spike ? "removed from the separation"
                                                      : "given its own offset in the separation")
                   : "NOT removed (" + e.not_applied + "): its size is in u_S";
-    if (e.kind == GrossErrorKind::spike)
+    if (!e.applied && e.u_S_added_um > 0)
+      what += fmt(" (widened by up to %.2g um)", e.u_S_added_um);
+    if (e.alternatives.size() > 1) {
+      // Ambiguous: say where it may be, each configuration with its own size and place.
+      std::string where;
+      for (std::size_t a = 0; a < e.alternatives.size(); ++a) {
+        const GrossErrorAlternative& alt = e.alternatives[a];
+        where +=
+            (a ? (a + 1 == e.alternatives.size() ? " or " : ", ") : "") +
+            fmt("%.0f (%+.3g +- %.2g um ", alt.configuration + 1.0, alt.size_um, alt.u_size_um) +
+            fmt(e.kind == GrossErrorKind::spike ? "at x = %.4g mm)" : "from x = %.4g mm on)",
+                alt.position * cfg_dx_mm);
+      }
+      std::snprintf(
+          buf, sizeof buf,
+          "%s near x = %.4g mm in one of the configurations %s; they explain it within "
+          "chi2 %.3g of each other, so this scan cannot tell which (z = %.3g, p = %.2g); "
+          "%s",
+          e.kind == GrossErrorKind::spike ? "spike: one reading off" : "step: a knocked sensor",
+          e.x_mm, where.c_str(), attribution_chi2, e.robust_z, e.p_value, what.c_str());
+    } else if (e.kind == GrossErrorKind::spike)
       std::snprintf(buf, sizeof buf,
                     "spike: the reading of configuration %d at x = %.4g mm is off by %+.3g +- "
                     "%.2g um (robust z = %.3g, p = %.2g); %s",
                     e.configuration + 1, e.x_mm, e.size_um, e.u_size_um, e.robust_z, e.p_value,
                     what.c_str());
+    else if (!e.attributed_by.empty())
+      std::snprintf(buf, sizeof buf,
+                    "step: configuration %d reads %+.3g +- %.2g um off from x = %.4g mm on (a "
+                    "knocked sensor named by %s, which differ by %.3g um there; z = %.3g in this "
+                    "scan alone); %s",
+                    e.configuration + 1, e.size_um, e.u_size_um, e.x_mm, e.attributed_by.c_str(),
+                    e.known_size_um, e.robust_z, what.c_str());
     else
       std::snprintf(buf, sizeof buf,
                     "step: configuration %d reads %+.3g +- %.2g um off from x = %.4g mm on "
@@ -184,12 +236,42 @@ GrossErrorScan find_gross_errors(const ResidualSpace& space_in, const Eigen::Mat
   GrossErrorScan out;
   out.correction_um = Eigen::MatrixXd::Zero(P, 4);
   out.columns.resize(4 * P, 0);
+  out.attribution_chi2 = opts.attribution_chi2;
   const Eigen::VectorXd y = reduce_readings(cfg, m_um);
   ResidualSpace space = space_in;
   std::vector<double> buf;
   std::mt19937_64 rng(opts.seed);
   std::normal_distribution<double> g(0.0, 1.0);
   std::vector<std::pair<int, int>> spikes_found;
+  // Steps another measurement names (repeat_steps.hpp) go into the model first, whether or not
+  // this scan alone could find them: a step of configuration 4 is nearly fitted by γ and shows
+  // little here, yet it moves S by its full size.
+  for (const AttributedStep& a : opts.attributed_steps) {
+    if (a.configuration < 0 || a.configuration > 3 || a.position < 1 || a.position >= P)
+      throw std::invalid_argument("find_gross_errors: attributed step at configuration " +
+                                  std::to_string(a.configuration) + ", position " +
+                                  std::to_string(a.position) + " is outside the scan");
+    const Eigen::VectorXd col = step_column(P, a.position, a.configuration);
+    const Eigen::VectorXd zp = space.project_out(reduce_columns(cfg, Eigen::MatrixXd(col)));
+    const Eigen::VectorXd r = space.project_out(y);
+    if (space.add(reduce_columns(cfg, Eigen::MatrixXd(col))) == 0 || !(zp.norm() > 0)) continue;
+    GrossError e;
+    e.kind = GrossErrorKind::step;
+    e.configuration = a.configuration;
+    e.position = a.position;
+    e.x_mm = a.position * cfg.dx_mm;
+    const int dof = std::max(1, space.dof());
+    const double c = zp.dot(r) / zp.norm();
+    e.robust_z = std::abs(c) / std::sqrt(std::max(r.squaredNorm() - c * c, 1e-300) / dof);
+    e.alternatives.push_back({a.configuration, a.position, 0.0, 0.0});
+    e.attributed_by = a.by;
+    e.known_size_um = std::abs(a.size_um);
+    e.known_u_size_um = a.u_size_um;
+    Eigen::MatrixXd C(4 * P, out.columns.cols() + 1);
+    C << out.columns, col;
+    out.columns = std::move(C);
+    out.errors.push_back(e);
+  }
   for (int round = 0; round < opts.max_errors && space.dof() > 2; ++round) {
     const Eigen::VectorXd r = space.project_out(y);
     const Eigen::MatrixXd d = reading_projector_diagonal(space);
@@ -258,10 +340,23 @@ GrossErrorScan find_gross_errors(const ResidualSpace& space_in, const Eigen::Mat
       col = step_column(P, e.position, e.configuration);
     }
     e.x_mm = e.position * cfg.dx_mm;
+    // Where else it may be: each configuration whose own best candidate of the same kind explains
+    // the residual within attribution_chi2 of the best (likelihood ratio), the best first.
+    e.alternatives.push_back({e.configuration, e.position, 0.0, 0.0});
+    for (int c = 0; c < 4; ++c) {
+      if (c == e.configuration) continue;
+      const auto cu = static_cast<std::size_t>(c);
+      const double t = spike ? data.spike_t[cu] : data.step_t[cu];
+      if (t <= 0 || (!spike && data.step_best_j[cu] < 0)) continue;
+      if (e.robust_z * e.robust_z - t * t >= opts.attribution_chi2) continue;
+      const int pos =
+          spike ? e.position : cand.steps[static_cast<std::size_t>(data.step_best_j[cu])].second;
+      e.alternatives.push_back({c, pos, 0.0, 0.0});
+    }
     // Which sensor position it was: the best candidate of another configuration must explain
     // clearly less (likelihood ratio of the two one-column models above χ²₁(0.99)); otherwise
     // the error is reported but not removed (removing the wrong one moves S by its full size).
-    e.applied = e.robust_z * e.robust_z - e.rival_z * e.rival_z >= opts.attribution_chi2;
+    e.applied = e.alternatives.size() == 1;
     // Near the detection threshold the largest of many candidates is mostly the largest noise
     // (the winner's curse): its fitted size is inflated and removing it makes S worse.  Removed
     // only when the statistic clears the threshold by `apply_margin` (in its own units, ~σ).
@@ -290,7 +385,39 @@ GrossErrorScan find_gross_errors(const ResidualSpace& space_in, const Eigen::Mat
     GrossError& e = out.errors[static_cast<std::size_t>(j)];
     e.size_um = beta(j);
     e.u_size_um = std::sqrt(std::max(0.0, out.covariance(j, j)));
-    if (!e.applied)
+    // Each alternative's own size: its column fitted to what the other errors leave.
+    const Eigen::VectorXd rest = r0 - Zp * beta + Zp.col(j) * beta(j);
+    for (std::size_t a = 0; a < e.alternatives.size(); ++a) {
+      GrossErrorAlternative& alt = e.alternatives[a];
+      if (a == 0) {
+        alt.size_um = e.size_um;
+        alt.u_size_um = e.u_size_um;
+        continue;
+      }
+      const Eigen::VectorXd z = space_in.project_out(
+          reduce_columns(cfg, error_column(e.kind, P, alt.position, alt.configuration)));
+      alt.size_um = z.dot(rest) / z.squaredNorm();
+      alt.u_size_um = std::sqrt(s2) / z.norm();
+    }
+    if (!e.attributed_by.empty()) {
+      // Named by another measurement: the step is in the traverse this scan uses (size ±k, k
+      // the known size) or in another traverse of that configuration (no step here); only this
+      // scan tells which, and it can only when the two hypotheses lie far apart against its
+      // uncertainty u (k >= 5u: choosing the nearer one then errs in < 1 % of scans).  Removed
+      // when they do and |size| is nearer k than 0; otherwise left in, k bounding its bias.
+      const double u = std::hypot(e.u_size_um, e.known_u_size_um);
+      const double a = std::abs(e.size_um), k = e.known_size_um;
+      e.applied = k >= 5.0 * u && std::abs(a - k) < a;
+      if (!e.applied) {
+        char b[300];
+        std::snprintf(b, sizeof b,
+                      "this scan cannot tell whether the knock fell in the traverse it uses "
+                      "(a step of %.3g um) or in another one of the configuration (none here): "
+                      "%+.3g +- %.2g um here",
+                      e.known_size_um, e.size_um, e.u_size_um);
+        e.not_applied = b;
+      }
+    } else if (!e.applied)
       e.not_applied = e.kind == GrossErrorKind::spike
                           ? "another configuration's reading explains it almost as well"
                           : "a step of another configuration explains it almost as well";
@@ -304,7 +431,7 @@ GrossErrorScan find_gross_errors(const ResidualSpace& space_in, const Eigen::Mat
       e.not_applied = b;
     }
   }
-  finish(&out, P);
+  finish(&out, P, cfg.dx_mm, opts.attribution_chi2);
   return out;
 }
 
@@ -353,20 +480,58 @@ FourSensorResult separate_without_gross_errors(const FourSensorConfig& cfg,
       e.not_applied = d.reason;
     }
   }
-  finish(scan, P);
+  // An error left in whose configuration is ambiguous biases S by its true configuration's
+  // column, which the scan cannot name: each plausible configuration's column with its own
+  // fitted size is carried (the sum of their squares bounds the largest).
+  std::vector<Eigen::VectorXd> aS, ag, af;
+  std::vector<double> avar;
+  for (GrossError& e : scan->errors) {
+    e.u_S_added_um = 0;
+    if (e.applied || e.alternatives.size() <= 1) continue;
+    Eigen::VectorXd added = Eigen::VectorXd::Zero(P);
+    for (const GrossErrorAlternative& alt : e.alternatives) {
+      Eigen::MatrixXd c(P, 4);
+      const Eigen::VectorXd z = error_column(e.kind, P, alt.position, alt.configuration);
+      for (int n = 0; n < P; ++n)
+        for (int i = 0; i < 4; ++i)
+          c(n, i) = -z(4 * n + i);
+      const FourSensorResult s = separate_four_sensor(cfg, c, lin);
+      aS.push_back(remove_polynomial(s.S_um, 2));
+      ag.push_back(remove_polynomial(1e6 * s.gamma_rad, 1));
+      af.push_back(s.f_um);
+      avar.push_back(alt.size_um * alt.size_um + alt.u_size_um * alt.u_size_um);
+      added += (avar.back() * aS.back().array().square()).matrix();
+    }
+    e.u_S_added_um = std::sqrt(added.maxCoeff());
+  }
+  finish(scan, P, cfg.dx_mm, scan->attribution_chi2);
+  const auto A = static_cast<Eigen::Index>(avar.size());
+  Eigen::MatrixXd DS(P, K + A), Dg(P, K + A), Df(N, K + A);
+  Eigen::MatrixXd carried = Eigen::MatrixXd::Zero(K + A, K + A);
+  DS.leftCols(K) = D_S;
+  Dg.leftCols(K) = D_g;
+  Df.leftCols(K) = D_f;
+  carried.topLeftCorner(K, K) = scan->carried;
+  for (Eigen::Index a = 0; a < A; ++a) {
+    const auto au = static_cast<std::size_t>(a);
+    DS.col(K + a) = aS[au];
+    Dg.col(K + a) = ag[au];
+    Df.col(K + a) = af[au];
+    carried(K + a, K + a) = avar[au];
+  }
   FourSensorResult after = separate_four_sensor(cfg, m_um - scan->correction_um, solve);
   // The gauge of `before` (refine.hpp): the constant, line and bow of S, constant and line of γ.
   after.S_um = before.S_um + remove_polynomial(after.S_um - before.S_um, 2);
   after.gamma_rad = before.gamma_rad + remove_polynomial(after.gamma_rad - before.gamma_rad, 1);
   auto widen = [&](Eigen::VectorXd& u, const Eigen::MatrixXd& D, double scale) {
     if (u.size() != D.rows()) return;
-    const Eigen::VectorXd var = (D * scan->carried).cwiseProduct(D).rowwise().sum();
+    const Eigen::VectorXd var = (D * carried).cwiseProduct(D).rowwise().sum();
     u = (u.array().square() + (scale * scale) * var.array().max(0.0)).sqrt();
   };
-  widen(after.u_S_um, D_S, 1.0);
-  widen(after.u_gamma_rad, D_g, 1e-6);
-  widen(after.u_f_um, D_f, 1.0);
-  if (after.covariance) after.covariance->add_low_rank(D_S, 1e-6 * D_g, D_f, scan->carried);
+  widen(after.u_S_um, DS, 1.0);
+  widen(after.u_gamma_rad, Dg, 1e-6);
+  widen(after.u_f_um, Df, 1.0);
+  if (after.covariance) after.covariance->add_low_rank(DS, 1e-6 * Dg, Df, carried);
   return after;
 }
 

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <limits>
 #include <stdexcept>
+#include <tuple>
 
 namespace errsep::core {
 
@@ -759,6 +760,7 @@ std::string RefineResult::brief_report() const {
     out += "; " + f;
   for (const auto& f : gross.findings)
     out += "; " + f + (gross_removed ? "" : " (not removed: RefineOptions::remove_gross_errors)");
+  if (nonlinearity.detected) out += "; " + nonlinearity.finding;
   if (!model_complete()) out += "; model incomplete";
   return out;
 }
@@ -1091,6 +1093,27 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
     res.after = std::move(without);
     res.m_corrected_um -= res.gross.correction_um;
     res.gross_removed = true;
+  }
+  if (opts.correct_nonlinearity) {
+    FourSensorResult without =
+        separate_without_nonlinearity(cfg, res.m_corrected_um, res.trace, res.after, opts.solve,
+                                      &res.nonlinearity, opts.decision);
+    if (res.nonlinearity.detected) {
+      // As above: what the steps before added to u stays.
+      for (auto [u, refined, raw_u] :
+           {std::tuple{&without.u_S_um, &res.after.u_S_um, &res.before.u_S_um},
+            std::tuple{&without.u_gamma_rad, &res.after.u_gamma_rad, &res.before.u_gamma_rad},
+            std::tuple{&without.u_f_um, &res.after.u_f_um, &res.before.u_f_um}})
+        if (u->size() == refined->size() && u->size() == raw_u->size())
+          *u =
+              (u->array().square() + (refined->array().square() - raw_u->array().square()).max(0.0))
+                  .sqrt();
+      if (res.nonlinearity.applied)
+        res.m_corrected_um -=
+            res.nonlinearity.c2_per_um *
+            (res.m_corrected_um.array() - res.nonlinearity.mid_um).square().matrix();
+      res.after = std::move(without);
+    }
   }
   return res;
 }

@@ -123,7 +123,7 @@ bool ResidualTraceOptions::is_valid(std::string* why) const {
   if (!(alpha > 0 && alpha < 1))
     return fail("alpha = " + std::to_string(alpha) + ": must be in (0, 1)");
   if (time_degree < 1 || position_degree < 1 || level_degree < 2 || temperature_degree < 1)
-    return fail("degrees must be >= 1 (level_degree >= 2: the common level terms start at 2)");
+    return fail("degrees must be >= 1 (level_degree >= 2: a non-linearity is of degree 2)");
   if (mc_samples < 19)
     return fail("mc_samples = " + std::to_string(mc_samples) + ": must be >= 19");
   return true;
@@ -239,39 +239,69 @@ ResidualTrace trace_residual(const ResidualSpace& space, const Eigen::MatrixXd& 
     out.tests.push_back(d);
   }
   {
-    // Reading level: common to every configuration (one sensor moved to four places reads
-    // through one characteristic; its gain is not identifiable, so degree 2 and up), then per
-    // configuration (degree 1 and up: a configuration's gain is the library's gain effect).
-    double lo = 0, hi = 0;
-    DependenceTest d = polynomial_test("reading level",
-                                       legendre_columns(m_um, opts.level_degree, -1, 2, &lo, &hi));
-    auto level_figures = [&](DependenceTest& dt, double a, double b, int first) {
-      dt.range_lo_um = a;
-      dt.range_hi_um = b;
-      if (!dt.tested || dt.coefficients_um.size() == 0) return;
-      const double half = 0.5 * (b - a);
-      // Quadratic coefficient in m: P_2(u) = (3u² − 1)/2 gives 1.5 c_2/half²; P_3 has none in u²
-      // about the mid-range.
-      const int i2 = 2 - first;
-      if (i2 >= 0 && i2 < dt.coefficients_um.size())
-        dt.kappa_per_um = 1.5 * dt.coefficients_um(i2) / (half * half);
-      double worst = 0;
-      for (int s = 0; s <= 40; ++s) {
-        const double u = -1.0 + s / 20.0;
-        double v = 0;
-        for (Eigen::Index j = 0; j < dt.coefficients_um.size(); ++j)
-          if (first + j >= 2) v += dt.coefficients_um(j) * legendre(static_cast<int>(first + j), u);
-        worst = std::max(worst, std::abs(v));
+    // Reading level.  The fitted readings r̂ = m − (reading-space residual) carry the noise Hε,
+    // which is independent of the residual Πε under Gaussian noise (orthogonal projections), so
+    // columns built from r̂ give exact F tests; columns of m itself would correlate with the
+    // residual at order σ/range.
+    const Eigen::MatrixXd fit = m_um - expand_residual(cfg, r);
+    const double lo = fit.minCoeff(), hi = fit.maxCoeff();
+    const double mid = 0.5 * (lo + hi), half = 0.5 * (hi - lo);
+    // Common to every configuration: one sensor moved to four places reads through one
+    // characteristic m = r + c₂·a² + c₃·a³, a = r − mid (its gain c₁ scales f, S, γ and e alike
+    // and is not identifiable).  The score test of c₂ (and of c₃) is the F test of the one column
+    // ∂m/∂c = a² (a³) at r̂: the non-linearity's own signature, one degree of freedom, the most
+    // powerful test against that alternative.  What the model absorbs of it (a function of f's
+    // sample, the parts affine in the offset O per position) cannot be seen; the rest is mostly
+    // the cross term 2c₂·(f(x + D_i) − mid)·(S(x) + O_i·γ(x)) (see the file comment).
+    for (int power : {2, 3}) {
+      Eigen::MatrixXd Z(4 * P, half > 0 ? 1 : 0);
+      if (half > 0)
+        for (int n = 0; n < P; ++n)
+          for (int i = 0; i < 4; ++i)
+            Z(4 * n + i, 0) = std::pow(fit(n, i) - mid, power);
+      DependenceTest d = polynomial_test(power == 2 ? "reading level (quadratic non-linearity)"
+                                                    : "reading level (cubic non-linearity)",
+                                         Z);
+      d.range_lo_um = lo;
+      d.range_hi_um = hi;
+      if (d.tested) {
+        const Eigen::VectorXd zp = space.project_out(reduce_columns(cfg, Z)).col(0);
+        const double explained = std::pow(zp.dot(r), 2) / zp.squaredNorm();
+        const double s2 = (r.squaredNorm() - explained) / std::max(1, dof - 1);
+        const double c = d.coefficients_um(0), u = std::sqrt(s2) / zp.norm();
+        d.nonlinear_um = std::abs(c) * std::pow(half, power);
+        d.visible_fraction = zp.norm() / Z.col(0).norm();
+        if (power == 2) {
+          d.kappa_per_um = c;
+          d.u_kappa_per_um = u;
+        } else {
+          d.kappa3_per_um2 = c;
+          d.u_kappa3_per_um2 = u;
+        }
       }
-      dt.nonlinear_um = worst;
-    };
-    level_figures(d, lo, hi, 2);
-    out.tests.push_back(d);
+      out.tests.push_back(d);
+    }
+    // Per configuration (degree 1 and up: a configuration's gain is the library's gain effect).
     for (int c = 0; c < 4; ++c) {
-      DependenceTest dc =
-          polynomial_test("reading level of configuration " + std::to_string(c + 1),
-                          legendre_columns(m_um, opts.level_degree, c, 1, &lo, &hi));
-      level_figures(dc, lo, hi, 1);
+      double a = 0, b = 0;
+      DependenceTest dc = polynomial_test("reading level of configuration " + std::to_string(c + 1),
+                                          legendre_columns(fit, opts.level_degree, c, 1, &a, &b));
+      dc.range_lo_um = a;
+      dc.range_hi_um = b;
+      if (dc.tested && dc.coefficients_um.size() > 0) {
+        const double h = 0.5 * (b - a);
+        // Quadratic coefficient in m: P_2(u) = (3u² − 1)/2 gives 1.5·c_2/h²; P_3 has no u² term.
+        if (dc.coefficients_um.size() > 1) dc.kappa_per_um = 1.5 * dc.coefficients_um(1) / (h * h);
+        double worst = 0;
+        for (int s = 0; s <= 40; ++s) {
+          const double u = -1.0 + s / 20.0;
+          double v = 0;
+          for (Eigen::Index j = 1; j < dc.coefficients_um.size(); ++j)
+            v += dc.coefficients_um(j) * legendre(static_cast<int>(j + 1), u);
+          worst = std::max(worst, std::abs(v));
+        }
+        dc.nonlinear_um = worst;
+      }
       out.tests.push_back(dc);
     }
   }
@@ -322,12 +352,25 @@ ResidualTrace trace_residual(const ResidualSpace& space, const Eigen::MatrixXd& 
           fmt(" (configuration %.0f's residual %.2f times its expected share: a noisier or "
               "disturbed sensor position)",
               d.coefficients_um(0), d.statistic);
+    } else if (d.variable.rfind("reading level (", 0) == 0) {
+      const bool quadratic = d.variable.find("quadratic") != std::string::npos;
+      f += quadratic
+               ? fmt(": the sensor reads r + c·(r − %.4g um)², c = %.3g +- %.2g /um "
+                     "(its slope changes %.3g %% per 100 um)",
+                     0.5 * (d.range_lo_um + d.range_hi_um), d.kappa_per_um, d.u_kappa_per_um,
+                     2.0 * d.kappa_per_um * 100.0 * 100.0)
+               : fmt(": the sensor reads r + c·(r − %.4g um)³, c = %.3g +- %.2g /um²",
+                     0.5 * (d.range_lo_um + d.range_hi_um), d.kappa3_per_um2, d.u_kappa3_per_um2);
+      f += fmt("; %.3g um at the ends of readings %.4g..%.4g um; %.2g of it shows in the "
+               "residual, the rest is absorbed by f, S and gamma",
+               d.nonlinear_um, d.range_lo_um, d.range_hi_um, d.visible_fraction) +
+           " (a sensor non-linearity: not in the effect library)";
     } else if (d.variable.rfind("reading level", 0) == 0) {
       f +=
           fmt(", quadratic term %.3g /um (the sensor's slope changes %.3g %% per 100 um); "
               "non-linear part up to %.3g um over readings %.4g..",
               d.kappa_per_um, 2.0 * d.kappa_per_um * 100.0 * 100.0, d.nonlinear_um, d.range_lo_um) +
-          fmt("%.4g um: a sensor non-linearity (not in the effect library)", d.range_hi_um);
+          fmt("%.4g um (a non-linearity or gain of this sensor position)", d.range_hi_um);
     } else {
       f += fmt(", F = %.3g on %.0f directions", d.statistic, d.identifiable);
     }

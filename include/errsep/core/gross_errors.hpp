@@ -37,6 +37,15 @@
 
 namespace errsep::core {
 
+/// A step whose configuration and place another measurement determined.
+struct AttributedStep {
+  int configuration = 0;  ///< 0-based
+  int position = 0;       ///< first position of the step
+  double size_um = 0;     ///< its size there (the sign is not used: only |size| bounds the bias)
+  double u_size_um = 0;   ///< its standard uncertainty
+  std::string by = "another measurement";  ///< for the report line
+};
+
 struct GrossErrorOptions {
   double alpha = 0.01;      ///< per round, split between spikes and steps
   int max_errors = 6;       ///< stop after this many detections
@@ -49,11 +58,23 @@ struct GrossErrorOptions {
   /// … and only when its statistic exceeds the detection threshold by this much (near the
   /// threshold the largest candidate is mostly noise and its fitted size inflated).
   double apply_margin = 1.0;
+  /// Steps another measurement names (find_repeat_steps, repeat_steps.hpp): each goes into the
+  /// model first, whether or not this scan alone shows it, and is removed or carried like a found
+  /// one (separate_without_gross_errors).
+  std::vector<AttributedStep> attributed_steps;
   bool is_valid(std::string* why = nullptr) const;
 };
 
 enum class GrossErrorKind { spike, step };
 const char* to_string(GrossErrorKind k);
+
+/// A place the error may be: a configuration whose own best candidate explains the residual
+/// within attribution_chi2 of the best one, with the size that candidate would have.
+struct GrossErrorAlternative {
+  int configuration = 0;  ///< 0-based
+  int position = 0;       ///< the spike's position, or the step's first position
+  double size_um = 0, u_size_um = 0;
+};
 
 struct GrossError {
   GrossErrorKind kind = GrossErrorKind::spike;
@@ -63,8 +84,19 @@ struct GrossError {
   double size_um = 0, u_size_um = 0;  ///< from the joint fit of all found errors
   double robust_z = 0;                ///< |t| when it was found
   double p_value = 1;                 ///< Monte-Carlo p-value of that largest |t|
-  double z_critical = 0;    ///< the detection threshold of its round (null quantile at α/2)
-  double rival_z = 0;       ///< |t| of the best candidate of another configuration in that round
+  double z_critical = 0;  ///< the detection threshold of its round (null quantile at α/2)
+  double rival_z = 0;     ///< |t| of the best candidate of another configuration in that round
+  /// Where it may be, the best first; one entry when attributed to one configuration.  A step's
+  /// candidates in different configurations differ only in the few positions between their
+  /// offsets (the rest is the same residual direction, see the file comment), so several often
+  /// remain; an error with more than one is never removed, and each alternative's column is
+  /// carried into u (separate_without_gross_errors).
+  std::vector<GrossErrorAlternative> alternatives;
+  std::string attributed_by;  ///< what named it, when not this scan alone
+  double known_size_um = 0;   ///< |size| that measurement gave (bounds the bias when left in)
+  double known_u_size_um = 0;
+  /// Largest widening of u_S it causes when not removed (0: not computed).
+  double u_S_added_um = 0;
   bool applied = true;      ///< removed from the separation
   std::string not_applied;  ///< why not (attribution ambiguous, or removal would not help)
   std::string description;
@@ -77,8 +109,10 @@ struct GrossErrorScan {
   Eigen::MatrixXd columns;     ///< 4P × K reading-space columns of the found errors (row 4n + i)
   Eigen::MatrixXd covariance;  ///< K × K of the sizes, µm²
   /// What separate_without_gross_errors carries into u: the covariance, plus the squared size of
-  /// each error not removed (the bias of leaving it in).
+  /// each error not removed that is attributed to one configuration (the bias of leaving it in);
+  /// an ambiguous one is carried through each of its alternatives' columns instead.
   Eigen::MatrixXd carried;
+  double attribution_chi2 = 6.63;     ///< of the search (for the report lines)
   Eigen::MatrixXd correction_um;      ///< P × 4: Σ size·column of the removed errors
   std::vector<std::string> findings;  ///< one line per error
   bool found() const { return !errors.empty(); }

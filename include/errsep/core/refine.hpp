@@ -40,6 +40,7 @@
 #include "errsep/core/model_effect.hpp"
 #include "errsep/core/residual_analysis.hpp"
 #include "errsep/core/residual_trace.hpp"
+#include "errsep/core/sensor_nonlinearity.hpp"
 #include "errsep/core/step_decision.hpp"
 
 namespace errsep::core {
@@ -60,13 +61,16 @@ struct RefineOptions {
   /// error of S, γ and f, not on the F-test alone.
   StepDecisionOptions decision;
   /// The final residual traced against the recorded variables (residual_trace.hpp): reported in
-  /// RefineResult::trace and its findings, never applied.
+  /// RefineResult::trace and its findings; only a non-linearity is acted on (correct_nonlinearity).
   ResidualTraceOptions trace;
   /// Spikes and steps searched in the final residual (gross_errors.hpp).  When one is found and
   /// remove_gross_errors is set, `after` is the separation without them (their sizes' covariance
   /// in u_S): a gross error is not absorbed into S.
   GrossErrorOptions gross;
   bool remove_gross_errors = true;
+  /// A sensor non-linearity the trace finds is corrected when decide_step expects S, γ, f to
+  /// improve, else carried in u (sensor_nonlinearity.hpp); false: reported only.
+  bool correct_nonlinearity = true;
   bool is_valid(std::string* why = nullptr) const;
 };
 
@@ -195,7 +199,8 @@ struct RefineResult {
   /// and temperature, and the spikes and steps in it (see RefineOptions::gross).
   ResidualTrace trace;
   GrossErrorScan gross;
-  bool gross_removed = false;  ///< `after` is the separation without the gross errors
+  bool gross_removed = false;     ///< `after` is the separation without the gross errors
+  NonlinearityStep nonlinearity;  ///< the trace's non-linearity, corrected or carried in u
   /// True when the final residual passes the whiteness test.  False means the model is still
   /// missing something even if no candidate in the library was significant.
   bool residual_white() const { return residual.whiteness.white; }

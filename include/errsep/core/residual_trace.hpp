@@ -19,9 +19,24 @@
 // tests carried out (Bonferroni), so on a complete model the trace reports a dependence in at
 // most a fraction α of scans.
 //
-// A sensor non-linearity (r + κ(r − r̄)², not in the effect library) is the reading-level trace's
-// quadratic term: κ is reported with the finding, as the change of the sensor's slope per 100 µm
-// of reading.
+// A sensor non-linearity (not in the effect library): the one sensor of the single-sensor system
+// reads m = r + c₂·a² (+ c₃·a³), a = r − mid, at all four configurations.  With Eq. (1)'s
+// r_i(x) = f(x + D_i) + S(x) + O_i·γ(x) + e_i and g_i = f(x + D_i) + e_i − mid,
+//   a² = g_i² + 2·g_i·(S + O_i·γ) + (S + O_i·γ)²,
+// and the model absorbs: f(x + D_i)² and every other function of f's sample alone (f is free per
+// sample), the constants e_i², and per position everything affine in O_i (S², 2·O_i·S·γ and the
+// parts of the other terms along 1 and O_i: S and γ take them).  What is left for the residual is
+// the part of the cross term 2·(f(x + D_i) − mid)·(S(x) + O_i·γ(x)) that is not affine in O_i,
+// plus the small 2·e_i·(S + O_i·γ) and O_i²·γ².  On the paper's geometry with random smooth
+// profiles only about a tenth of the norm of c₂·a² is in the residual (the finding prints the
+// fraction), so a non-linearity can double the S error while showing ~3 σ in the residual; a
+// plan that repeats configurations at the same reading levels (closing pass, reversed) shows
+// nothing more, since the non-linearity repeats too; a configuration measured again with the
+// sensor re-zeroed by Δ would show the slope difference 2·c₂·Δ over the whole traverse.
+// The test is the score test of c₂ (c₃): the F test of the single column ∂m/∂c = a² (a³) at the
+// fitted readings (one degree of freedom, the non-linearity's own signature).  Per configuration
+// the reading level is also traced with Legendre columns of degree 1..level_degree (a gain or a
+// non-linearity of one sensor position).
 #include <Eigen/Core>
 #include <cstdint>
 #include <string>
@@ -43,7 +58,7 @@ struct ResidualTraceOptions {
   double alpha = 0.01;         ///< family-wise level over all tests of the trace
   int time_degree = 3;         ///< Legendre degrees of each variable's columns
   int position_degree = 3;     ///< per configuration
-  int level_degree = 3;        ///< per configuration, and common to all (degree 2 and up)
+  int level_degree = 3;        ///< per configuration (the common test is c₂·a² and c₃·a³)
   int temperature_degree = 2;  ///< common to all configurations
   int mc_samples = 400;        ///< draws for the configuration test
   std::uint64_t seed = 11;     ///< fixed: the same data give the same report
@@ -60,12 +75,18 @@ struct DependenceTest {
   double statistic = 0;    ///< F, or for "configuration" the largest energy ratio
   double p_value = 1;      ///< of this test alone
   double p_adjusted = 1;   ///< times the number of tests carried out (Bonferroni), at most 1
-  /// Fitted coefficients of the Legendre terms P_1..P_d (µm), for the polynomial tests; for the
-  /// reading level also: `kappa_per_um`, the quadratic coefficient of the fit in m, and
-  /// `nonlinear_um`, the largest departure of the degree >= 2 part over the readings' range.
+  /// Fitted coefficients of the test's columns: of the Legendre terms P_1..P_d (µm) for the
+  /// polynomial tests, of a² (1/µm) or a³ (1/µm²) for the common non-linearity tests.  For the
+  /// reading level also: `kappa_per_um`, the quadratic coefficient in m (with its standard
+  /// uncertainty for the common test), `kappa3_per_um2` the cubic one, and `nonlinear_um`, the
+  /// largest departure of the non-linear part over the readings' range.
   Eigen::VectorXd coefficients_um;
-  double kappa_per_um = 0;
+  double kappa_per_um = 0, u_kappa_per_um = 0;
+  double kappa3_per_um2 = 0, u_kappa3_per_um2 = 0;
   double nonlinear_um = 0;
+  /// Common non-linearity tests: ‖Π·z‖/‖z‖, the fraction of the signature z = a² (a³) that the
+  /// model cannot absorb (the rest changes f, S, γ, e without a trace in the residual).
+  double visible_fraction = 0;
   double range_lo_um = 0, range_hi_um = 0;
   bool significant = false;  ///< p_adjusted < alpha
   std::string finding;       ///< one line when significant, else empty
