@@ -2,8 +2,10 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <stdexcept>
 
 #include "errsep/core/effect_thermal_drift.hpp"
@@ -111,11 +113,6 @@ Eigen::VectorXd flatten(const Eigen::MatrixXd& m) {
   return y;
 }
 
-Eigen::MatrixXd thin_q(const Eigen::MatrixXd& X) {
-  Eigen::HouseholderQR<Eigen::MatrixXd> qr(X);
-  return qr.householderQ() * Eigen::MatrixXd::Identity(X.rows(), X.cols());
-}
-
 // Columns projected on the complement of span(Q), scaled to unit norm before projection; the SVD
 // of the result.
 struct Projected {
@@ -145,27 +142,49 @@ Projected project(const Eigen::MatrixXd& Q, const Eigen::MatrixXd& J, double tol
   return p;
 }
 
-}  // namespace
+// One column set [base, extra] factorised (X = Q·R, thin), and what the fit and the refine ask
+// of it.  Everything here depends on the plan and the column set only, never on the readings,
+// so a SequenceModel computes it once and every scan of the plan reuses it (the dense QR and Q
+// were ~90 % of a refine's time when rebuilt per call).
+struct Factor {
+  Eigen::MatrixXd extra;          // the columns beyond the base design
+  Eigen::MatrixXd Q, R;           // thin
+  Eigen::VectorXd u_S_unit;       // row norms of Π·(R⁻¹)_S·: u_S = σ̂·u_S_unit
+  std::map<int, Projected> proj;  // candidate → its columns projected off span(Q)
+  std::map<int, Eigen::MatrixXd> toS;  // candidate → Π·(R⁻¹Qᵀ·J·D⁻¹)_S (what the fit puts in Ŝ)
+  std::map<int, Projected> rival;  // candidate's reduced directions of the parent model
+};
 
-SequenceFit fit_four_sensor_sequence(const FourSensorConfig& cfg, const ScanSequence& seq,
-                                     const Eigen::MatrixXd& m_um, const Eigen::MatrixXd& extra) {
-  const Base b = base_design(cfg, seq);
+Factor factorise(const Base& b, const Eigen::MatrixXd& extra) {
+  Factor F;
+  F.extra = extra;
+  Eigen::MatrixXd X(b.X.rows(), b.X.cols() + extra.cols());
+  X.leftCols(b.X.cols()) = b.X;
+  if (extra.cols()) X.rightCols(extra.cols()) = extra;
+  Eigen::HouseholderQR<Eigen::MatrixXd> qr(X);
+  F.Q = qr.householderQ() * Eigen::MatrixXd::Identity(X.rows(), X.cols());
+  F.R = qr.matrixQR().topRows(X.cols()).triangularView<Eigen::Upper>();
+  // Cov(β) = σ̂²·R⁻¹R⁻ᵀ; the S block about its best-fit bow: Π·Cov_SS·Π.
+  const Eigen::MatrixXd Rinv_S = F.R.triangularView<Eigen::Upper>()
+                                     .solve(Eigen::MatrixXd::Identity(X.cols(), X.cols()))
+                                     .middleRows(b.nf, b.P);
+  const Eigen::MatrixXd Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
+  F.u_S_unit = (Pi * Rinv_S).rowwise().norm();
+  return F;
+}
+
+SequenceFit fit_with(const Base& b, const Factor& F, const Eigen::MatrixXd& m_um) {
   if (m_um.rows() != b.P || m_um.cols() != b.T)
     throw std::invalid_argument("readings must be P x T (" + std::to_string(b.P) + " x " +
                                 std::to_string(b.T) + "), got " + std::to_string(m_um.rows()) +
                                 " x " + std::to_string(m_um.cols()));
-  if (extra.size() != 0 && extra.rows() != b.X.rows())
-    throw std::invalid_argument("extra columns must have P*T rows");
-  const Eigen::Index nb = b.X.cols(), q = extra.size() ? extra.cols() : 0;
-  Eigen::MatrixXd X(b.X.rows(), nb + q);
-  X.leftCols(nb) = b.X;
-  if (q) X.rightCols(q) = extra;
   const Eigen::VectorXd y = flatten(m_um);
-  Eigen::HouseholderQR<Eigen::MatrixXd> qr(X);
-  const Eigen::VectorXd beta = qr.solve(y);
-  const Eigen::VectorXd r = y - X * beta;
+  const Eigen::VectorXd qty = F.Q.transpose() * y;
+  const Eigen::VectorXd beta = F.R.triangularView<Eigen::Upper>().solve(qty);
+  const Eigen::VectorXd r = y - F.Q * qty;
+  const Eigen::Index q = F.extra.cols();
   SequenceFit out;
-  out.dof = static_cast<int>(X.rows() - X.cols());
+  out.dof = static_cast<int>(F.Q.rows() - F.Q.cols());
   out.rss_um2 = r.squaredNorm();
   out.sigma_um = out.dof > 0 ? std::sqrt(out.rss_um2 / out.dof) : 0.0;
   out.f_um = b.Bf * beta.head(b.nf);
@@ -179,15 +198,18 @@ SequenceFit fit_four_sensor_sequence(const FourSensorConfig& cfg, const ScanSequ
   out.residual_um.resize(b.P, b.T);
   for (int k = 0; k < b.T; ++k)
     out.residual_um.col(k) = r.segment(static_cast<Eigen::Index>(k) * b.P, b.P);
-  // Cov(β) = σ̂²·R⁻¹R⁻ᵀ; the S block about its best-fit bow: Π·Cov_SS·Π.
-  const Eigen::MatrixXd R = qr.matrixQR().topRows(X.cols()).triangularView<Eigen::Upper>();
-  const Eigen::MatrixXd Rinv_S = R.triangularView<Eigen::Upper>()
-                                     .solve(Eigen::MatrixXd::Identity(X.cols(), X.cols()))
-                                     .middleRows(b.nf, b.P);
-  const Eigen::MatrixXd Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
-  const Eigen::MatrixXd A = Pi * Rinv_S;  // Π·(R⁻¹)_S·: Cov = σ̂²·A·Aᵀ
-  out.u_S_um = out.sigma_um * A.rowwise().norm();
+  out.u_S_um = out.sigma_um * F.u_S_unit;
   return out;
+}
+
+}  // namespace
+
+SequenceFit fit_four_sensor_sequence(const FourSensorConfig& cfg, const ScanSequence& seq,
+                                     const Eigen::MatrixXd& m_um, const Eigen::MatrixXd& extra) {
+  const Base b = base_design(cfg, seq);
+  if (extra.size() != 0 && extra.rows() != b.X.rows())
+    throw std::invalid_argument("extra columns must have P*T rows");
+  return fit_with(b, factorise(b, extra.size() ? extra : Eigen::MatrixXd(b.X.rows(), 0)), m_um);
 }
 
 SequenceEffectColumns sequence_effect_columns(SequenceEffectKind kind, const FourSensorConfig& cfg,
@@ -239,101 +261,206 @@ SequenceEffectColumns sequence_effect_columns(SequenceEffectKind kind, const Fou
   return out;
 }
 
-namespace {
+// The plan's model: the base design, the candidates' columns (drift, thermal at each τ of the
+// grid, traverse; candidate i is an index into `cands`), and the factorisation of every column
+// set the refine has met, keyed by the candidates added in order (their directions are those of
+// the model before them, so the key fixes the columns).
+struct SequenceModel::Impl {
+  FourSensorConfig cfg;
+  ScanSequence seq;
+  SequenceRefineOptions o;
+  Base b;
+  Eigen::MatrixXd Pi;
+  std::vector<SequenceEffectColumns> cands;
+  std::vector<double> cand_tau;  // thermal: τ; else 0
+  std::map<std::vector<int>, Factor> factors;
+  std::vector<SequenceIdentifiability> ids;
 
-double representative_tau_s(const FourSensorConfig& cfg, const ScanSequence& seq, int grid) {
-  const auto g = ThermalDriftEffect::tau_grid_s(seq.times_s(cfg), grid);
-  return g[g.size() / 2];
-}
-
-// The widening of the header's file comment, for each detected-but-unidentifiable effect, on the
-// final model (base + added effects): res.after.u_S_um and the candidates' u_S_added_um.
-void widen_for_unidentifiable(const FourSensorConfig& cfg, const ScanSequence& seq, const Base& b,
-                              const Eigen::MatrixXd& extra, const Eigen::VectorXd& y,
-                              const SequenceRefineOptions& o, SequenceRefineResult& res) {
-  res.u_S_widening_um = Eigen::VectorXd::Zero(b.P);
-  if (res.detected_not_identifiable.empty()) return;
-  Eigen::MatrixXd X(b.X.rows(), b.X.cols() + extra.cols());
-  X << b.X, extra;
-  Eigen::HouseholderQR<Eigen::MatrixXd> qr(X);
-  const Eigen::MatrixXd Q = qr.householderQ() * Eigen::MatrixXd::Identity(X.rows(), X.cols());
-  const Eigen::MatrixXd R = qr.matrixQR().topRows(X.cols()).triangularView<Eigen::Upper>();
-  const Eigen::MatrixXd Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
-  const Eigen::VectorXd r = y - Q * (Q.transpose() * y);
-  const double s2_noise = res.after.sigma_um * res.after.sigma_um;
-  Eigen::VectorXd var = Eigen::VectorXd::Zero(b.P);
-  for (auto& c : res.detected_not_identifiable) {
-    const auto cols =
-        sequence_effect_columns(c.kind, cfg, seq, c.tau_s > 0 ? c.tau_s : 40.0, o.traverse_degree);
-    const Projected pj = project(Q, cols.J, o.identifiability_tol, o.weak_direction_sv);
-    const Eigen::MatrixXd Js = cols.J * pj.D.cwiseInverse().asDiagonal();
-    const Eigen::MatrixXd toS =
-        Pi * R.triangularView<Eigen::Upper>().solve(Q.transpose() * Js).middleRows(b.nf, b.P);
-    // The directions that size the effect: the well-determined ones, or every seen one when the
-    // plan determines none well (their noise is removed from the squared coefficients).
-    const Eigen::Index q = cols.J.cols();
-    const Eigen::Index ks = pj.strong > 0 ? pj.strong : pj.identifiable;
-    Eigen::VectorXd coef = Eigen::VectorXd::Zero(ks);
-    double s2 = 0.0;
-    for (Eigen::Index j = 0; j < ks; ++j) {
-      const double u = pj.U.col(j).dot(r);
-      // The coefficient's size plus its standard uncertainty σ̂/svⱼ: the size the data do not
-      // exclude at one standard uncertainty (the fitted size alone under-covers when the one
-      // seen direction is small by chance: closing pass, drift, coverage 0.83 of the detected
-      // runs instead of 0.96).
-      const double c2 = std::pow(std::abs(u) + std::sqrt(s2_noise), 2) / (pj.sv(j) * pj.sv(j));
-      coef(j) = std::copysign(std::sqrt(c2), u);
-      s2 += c2;
-    }
-    if (ks > 0) s2 /= static_cast<double>(ks);
-    const Eigen::VectorXd seen = toS * pj.V.leftCols(ks) * coef;
-    const Eigen::VectorXd unseen = (toS * pj.V.rightCols(q - ks)).rowwise().squaredNorm();
-    const Eigen::VectorXd add = seen.cwiseAbs2() + s2 * unseen;
-    c.u_S_added_um = std::sqrt(add.mean());
-    var += add;
+  Impl(const FourSensorConfig& c, const ScanSequence& s, const SequenceRefineOptions& opt)
+      : cfg(c), seq(s), o(opt), b(base_design(c, s)) {
+    std::string why;
+    if (!o.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
+    Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
+    const auto taus = ThermalDriftEffect::tau_grid_s(seq.times_s(cfg), o.thermal_grid);
+    auto add = [&](SequenceEffectKind k, double tau) {
+      cands.push_back(
+          sequence_effect_columns(k, cfg, seq, tau > 0 ? tau : 40.0, o.traverse_degree));
+      cand_tau.push_back(tau);
+    };
+    add(SequenceEffectKind::drift, 0.0);
+    for (double tau : taus)
+      add(SequenceEffectKind::thermal, tau);
+    add(SequenceEffectKind::traverse, 0.0);
+    factors.emplace(std::vector<int>{}, factorise(b, Eigen::MatrixXd(b.X.rows(), 0)));
+    ids = identifiability();
   }
-  res.u_S_widening_um = var.cwiseSqrt();
-  res.after.u_S_um = (res.after.u_S_um.cwiseAbs2() + var).cwiseSqrt();
+
+  std::vector<int> candidates_of(SequenceEffectKind k) const {
+    std::vector<int> v;
+    for (std::size_t i = 0; i < cands.size(); ++i)
+      if (cands[i].kind == k) v.push_back(static_cast<int>(i));
+    return v;
+  }
+
+  bool identifiable_from_plan(SequenceEffectKind k) const {
+    return std::any_of(ids.begin(), ids.end(),
+                       [k](const auto& c) { return c.kind == k && c.identifiable_from_plan; });
+  }
+
+  const Projected& projection(Factor& F, int i) {
+    auto it = F.proj.find(i);
+    if (it == F.proj.end())
+      it = F.proj
+               .emplace(i, project(F.Q, cands[static_cast<std::size_t>(i)].J, o.identifiability_tol,
+                                   o.weak_direction_sv))
+               .first;
+    return it->second;
+  }
+
+  // What the fit of model F puts into Ŝ (after the gauge) from readings along candidate i's
+  // unit-scaled columns: Π·(R⁻¹Qᵀ·J·D⁻¹)_S.
+  const Eigen::MatrixXd& to_S(Factor& F, int i) {
+    auto it = F.toS.find(i);
+    if (it == F.toS.end()) {
+      const Projected& pj = projection(F, i);
+      const Eigen::MatrixXd Js =
+          cands[static_cast<std::size_t>(i)].J * pj.D.cwiseInverse().asDiagonal();
+      it = F.toS
+               .emplace(i, Pi * F.R.triangularView<Eigen::Upper>()
+                                    .solve(F.Q.transpose() * Js)
+                                    .middleRows(b.nf, b.P))
+               .first;
+    }
+    return it->second;
+  }
+
+  // The directions candidate i is fitted on in model F: an effect the plan identifies keeps its
+  // weakly determined directions too (by the plan's measure they do not reach S, and without them
+  // the effect is incomplete: a drift fitted on three of its four directions leaves a residual
+  // another effect takes).  One it does not is scored on its well-determined directions, or,
+  // when the plan determines none well (the single plan's non-repeating traverse), on every
+  // direction the data see: the F-test is exact on any of them, and a suspected effect must be
+  // told.
+  int scored_directions(Factor& F, int i) {
+    const Projected& pj = projection(F, i);
+    const bool identifiable = identifiable_from_plan(cands[static_cast<std::size_t>(i)].kind);
+    return identifiable || pj.strong == 0 ? pj.identifiable : pj.strong;
+  }
+  Eigen::MatrixXd directions(Factor& F, int i) {
+    const Projected& pj = projection(F, i);
+    return cands[static_cast<std::size_t>(i)].J * pj.D.cwiseInverse().asDiagonal() *
+           pj.V.leftCols(scored_directions(F, i));
+  }
+
+  Factor& factor(const std::vector<int>& key) {
+    auto it = factors.find(key);
+    if (it != factors.end()) return it->second;
+    const std::vector<int> parent(key.begin(), key.end() - 1);
+    Factor& Fp = factor(parent);
+    const Eigen::MatrixXd d = directions(Fp, key.back());
+    Eigen::MatrixXd extra(b.X.rows(), Fp.extra.cols() + d.cols());
+    extra << Fp.extra, d;
+    return factors.emplace(key, factorise(b, extra)).first->second;
+  }
+
+  std::vector<SequenceIdentifiability> identifiability() {
+    Factor& F = factor({});
+    const auto thermal = candidates_of(SequenceEffectKind::thermal);
+    std::vector<SequenceIdentifiability> out;
+    for (auto kind :
+         {SequenceEffectKind::drift, SequenceEffectKind::thermal, SequenceEffectKind::traverse}) {
+      // The thermal drift at the grid's middle τ represents the family.
+      const int i = kind == SequenceEffectKind::thermal ? thermal[thermal.size() / 2]
+                                                        : candidates_of(kind).front();
+      const Projected& pj = projection(F, i);
+      SequenceIdentifiability id;
+      id.kind = kind;
+      id.parameters = static_cast<int>(pj.D.size());
+      id.identifiable = pj.identifiable;
+      id.strong = pj.strong;
+      id.relative_sv = pj.sv;
+      // A unit column spread over the P·T readings has RMS 1/sqrt(P·T); the RMS change of S it
+      // causes is |toS·v|/sqrt(P): the gain from the effect's reading RMS to S's is
+      // |toS·v|·sqrt(T).
+      const Eigen::Index k0 = id.parameters - pj.strong;
+      if (k0 > 0) {
+        const Eigen::MatrixXd Sh = to_S(F, i) * pj.V.rightCols(k0);
+        id.undetermined_S_gain =
+            Eigen::JacobiSVD<Eigen::MatrixXd>(Sh).singularValues()(0) * std::sqrt(double(b.T));
+      }
+      id.identifiable_from_plan = id.undetermined_S_gain <= o.undetermined_S_max;
+      out.push_back(id);
+    }
+    return out;
+  }
+
+  // The widening of the header's file comment, for each detected-but-unidentifiable effect
+  // (candidate index in `which`), on the final model F: res.after.u_S_um and the candidates'
+  // u_S_added_um.
+  void widen_for_unidentifiable(Factor& F, const Eigen::VectorXd& y, const std::vector<int>& which,
+                                SequenceRefineResult& res) {
+    res.u_S_widening_um = Eigen::VectorXd::Zero(b.P);
+    if (res.detected_not_identifiable.empty()) return;
+    const Eigen::VectorXd r = y - F.Q * (F.Q.transpose() * y);
+    const double s2_noise = res.after.sigma_um * res.after.sigma_um;
+    Eigen::VectorXd var = Eigen::VectorXd::Zero(b.P);
+    for (std::size_t ci = 0; ci < which.size(); ++ci) {
+      auto& c = res.detected_not_identifiable[ci];
+      const Projected& pj = projection(F, which[ci]);
+      const Eigen::MatrixXd& toS = to_S(F, which[ci]);
+      // The directions that size the effect: the well-determined ones, or every seen one when
+      // the plan determines none well (their noise is removed from the squared coefficients).
+      const Eigen::Index q = pj.D.size();
+      const Eigen::Index ks = pj.strong > 0 ? pj.strong : pj.identifiable;
+      Eigen::VectorXd coef = Eigen::VectorXd::Zero(ks);
+      double s2 = 0.0;
+      for (Eigen::Index j = 0; j < ks; ++j) {
+        const double u = pj.U.col(j).dot(r);
+        // The coefficient's size plus its standard uncertainty σ̂/svⱼ: the size the data do not
+        // exclude at one standard uncertainty (the fitted size alone under-covers when the one
+        // seen direction is small by chance: closing pass, drift, coverage 0.83 of the detected
+        // runs instead of 0.96).
+        const double c2 = std::pow(std::abs(u) + std::sqrt(s2_noise), 2) / (pj.sv(j) * pj.sv(j));
+        coef(j) = std::copysign(std::sqrt(c2), u);
+        s2 += c2;
+      }
+      if (ks > 0) s2 /= static_cast<double>(ks);
+      const Eigen::VectorXd seen = toS * pj.V.leftCols(ks) * coef;
+      const Eigen::VectorXd unseen = (toS * pj.V.rightCols(q - ks)).rowwise().squaredNorm();
+      const Eigen::VectorXd add = seen.cwiseAbs2() + s2 * unseen;
+      c.u_S_added_um = std::sqrt(add.mean());
+      var += add;
+    }
+    res.u_S_widening_um = var.cwiseSqrt();
+    res.after.u_S_um = (res.after.u_S_um.cwiseAbs2() + var).cwiseSqrt();
+  }
+
+  SequenceRefineResult refine(const Eigen::MatrixXd& m_um);
+};
+
+SequenceModel::SequenceModel(const FourSensorConfig& cfg, const ScanSequence& seq,
+                             const SequenceRefineOptions& o)
+    : impl_(std::make_unique<Impl>(cfg, seq, o)) {}
+SequenceModel::~SequenceModel() = default;
+SequenceModel::SequenceModel(SequenceModel&&) noexcept = default;
+SequenceModel& SequenceModel::operator=(SequenceModel&&) noexcept = default;
+
+const std::vector<SequenceIdentifiability>& SequenceModel::identifiability() const {
+  return impl_->ids;
 }
 
-}  // namespace
+SequenceFit SequenceModel::fit(const Eigen::MatrixXd& m_um) const {
+  return fit_with(impl_->b, impl_->factors.at({}), m_um);
+}
+
+SequenceRefineResult SequenceModel::refine(const Eigen::MatrixXd& m_um) {
+  return impl_->refine(m_um);
+}
 
 std::vector<SequenceIdentifiability> sequence_identifiability(const FourSensorConfig& cfg,
                                                               const ScanSequence& seq,
                                                               const SequenceRefineOptions& o) {
-  const Base b = base_design(cfg, seq);
-  Eigen::HouseholderQR<Eigen::MatrixXd> qr(b.X);
-  const Eigen::MatrixXd Q = qr.householderQ() * Eigen::MatrixXd::Identity(b.X.rows(), b.X.cols());
-  const Eigen::MatrixXd R = qr.matrixQR().topRows(b.X.cols()).triangularView<Eigen::Upper>();
-  const Eigen::MatrixXd Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
-  const double tau = representative_tau_s(cfg, seq, o.thermal_grid);
-  std::vector<SequenceIdentifiability> out;
-  for (auto kind :
-       {SequenceEffectKind::drift, SequenceEffectKind::thermal, SequenceEffectKind::traverse}) {
-    const auto cols = sequence_effect_columns(kind, cfg, seq, tau, o.traverse_degree);
-    const Projected pj = project(Q, cols.J, o.identifiability_tol, o.weak_direction_sv);
-    SequenceIdentifiability id;
-    id.kind = kind;
-    id.parameters = static_cast<int>(cols.J.cols());
-    id.identifiable = pj.identifiable;
-    id.strong = pj.strong;
-    id.relative_sv = pj.sv;
-    // What the base fit puts into S from readings J·D⁻¹·v: (R⁻¹Qᵀ)_S·J·D⁻¹·v, after the gauge.
-    const Eigen::MatrixXd Js = cols.J * pj.D.cwiseInverse().asDiagonal();
-    const Eigen::MatrixXd toS =
-        Pi * R.triangularView<Eigen::Upper>().solve(Q.transpose() * Js).middleRows(b.nf, b.P);
-    // A unit column spread over the P·T readings has RMS 1/sqrt(P·T); the RMS change of S it
-    // causes is |toS·v|/sqrt(P): the gain from the effect's reading RMS to S's is |toS·v|·sqrt(T).
-    const Eigen::Index k0 = id.parameters - pj.strong;
-    if (k0 > 0) {
-      const Eigen::MatrixXd Sh = toS * pj.V.rightCols(k0);
-      id.undetermined_S_gain =
-          Eigen::JacobiSVD<Eigen::MatrixXd>(Sh).singularValues()(0) * std::sqrt(double(b.T));
-    }
-    id.identifiable_from_plan = id.undetermined_S_gain <= o.undetermined_S_max;
-    out.push_back(id);
-  }
-  return out;
+  return SequenceModel(cfg, seq, o).identifiability();
 }
 
 bool SequenceRefineResult::identified(SequenceEffectKind k) const {
@@ -349,66 +476,56 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
                                                  const ScanSequence& seq,
                                                  const Eigen::MatrixXd& m_um,
                                                  const SequenceRefineOptions& o) {
-  std::string why;
-  if (!o.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
+  return SequenceModel(cfg, seq, o).refine(m_um);
+}
+
+SequenceRefineResult SequenceModel::Impl::refine(const Eigen::MatrixXd& m_um) {
   SequenceRefineResult res;
   res.plan = seq.name;
-  res.before = fit_four_sensor_sequence(cfg, seq, m_um);
-  res.plan_identifiability = sequence_identifiability(cfg, seq, o);
-  const Base b = base_design(cfg, seq);
+  res.before = fit_with(b, factor({}), m_um);
+  res.plan_identifiability = ids;
   const Eigen::VectorXd y = flatten(m_um);
-  const auto taus = ThermalDriftEffect::tau_grid_s(seq.times_s(cfg), o.thermal_grid);
   const std::vector<SequenceEffectKind> kinds = {
       SequenceEffectKind::drift, SequenceEffectKind::thermal, SequenceEffectKind::traverse};
-  Eigen::MatrixXd extra(b.X.rows(), 0);
+  std::vector<int> key;           // the candidates added, in order
+  std::vector<int> detected_ids;  // candidate of each res.detected_not_identifiable
   for (int round = 0; round < o.max_effects; ++round) {
-    Eigen::MatrixXd X(b.X.rows(), b.X.cols() + extra.cols());
-    X << b.X, extra;
-    const Eigen::MatrixXd Q = thin_q(X);
-    const Eigen::VectorXd r = y - Q * (Q.transpose() * y);
+    Factor& F = factor(key);
+    const Eigen::VectorXd r = y - F.Q * (F.Q.transpose() * y);
     const double rss = r.squaredNorm();
-    const int dof = static_cast<int>(X.rows() - X.cols());
+    const int dof = static_cast<int>(F.Q.rows() - F.Q.cols());
     std::vector<SequenceCandidate> scored;
-    std::vector<Eigen::MatrixXd> directions;
+    std::vector<int> best_of;  // candidate index of each scored entry, or -1 (no directions)
     for (auto kind : kinds) {
       if (res.identified(kind)) continue;
       SequenceCandidate best;
       best.kind = kind;
-      const bool identifiable = res.identifiable_from_plan(kind);
-      Eigen::MatrixXd best_dirs;
-      const std::vector<double> grid =
-          kind == SequenceEffectKind::thermal ? taus : std::vector<double>{0.0};
-      for (double tau : grid) {
-        const auto cols = sequence_effect_columns(kind, cfg, seq, tau, o.traverse_degree);
-        const Projected pj = project(Q, cols.J, o.identifiability_tol, o.weak_direction_sv);
-        // An effect the plan identifies keeps its weakly determined directions too: by the
-        // plan's measure they do not reach S, and without them the effect is incomplete (a
-        // drift fitted on three of its four directions leaves a residual another effect takes).
-        // One it does not is scored on its well-determined directions, or, when the plan
-        // determines none well (the single plan's non-repeating traverse), on every direction
-        // the data see: the F-test is exact on any of them, and a suspected effect must be told.
-        const int kid = identifiable || pj.strong == 0 ? pj.identifiable : pj.strong;
+      int best_i = -1;
+      const std::vector<int> grid = candidates_of(kind);
+      for (int i : grid) {
+        const Projected& pj = projection(F, i);
+        const int kid = scored_directions(F, i);
         if (kid == 0 || dof - kid <= 0) continue;
         double d = 0.0;
         for (int j = 0; j < kid; ++j)
           d += std::pow(pj.U.col(j).dot(r), 2);
-        const double F = (d / kid) / ((rss - d) / (dof - kid));
-        const double p = f_test_p_value(F, kid, dof - kid);
-        if (best_dirs.size() == 0 || p < best.p_value) {
-          best.description = cols.description;
-          best.tau_s = kind == SequenceEffectKind::thermal ? tau : 0.0;
+        const double Fs = (d / kid) / ((rss - d) / (dof - kid));
+        const double p = f_test_p_value(Fs, kid, dof - kid);
+        if (best_i < 0 || p < best.p_value) {
+          best.description = cands[static_cast<std::size_t>(i)].description;
+          best.tau_s = cand_tau[static_cast<std::size_t>(i)];
           best.identifiable = kid;
-          best.F = F;
+          best.F = Fs;
           best.p_value = p;
           best.delta_rss_um2 = d;
-          best_dirs = cols.J * pj.D.cwiseInverse().asDiagonal() * pj.V.leftCols(kid);
+          best_i = i;
         }
       }
       // Šidák over the τ grid (neighbouring values are correlated: conservative).
       if (grid.size() > 1)
         best.p_value = -std::expm1(static_cast<double>(grid.size()) * std::log1p(-best.p_value));
       scored.push_back(best);
-      directions.push_back(best_dirs);
+      best_of.push_back(best_i);
     }
     if (round == 0) res.first_round = scored;
     if (scored.empty()) break;
@@ -417,11 +534,13 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
     const double threshold = o.alpha / static_cast<double>(scored.size());
     std::size_t ib = scored.size();
     for (std::size_t i = 0; i < scored.size(); ++i) {
-      if (!(scored[i].p_value < threshold) || directions[i].size() == 0) continue;
-      if (!res.identifiable_from_plan(scored[i].kind)) {
+      if (!(scored[i].p_value < threshold) || best_of[i] < 0) continue;
+      if (!identifiable_from_plan(scored[i].kind)) {
         if (std::none_of(res.detected_not_identifiable.begin(), res.detected_not_identifiable.end(),
-                         [&](const auto& c) { return c.kind == scored[i].kind; }))
+                         [&](const auto& c) { return c.kind == scored[i].kind; })) {
           res.detected_not_identifiable.push_back(scored[i]);
+          detected_ids.push_back(best_of[i]);
+        }
         continue;
       }
       if (ib == scored.size() || scored[i].p_value < scored[ib].p_value) ib = i;
@@ -438,19 +557,25 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
     };
     std::string rival;
     for (std::size_t i = 0; i < scored.size(); ++i) {
-      if (i == ib || !(scored[i].p_value < threshold) || directions[i].size() == 0) continue;
+      if (i == ib || !(scored[i].p_value < threshold) || best_of[i] < 0) continue;
       if (is_drift(scored[i].kind) && is_drift(scored[ib].kind)) continue;
-      Eigen::MatrixXd Xr(X.rows(), X.cols() + directions[i].cols());
-      Xr << X, directions[i];
-      const Eigen::MatrixXd Qr = thin_q(Xr);
-      const Eigen::VectorXd rr = y - Qr * (Qr.transpose() * y);
-      const Projected pb = project(Qr, directions[ib], o.identifiability_tol, 0.0);
-      const int kb = pb.identifiable, dof_r = static_cast<int>(Xr.rows() - Xr.cols()) - kb;
+      std::vector<int> rkey = key;
+      rkey.push_back(best_of[i]);
+      Factor& Fr = factor(rkey);  // the model with the rival's directions
+      auto it = Fr.rival.find(best_of[ib]);
+      if (it == Fr.rival.end())
+        it = Fr.rival
+                 .emplace(best_of[ib], project(Fr.Q, directions(factor(key), best_of[ib]),
+                                               o.identifiability_tol, 0.0))
+                 .first;
+      const Projected& pb = it->second;
+      const Eigen::VectorXd rr = y - Fr.Q * (Fr.Q.transpose() * y);
+      const int kb = pb.identifiable, dof_r = static_cast<int>(Fr.Q.rows() - Fr.Q.cols()) - kb;
       double d = 0.0;
       for (int j = 0; j < kb; ++j)
         d += std::pow(pb.U.col(j).dot(rr), 2);
-      const double F = kb > 0 && dof_r > 0 ? (d / kb) / ((rr.squaredNorm() - d) / dof_r) : 0.0;
-      if (!(f_test_p_value(F, kb, dof_r) < threshold)) rival = to_string(scored[i].kind);
+      const double Fs = kb > 0 && dof_r > 0 ? (d / kb) / ((rr.squaredNorm() - d) / dof_r) : 0.0;
+      if (!(f_test_p_value(Fs, kb, dof_r) < threshold)) rival = to_string(scored[i].kind);
     }
     if (!rival.empty()) {
       char amb[300];
@@ -462,13 +587,12 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
       res.ambiguous.push_back(amb);
       break;
     }
-    Eigen::MatrixXd grown(extra.rows(), extra.cols() + directions[ib].cols());
-    grown << extra, directions[ib];
-    extra = grown;
+    key.push_back(best_of[ib]);
     res.added.push_back(scored[ib]);
   }
-  res.after = extra.cols() ? fit_four_sensor_sequence(cfg, seq, m_um, extra) : res.before;
-  widen_for_unidentifiable(cfg, seq, b, extra, y, o, res);
+  Factor& Ff = factor(key);
+  res.after = key.empty() ? res.before : fit_with(b, Ff, m_um);
+  widen_for_unidentifiable(Ff, y, detected_ids, res);
   char buf[600];
   for (const auto& a : res.added) {
     std::snprintf(buf, sizeof buf, "%s identified: %s, %d direction(s), F = %.3g, p = %.2g",

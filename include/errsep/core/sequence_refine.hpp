@@ -54,6 +54,7 @@
 // toS being what the fit puts into Ŝ (after the gauge) from readings along the effect's columns.
 // u_S = sqrt(u_S² + Σ_effects u_add²).
 #include <Eigen/Core>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -158,10 +159,42 @@ std::vector<SequenceIdentifiability> sequence_identifiability(const FourSensorCo
                                                               const SequenceRefineOptions& o = {});
 
 /// The loop on readings m (P × T, column k = traverse k).  Throws std::invalid_argument for bad
-/// inputs.
+/// inputs.  One call builds a SequenceModel and discards it; to refine several scans of one plan,
+/// keep the model.
 SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
                                                  const ScanSequence& seq,
                                                  const Eigen::MatrixXd& m_um,
                                                  const SequenceRefineOptions& o = {});
+
+/// The plan's side of the fit and the refine: everything that depends on the configuration, the
+/// sequence (its reading times included) and the options, never on the readings: the base design,
+/// the candidates' columns (drift, thermal at each τ of the grid, traverse), the factorisation of
+/// every column set the refine meets (the base, then the base with each added effect), the
+/// projections and the identifiability.  Built once, it makes each later fit or refine of a scan
+/// of the same plan a few matrix-vector products (a refine of the reversed plan: ~30 ms rebuilt
+/// per call, ~2 ms with the model kept).  refine() fills its caches as it meets new column sets:
+/// not thread-safe; one model per thread.  Results equal those of the free functions.
+class SequenceModel {
+ public:
+  /// Throws std::invalid_argument for a bad configuration, sequence or options.
+  SequenceModel(const FourSensorConfig& cfg, const ScanSequence& seq,
+                const SequenceRefineOptions& o = {});
+  ~SequenceModel();
+  SequenceModel(SequenceModel&&) noexcept;
+  SequenceModel& operator=(SequenceModel&&) noexcept;
+  SequenceModel(const SequenceModel&) = delete;
+  SequenceModel& operator=(const SequenceModel&) = delete;
+
+  /// fit_four_sensor_sequence without extra columns.
+  SequenceFit fit(const Eigen::MatrixXd& m_um) const;
+  /// refine_four_sensor_sequence.
+  SequenceRefineResult refine(const Eigen::MatrixXd& m_um);
+  /// sequence_identifiability.
+  const std::vector<SequenceIdentifiability>& identifiability() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 }  // namespace errsep::core
