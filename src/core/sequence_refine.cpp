@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <random>
 #include <stdexcept>
 
 #include "errsep/core/effect_thermal_drift.hpp"
@@ -147,10 +148,12 @@ Projected project(const Eigen::MatrixXd& Q, const Eigen::MatrixXd& J, double tol
 // so a SequenceModel computes it once and every scan of the plan reuses it (the dense QR and Q
 // were ~90 % of a refine's time when rebuilt per call).
 struct Factor {
-  Eigen::MatrixXd extra;          // the columns beyond the base design
-  Eigen::MatrixXd Q, R;           // thin
-  Eigen::VectorXd u_S_unit;       // row norms of Π·(R⁻¹)_S·: u_S = σ̂·u_S_unit
-  std::map<int, Projected> proj;  // candidate → its columns projected off span(Q)
+  Eigen::MatrixXd extra;     // the columns beyond the base design
+  Eigen::MatrixXd Q, R;      // thin
+  Eigen::VectorXd u_S_unit;  // row norms of Π·(R⁻¹)_S·: u_S = σ̂·u_S_unit
+  Eigen::MatrixXd Rinv_S;    // (R⁻¹)_S·: Cov(Ŝ) = σ̂²·Rinv_S·Rinv_Sᵀ in the fit's gauge
+  Eigen::VectorXd u_gamma_unit, u_f_unit;  // row norms of 1e-6·(R⁻¹)_γ· and Bf·(R⁻¹)_f·
+  std::map<int, Projected> proj;           // candidate → its columns projected off span(Q)
   std::map<int, Eigen::MatrixXd> toS;  // candidate → Π·(R⁻¹Qᵀ·J·D⁻¹)_S (what the fit puts in Ŝ)
   std::map<int, Projected> rival;  // candidate's reduced directions of the parent model
 };
@@ -165,11 +168,13 @@ Factor factorise(const Base& b, const Eigen::MatrixXd& extra) {
   F.Q = qr.householderQ() * Eigen::MatrixXd::Identity(X.rows(), X.cols());
   F.R = qr.matrixQR().topRows(X.cols()).triangularView<Eigen::Upper>();
   // Cov(β) = σ̂²·R⁻¹R⁻ᵀ; the S block about its best-fit bow: Π·Cov_SS·Π.
-  const Eigen::MatrixXd Rinv_S = F.R.triangularView<Eigen::Upper>()
-                                     .solve(Eigen::MatrixXd::Identity(X.cols(), X.cols()))
-                                     .middleRows(b.nf, b.P);
+  const Eigen::MatrixXd Rinv =
+      F.R.triangularView<Eigen::Upper>().solve(Eigen::MatrixXd::Identity(X.cols(), X.cols()));
+  F.Rinv_S = Rinv.middleRows(b.nf, b.P);
   const Eigen::MatrixXd Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
-  F.u_S_unit = (Pi * Rinv_S).rowwise().norm();
+  F.u_S_unit = (Pi * F.Rinv_S).rowwise().norm();
+  F.u_gamma_unit = 1e-6 * Rinv.middleRows(b.nf + b.P, b.P).rowwise().norm();
+  F.u_f_unit = (b.Bf * Rinv.topRows(b.nf)).rowwise().norm();
   return F;
 }
 
@@ -199,6 +204,9 @@ SequenceFit fit_with(const Base& b, const Factor& F, const Eigen::MatrixXd& m_um
   for (int k = 0; k < b.T; ++k)
     out.residual_um.col(k) = r.segment(static_cast<Eigen::Index>(k) * b.P, b.P);
   out.u_S_um = out.sigma_um * F.u_S_unit;
+  out.S_covariance_factor_um = out.sigma_um * F.Rinv_S;
+  out.u_gamma_rad = out.sigma_um * F.u_gamma_unit;
+  out.u_f_um = out.sigma_um * F.u_f_unit;
   return out;
 }
 
@@ -210,6 +218,35 @@ SequenceFit fit_four_sensor_sequence(const FourSensorConfig& cfg, const ScanSequ
   if (extra.size() != 0 && extra.rows() != b.X.rows())
     throw std::invalid_argument("extra columns must have P*T rows");
   return fit_with(b, factorise(b, extra.size() ? extra : Eigen::MatrixXd(b.X.rows(), 0)), m_um);
+}
+
+StraightnessEstimate sequence_straightness(const SequenceFit& fit, const Eigen::VectorXd& x_mm,
+                                           ReferenceLine reference, int draws) {
+  const Eigen::MatrixXd& G = fit.S_covariance_factor_um;
+  if (x_mm.size() != fit.S_um.size() || G.rows() != fit.S_um.size())
+    throw std::invalid_argument(
+        "sequence_straightness: x, S and the covariance factor differ in "
+        "length");
+  const std::vector<double> x(x_mm.data(), x_mm.data() + x_mm.size());
+  const std::vector<double> s(fit.S_um.data(), fit.S_um.data() + fit.S_um.size());
+  return estimate_straightness(
+      x, s,
+      [&G](const std::vector<double>& c) {
+        return (G.transpose() *
+                Eigen::Map<const Eigen::VectorXd>(c.data(), static_cast<Eigen::Index>(c.size())))
+            .squaredNorm();
+      },
+      [&G](std::uint64_t seed, std::vector<double>& dev) {
+        // A draw of the deviation with covariance G·Gᵀ: G·z, z standard normal.
+        std::mt19937_64 rng(seed);
+        std::normal_distribution<double> n01;
+        Eigen::VectorXd z(G.cols());
+        for (Eigen::Index j = 0; j < z.size(); ++j)
+          z(j) = n01(rng);
+        const Eigen::VectorXd d = G * z;
+        dev.assign(d.data(), d.data() + d.size());
+      },
+      reference, draws);
 }
 
 SequenceEffectColumns sequence_effect_columns(SequenceEffectKind kind, const FourSensorConfig& cfg,
@@ -430,6 +467,13 @@ struct SequenceModel::Impl {
       const Eigen::VectorXd add = seen.cwiseAbs2() + s2 * unseen;
       c.u_S_added_um = std::sqrt(add.mean());
       var += add;
+      // The same widening as columns of the covariance factor (their row norms squared are
+      // `add`), so that a straightness of Ŝ carries it too.
+      Eigen::MatrixXd& G = res.after.S_covariance_factor_um;
+      const Eigen::Index g0 = G.cols();
+      G.conservativeResize(Eigen::NoChange, g0 + 1 + (q - ks));
+      G.col(g0) = seen;
+      G.rightCols(q - ks) = std::sqrt(s2) * (toS * pj.V.rightCols(q - ks));
     }
     res.u_S_widening_um = var.cwiseSqrt();
     res.after.u_S_um = (res.after.u_S_um.cwiseAbs2() + var).cwiseSqrt();

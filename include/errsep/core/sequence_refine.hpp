@@ -59,6 +59,7 @@
 #include <vector>
 
 #include "errsep/core/four_sensor_config.hpp"
+#include "errsep/core/iso230.hpp"
 #include "errsep/core/scan_sequence.hpp"
 
 namespace errsep::core {
@@ -69,7 +70,17 @@ const char* to_string(SequenceEffectKind k);
 struct SequenceFit {
   Eigen::VectorXd f_um, S_um, gamma_rad;  ///< N, P, P
   Eigen::VectorXd e_um;                   ///< T zero-adjustment values, one per traverse
-  Eigen::VectorXd u_S_um;              ///< of S about its best-fit constant, line and bow (k = 1)
+  Eigen::VectorXd u_S_um;  ///< of S about its best-fit constant, line and bow (k = 1)
+  /// G (P × k): Cov(Ŝ) = G·Gᵀ in the fit's own gauge (f(x_0) = f(x_{N−1}) = 0, f ⟂ bow, e of
+  /// traverse 1 and configuration 4 held at 0), the bow of S included: what an ISO 230-1
+  /// straightness of Ŝ needs (sequence_straightness).  After a refine it also holds the
+  /// widening's columns (SequenceRefineResult::u_S_widening_um).
+  Eigen::MatrixXd S_covariance_factor_um;
+  /// Standard uncertainties (k = 1) in the fit's gauge: γ up to the constant that e_4 = 0 sets
+  /// (as Eq. 19), f with its ends at 0.
+  Eigen::VectorXd u_gamma_rad, u_f_um;
+  /// The row norms of S_covariance_factor_um: u(Ŝ) in the fit's gauge, the bow included.
+  Eigen::VectorXd u_S_in_gauge_um() const { return S_covariance_factor_um.rowwise().norm(); }
   Eigen::VectorXd extra_coefficients;  ///< along the extra columns
   Eigen::MatrixXd residual_um;         ///< P × T
   double rss_um2 = 0, sigma_um = 0;
@@ -81,6 +92,13 @@ struct SequenceFit {
 SequenceFit fit_four_sensor_sequence(const FourSensorConfig& cfg, const ScanSequence& seq,
                                      const Eigen::MatrixXd& m_um,
                                      const Eigen::MatrixXd& extra = {});
+
+/// The ISO 230-1 straightness of fit.S_um about `reference` with its U (k = 2) from the fit's
+/// covariance (S_covariance_factor_um; the bias by `draws` Monte-Carlo draws, seeded): as
+/// four_sensor_straightness for a single scan.  Throws std::invalid_argument as
+/// estimate_straightness.
+StraightnessEstimate sequence_straightness(const SequenceFit& fit, const Eigen::VectorXd& x_mm,
+                                           ReferenceLine reference, int draws = 100);
 
 /// An effect's columns for a sequence (rows k·P + n), at time constant tau_s for thermal.
 struct SequenceEffectColumns {
