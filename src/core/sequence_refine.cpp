@@ -5,7 +5,9 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <map>
+#include <optional>
 #include <random>
 #include <stdexcept>
 
@@ -480,6 +482,107 @@ struct SequenceModel::Impl {
   }
 
   SequenceRefineResult refine(const Eigen::MatrixXd& m_um);
+
+  // The thermal columns at τ, and their derivative with respect to τ (P·T × 4).
+  Eigen::MatrixXd thermal_columns(double tau_s, bool derivative) const {
+    const Eigen::MatrixXd t = seq.times_s(cfg);
+    const double t0 = t.minCoeff();
+    Eigen::MatrixXd J = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(b.P) * b.T, 4);
+    for (int k = 0; k < b.T; ++k)
+      for (int n = 0; n < b.P; ++n) {
+        const double tt = t(n, k) - t0, e = std::exp(-tt / tau_s);
+        J(static_cast<Eigen::Index>(k) * b.P + n,
+          seq.traverses[static_cast<std::size_t>(k)].configuration) =
+            derivative ? -tt / (tau_s * tau_s) * e : 1.0 - e;
+      }
+    return J;
+  }
+
+  // A thermal drift added at a grid τ (candidate key[j]): τ is a parameter of the fit, not a
+  // constant (issue 16 item 2: u_S lacked τ's uncertainty; the applied thermal cells covered
+  // 0.59-0.79).  τ is searched by least squares between the grid's neighbours (golden section
+  // on log τ, the residual of the other columns projected out), then the model is linearised in
+  // τ at its optimum (Gauss-Newton): the column ∂(effect)/∂τ = Σ_c Â_c·∂J_c/∂τ joins the design,
+  // so the covariance of Ŝ carries τ's uncertainty to first order.  Returns the final model's
+  // factorisation (its extra columns: the others, the thermal directions at τ, ∂/∂τ) and sets
+  // the candidate's tau_s and u_tau_s.
+  struct ThermalFit {
+    Factor F;        // the model with ∂/∂τ
+    double rss = 0;  // of the model at τ without ∂/∂τ
+    int dof = 0;
+  };
+  ThermalFit thermal_with_tau(const std::vector<int>& key, std::size_t j, const Eigen::VectorXd& y,
+                              SequenceCandidate& cand) {
+    // The blocks of the final model's extra columns, in key order.
+    std::vector<Eigen::Index> start(key.size() + 1, 0);
+    for (std::size_t q = 0; q < key.size(); ++q) {
+      Factor& Fq = factor(std::vector<int>(key.begin(), key.begin() + static_cast<long>(q)));
+      start[q + 1] = start[q] + scored_directions(Fq, key[q]);
+    }
+    const Factor& Ff = factor(key);
+    Factor& Fp = factor(std::vector<int>(key.begin(), key.begin() + static_cast<long>(j)));
+    const Projected& pj = projection(Fp, key[j]);
+    // The amplitudes the plan lets the fit take: a = M·c (M = D⁻¹·V_k, the reduced directions).
+    const Eigen::MatrixXd M =
+        pj.D.cwiseInverse().asDiagonal() * pj.V.leftCols(scored_directions(Fp, key[j]));
+    const Eigen::Index k = M.cols();
+    Eigen::MatrixXd others(b.X.rows(), Ff.extra.cols() - k);
+    others << Ff.extra.leftCols(start[j]), Ff.extra.rightCols(Ff.extra.cols() - start[j + 1]);
+    const Factor F0 = factorise(b, others);
+    const Eigen::VectorXd r0 = y - F0.Q * (F0.Q.transpose() * y);
+    auto rss = [&](double log_tau) {
+      const Eigen::MatrixXd Jt = thermal_columns(std::exp(log_tau), false) * M;
+      const Eigen::MatrixXd RJ = Jt - F0.Q * (F0.Q.transpose() * Jt);
+      Eigen::HouseholderQR<Eigen::MatrixXd> qr(RJ);
+      const Eigen::MatrixXd Qj = qr.householderQ() * Eigen::MatrixXd::Identity(RJ.rows(), k);
+      return r0.squaredNorm() - (Qj.transpose() * r0).squaredNorm();
+    };
+    // Between the neighbouring grid points (the grid's ratio; one step beyond the grid's ends).
+    const auto grid = candidates_of(SequenceEffectKind::thermal);
+    const double ratio = grid.size() > 1 ? cand_tau[static_cast<std::size_t>(grid[1])] /
+                                               cand_tau[static_cast<std::size_t>(grid[0])]
+                                         : 2.0;
+    const double lg = std::log(cand.tau_s);
+    double lo = lg - std::log(ratio), hi = lg + std::log(ratio);
+    const double phi = 0.5 * (std::sqrt(5.0) - 1.0);
+    double a = hi - phi * (hi - lo), c = lo + phi * (hi - lo);
+    double fa = rss(a), fc = rss(c);
+    for (int it = 0; it < 30 && hi - lo > 1e-4; ++it) {
+      if (fa < fc) {
+        hi = c;
+        c = a;
+        fc = fa;
+        a = hi - phi * (hi - lo);
+        fa = rss(a);
+      } else {
+        lo = a;
+        a = c;
+        fa = fc;
+        c = lo + phi * (hi - lo);
+        fc = rss(c);
+      }
+    }
+    double log_tau = 0.5 * (lo + hi);
+    if (!(rss(log_tau) < rss(lg))) log_tau = lg;  // never worse than the grid's point
+    const double tau = std::exp(log_tau);
+    // The fit at τ, then the Gauss-Newton column of τ from its amplitudes.
+    const Eigen::MatrixXd Jt = thermal_columns(tau, false) * M;
+    Eigen::MatrixXd extra(b.X.rows(), others.cols() + k + 1);
+    extra.leftCols(others.cols() + k) << others, Jt;
+    const Factor Ft = factorise(b, extra.leftCols(others.cols() + k));
+    const Eigen::VectorXd coef =
+        Ft.R.triangularView<Eigen::Upper>().solve(Ft.Q.transpose() * y).tail(k);
+    extra.col(others.cols() + k) = thermal_columns(tau, true) * (M * coef);
+    ThermalFit out{factorise(b, extra), (y - Ft.Q * (Ft.Q.transpose() * y)).squaredNorm(),
+                   static_cast<int>(Ft.Q.rows() - Ft.Q.cols())};
+    const Factor& F = out.F;
+    const SequenceFit fit = fit_with(b, F, Eigen::Map<const Eigen::MatrixXd>(y.data(), b.P, b.T));
+    cand.tau_s = tau;
+    // τ's coefficient is the last unknown: its row of R⁻¹ is 1/R_nn.
+    const Eigen::Index last = F.R.cols() - 1;
+    cand.u_tau_s = std::abs(F.R(last, last)) > 0 ? fit.sigma_um / std::abs(F.R(last, last)) : 0.0;
+    return out;
+  }
 };
 
 SequenceModel::SequenceModel(const FourSensorConfig& cfg, const ScanSequence& seq,
@@ -634,13 +737,108 @@ SequenceRefineResult SequenceModel::Impl::refine(const Eigen::MatrixXd& m_um) {
     key.push_back(best_of[ib]);
     res.added.push_back(scored[ib]);
   }
-  Factor& Ff = factor(key);
-  res.after = key.empty() ? res.before : fit_with(b, Ff, m_um);
-  widen_for_unidentifiable(Ff, y, detected_ids, res);
+  Factor* Ff = &factor(key);
+  std::optional<ThermalFit> with_tau;
+  // The drift family (a linear drift is the long-τ limit of the thermal one): which member was
+  // added, and whether the data tell the two apart.  They often do not: the readings differ by
+  // little (what differs is mostly absorbed by S, γ, e), yet S does (reversed plan, thermal on all
+  // configurations taken for a line: S covered 0.10-0.56 in those runs).  So the other member is
+  // fitted too (the thermal one with τ fitted); it replaces the one added when it fits
+  // significantly better (F-test on the one parameter τ at the step's level), and when neither
+  // does, what the choice does to S, ΔS = Ŝ_other − Ŝ_chosen (after the gauge), enters u_S as
+  // a type-B term between the two (u = |ΔS|/√3, uniform between them).
+  Eigen::VectorXd drift_form_dS;
+  {
+    int jd = -1, jt = -1;
+    for (std::size_t j = 0; j < key.size(); ++j) {
+      const auto kind = cands[static_cast<std::size_t>(key[j])].kind;
+      if (kind == SequenceEffectKind::drift) jd = static_cast<int>(j);
+      if (kind == SequenceEffectKind::thermal) jt = static_cast<int>(j);
+    }
+    auto S_of = [&](const Factor& F) { return fit_with(b, F, m_um).S_um; };
+    if (jt >= 0) {
+      with_tau = thermal_with_tau(key, static_cast<std::size_t>(jt), y, res.added[jt]);
+      if (jd < 0) {
+        std::vector<int> lin = key;
+        lin[static_cast<std::size_t>(jt)] = candidates_of(SequenceEffectKind::drift).front();
+        const Factor& Fl = factor(lin);
+        const double rss_l = (y - Fl.Q * (Fl.Q.transpose() * y)).squaredNorm();
+        const double F =
+            with_tau->dof > 0 ? (rss_l - with_tau->rss) / (with_tau->rss / with_tau->dof) : 0.0;
+        if (!(f_test_p_value(F, 1, with_tau->dof) < o.alpha))
+          drift_form_dS = Pi * (S_of(Fl) - S_of(with_tau->F));
+      }
+    } else if (jd >= 0) {
+      const auto j = static_cast<std::size_t>(jd);
+      std::vector<int> alt = key;
+      int best = -1;
+      double best_rss = 0;
+      Factor& Fp = factor(std::vector<int>(key.begin(), key.begin() + static_cast<long>(j)));
+      const Eigen::VectorXd rp = y - Fp.Q * (Fp.Q.transpose() * y);
+      for (int i : candidates_of(SequenceEffectKind::thermal)) {
+        const Projected& pj = projection(Fp, i);
+        const int kid = scored_directions(Fp, i);
+        double d = 0.0;
+        for (int q = 0; q < kid; ++q)
+          d += std::pow(pj.U.col(q).dot(rp), 2);
+        if (best < 0 || rp.squaredNorm() - d < best_rss) {
+          best = i;
+          best_rss = rp.squaredNorm() - d;
+        }
+      }
+      if (best >= 0) {
+        alt[j] = best;
+        SequenceCandidate th = res.added[j];
+        th.kind = SequenceEffectKind::thermal;
+        th.tau_s = cand_tau[static_cast<std::size_t>(best)];
+        th.description = cands[static_cast<std::size_t>(best)].description;
+        ThermalFit tf = thermal_with_tau(alt, j, y, th);
+        const Factor& Fd = factor(key);
+        const double rss_d = (y - Fd.Q * (Fd.Q.transpose() * y)).squaredNorm();
+        const double F = tf.dof > 0 ? (rss_d - tf.rss) / (tf.rss / tf.dof) : 0.0;
+        if (f_test_p_value(F, 1, tf.dof) < o.alpha) {
+          char note[120];
+          std::snprintf(note, sizeof note, " (fits better than a linear drift: F = %.3g)", F);
+          th.description += note;
+          th.identifiable = scored_directions(Fp, best);
+          res.added[j] = th;
+          key = alt;
+          with_tau = std::move(tf);
+        } else {
+          drift_form_dS = Pi * (S_of(tf.F) - S_of(Fd));
+        }
+      }
+    }
+  }
+  if (with_tau) Ff = &with_tau->F;
+  res.after = key.empty() ? res.before : fit_with(b, *Ff, m_um);
+  res.u_S_drift_form_um = Eigen::VectorXd::Zero(b.P);
+  if (drift_form_dS.size()) {
+    res.u_S_drift_form_um = drift_form_dS.cwiseAbs() / std::sqrt(3.0);
+    Eigen::MatrixXd& G = res.after.S_covariance_factor_um;
+    G.conservativeResize(Eigen::NoChange, G.cols() + 1);
+    G.col(G.cols() - 1) = drift_form_dS / std::sqrt(3.0);
+    res.after.u_S_um =
+        (res.after.u_S_um.cwiseAbs2() + res.u_S_drift_form_um.cwiseAbs2()).cwiseSqrt();
+  }
+  widen_for_unidentifiable(*Ff, y, detected_ids, res);
   char buf[600];
   for (const auto& a : res.added) {
     std::snprintf(buf, sizeof buf, "%s identified: %s, %d direction(s), F = %.3g, p = %.2g",
                   to_string(a.kind), a.description.c_str(), a.identifiable, a.F, a.p_value);
+    if (a.kind == SequenceEffectKind::thermal) {
+      char t[120];
+      std::snprintf(t, sizeof t, "; tau fitted %.3g +- %.2g s (carried in u_S)", a.tau_s,
+                    a.u_tau_s);
+      std::strncat(buf, t, sizeof buf - std::strlen(buf) - 1);
+    }
+    res.report.push_back(buf);
+  }
+  if (drift_form_dS.size()) {
+    std::snprintf(buf, sizeof buf,
+                  "drift: linear or thermal (warm-up) form not told apart by the data; S differs "
+                  "by %.2g um RMS between them: carried in u_S",
+                  std::sqrt(drift_form_dS.squaredNorm() / static_cast<double>(b.P)));
     res.report.push_back(buf);
   }
   res.report.insert(res.report.end(), res.ambiguous.begin(), res.ambiguous.end());

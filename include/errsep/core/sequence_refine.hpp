@@ -143,7 +143,10 @@ struct SequenceCandidate {
   std::string description;
   int identifiable = 0;
   double F = 0, p_value = 1, delta_rss_um2 = 0;
-  double tau_s = 0;  ///< thermal: the time constant of the best score
+  /// thermal: the time constant of the best score on the grid; once added, the least-squares τ
+  /// (searched between the grid's neighbours), with its standard uncertainty u_tau_s.
+  double tau_s = 0;
+  double u_tau_s = 0;
   /// Detected but not identifiable: the RMS over x of what it adds to u_S (widen_u_S_um).
   double u_S_added_um = 0;
 };
@@ -159,6 +162,9 @@ struct SequenceRefineResult {
   /// P: the part of after.u_S_um that the detected-but-unidentifiable effects add (quadrature);
   /// zero when there are none.
   Eigen::VectorXd u_S_widening_um;
+  /// P: the part of after.u_S_um that the drift's form adds when the data do not tell a linear
+  /// drift from a thermal one (|ΔS|/√3, ΔS the difference of Ŝ between them); zero otherwise.
+  Eigen::VectorXd u_S_drift_form_um;
   /// Significant candidates the data cannot tell apart (one explains the other's signal): not
   /// applied; one line each, also in `report`.
   std::vector<std::string> ambiguous;
