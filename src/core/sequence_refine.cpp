@@ -160,7 +160,9 @@ struct Factor {
   std::map<int, Projected> rival;  // candidate's reduced directions of the parent model
 };
 
-Factor factorise(const Base& b, const Eigen::MatrixXd& extra) {
+// with_u: also what fit_with needs for the uncertainties (R⁻¹; a third of the cost); a model
+// used only for projections and residuals goes without.
+Factor factorise(const Base& b, const Eigen::MatrixXd& extra, bool with_u = true) {
   Factor F;
   F.extra = extra;
   Eigen::MatrixXd X(b.X.rows(), b.X.cols() + extra.cols());
@@ -169,6 +171,7 @@ Factor factorise(const Base& b, const Eigen::MatrixXd& extra) {
   Eigen::HouseholderQR<Eigen::MatrixXd> qr(X);
   F.Q = qr.householderQ() * Eigen::MatrixXd::Identity(X.rows(), X.cols());
   F.R = qr.matrixQR().topRows(X.cols()).triangularView<Eigen::Upper>();
+  if (!with_u) return F;
   // Cov(β) = σ̂²·R⁻¹R⁻ᵀ; the S block about its best-fit bow: Π·Cov_SS·Π.
   const Eigen::MatrixXd Rinv =
       F.R.triangularView<Eigen::Upper>().solve(Eigen::MatrixXd::Identity(X.cols(), X.cols()));
@@ -181,6 +184,7 @@ Factor factorise(const Base& b, const Eigen::MatrixXd& extra) {
 }
 
 SequenceFit fit_with(const Base& b, const Factor& F, const Eigen::MatrixXd& m_um) {
+  if (F.u_S_unit.size() != b.P) throw std::logic_error("sequence fit: factor without R^-1");
   if (m_um.rows() != b.P || m_um.cols() != b.T)
     throw std::invalid_argument("readings must be P x T (" + std::to_string(b.P) + " x " +
                                 std::to_string(b.T) + "), got " + std::to_string(m_um.rows()) +
@@ -483,6 +487,65 @@ struct SequenceModel::Impl {
 
   SequenceRefineResult refine(const Eigen::MatrixXd& m_um);
 
+  // The drift family's form by profile likelihood: the linear drift and the thermal one at 40 τ
+  // (log-spaced over the grid's range and one grid step beyond), each fitted with the model's
+  // other columns (Frisch-Waugh: the family's columns against the residual of the others; Ŝ
+  // updated by the others' R⁻¹Qᵀ).  The members whose residual is within the 95 % profile
+  // bound of the best (rss <= rss_min + 3.84·σ̂², one parameter τ) are those the data do not
+  // reject; returns Π·(Ŝ_m − Ŝ_chosen) of the one farthest from the chosen S (RMS), or empty
+  // when none differs.
+  Eigen::VectorXd drift_form_spread(const std::vector<int>& key, std::size_t j,
+                                    const Eigen::VectorXd& y, const Eigen::VectorXd& S_chosen) {
+    std::optional<Factor> own;
+    const Factor& F0 = without_block(key, j, own);
+    const Eigen::VectorXd qty0 = F0.Q.transpose() * y;
+    const Eigen::VectorXd r0 = y - F0.Q * qty0;
+    const Eigen::VectorXd S0 = F0.R.triangularView<Eigen::Upper>().solve(qty0).segment(b.nf, b.P);
+    Factor& Fp = factor(std::vector<int>(key.begin(), key.begin() + static_cast<long>(j)));
+    auto amplitudes = [&](int i) {  // the amplitudes the plan lets the fit take (M = D⁻¹·V_k)
+      const Projected& pj = projection(Fp, i);
+      return Eigen::MatrixXd(pj.D.cwiseInverse().asDiagonal() *
+                             pj.V.leftCols(scored_directions(Fp, i)));
+    };
+    const auto grid = candidates_of(SequenceEffectKind::thermal);
+    const Eigen::MatrixXd Mt = amplitudes(grid[grid.size() / 2]);
+    const Eigen::MatrixXd Md = amplitudes(candidates_of(SequenceEffectKind::drift).front());
+    std::vector<double> rss;
+    std::vector<Eigen::VectorXd> S;
+    auto member = [&](const Eigen::MatrixXd& Jt) {
+      const Eigen::MatrixXd QtJ = F0.Q.transpose() * Jt;
+      const Eigen::MatrixXd RJ = Jt - F0.Q * QtJ;
+      const Eigen::VectorXd c = RJ.colPivHouseholderQr().solve(r0);
+      rss.push_back((r0 - RJ * c).squaredNorm());
+      S.push_back(S0 - F0.R.triangularView<Eigen::Upper>().solve(QtJ).middleRows(b.nf, b.P) * c);
+    };
+    member(cands[static_cast<std::size_t>(candidates_of(SequenceEffectKind::drift).front())].J *
+           Md);
+    const double lo = cand_tau[static_cast<std::size_t>(grid.front())],
+                 hi = cand_tau[static_cast<std::size_t>(grid.back())];
+    const double ratio = grid.size() > 1 ? std::pow(hi / lo, 1.0 / (grid.size() - 1)) : 2.0;
+    constexpr int kProfile = 40;
+    for (int q = 0; q < kProfile; ++q) {
+      const double tau =
+          lo / ratio * std::pow(hi * ratio / (lo / ratio), static_cast<double>(q) / (kProfile - 1));
+      member(thermal_columns(tau, false) * Mt);
+    }
+    const double rss_min = *std::min_element(rss.begin(), rss.end());
+    const int dof = static_cast<int>(F0.Q.rows() - F0.Q.cols() - Mt.cols() - 1);
+    const double bound = rss_min * (1.0 + 3.84 / std::max(dof, 1));
+    Eigen::VectorXd out;
+    double far = 0.0;
+    for (std::size_t q = 0; q < rss.size(); ++q) {
+      if (rss[q] > bound) continue;
+      const Eigen::VectorXd d = Pi * (S[q] - S_chosen);
+      if (d.squaredNorm() > far) {
+        far = d.squaredNorm();
+        out = d;
+      }
+    }
+    return out;
+  }
+
   // The thermal columns at τ, and their derivative with respect to τ (P·T × 4).
   Eigen::MatrixXd thermal_columns(double tau_s, bool derivative) const {
     const Eigen::MatrixXd t = seq.times_s(cfg);
@@ -506,6 +569,24 @@ struct SequenceModel::Impl {
   // so the covariance of Ŝ carries τ's uncertainty to first order.  Returns the final model's
   // factorisation (its extra columns: the others, the thermal directions at τ, ∂/∂τ) and sets
   // the candidate's tau_s and u_tau_s.
+  // The model without the drift family's block key[j] (its other columns kept): the cached
+  // parent when the block is the last one, else factorised here into `own`.
+  const Factor& without_block(const std::vector<int>& key, std::size_t j,
+                              std::optional<Factor>& own) {
+    if (j + 1 == key.size())
+      return factor(std::vector<int>(key.begin(), key.begin() + static_cast<long>(j)));
+    std::vector<Eigen::Index> start(key.size() + 1, 0);
+    for (std::size_t q = 0; q < key.size(); ++q) {
+      Factor& Fq = factor(std::vector<int>(key.begin(), key.begin() + static_cast<long>(q)));
+      start[q + 1] = start[q] + scored_directions(Fq, key[q]);
+    }
+    const Factor& Ff = factor(key);
+    Eigen::MatrixXd others(b.X.rows(), Ff.extra.cols() - (start[j + 1] - start[j]));
+    others << Ff.extra.leftCols(start[j]), Ff.extra.rightCols(Ff.extra.cols() - start[j + 1]);
+    own = factorise(b, others, false);
+    return *own;
+  }
+
   struct ThermalFit {
     Factor F;        // the model with ∂/∂τ
     double rss = 0;  // of the model at τ without ∂/∂τ
@@ -514,21 +595,15 @@ struct SequenceModel::Impl {
   ThermalFit thermal_with_tau(const std::vector<int>& key, std::size_t j, const Eigen::VectorXd& y,
                               SequenceCandidate& cand) {
     // The blocks of the final model's extra columns, in key order.
-    std::vector<Eigen::Index> start(key.size() + 1, 0);
-    for (std::size_t q = 0; q < key.size(); ++q) {
-      Factor& Fq = factor(std::vector<int>(key.begin(), key.begin() + static_cast<long>(q)));
-      start[q + 1] = start[q] + scored_directions(Fq, key[q]);
-    }
-    const Factor& Ff = factor(key);
     Factor& Fp = factor(std::vector<int>(key.begin(), key.begin() + static_cast<long>(j)));
     const Projected& pj = projection(Fp, key[j]);
     // The amplitudes the plan lets the fit take: a = M·c (M = D⁻¹·V_k, the reduced directions).
     const Eigen::MatrixXd M =
         pj.D.cwiseInverse().asDiagonal() * pj.V.leftCols(scored_directions(Fp, key[j]));
     const Eigen::Index k = M.cols();
-    Eigen::MatrixXd others(b.X.rows(), Ff.extra.cols() - k);
-    others << Ff.extra.leftCols(start[j]), Ff.extra.rightCols(Ff.extra.cols() - start[j + 1]);
-    const Factor F0 = factorise(b, others);
+    std::optional<Factor> own;
+    const Factor& F0 = without_block(key, j, own);
+    const Eigen::MatrixXd& others = F0.extra;
     const Eigen::VectorXd r0 = y - F0.Q * (F0.Q.transpose() * y);
     auto rss = [&](double log_tau) {
       const Eigen::MatrixXd Jt = thermal_columns(std::exp(log_tau), false) * M;
@@ -569,18 +644,21 @@ struct SequenceModel::Impl {
     const Eigen::MatrixXd Jt = thermal_columns(tau, false) * M;
     Eigen::MatrixXd extra(b.X.rows(), others.cols() + k + 1);
     extra.leftCols(others.cols() + k) << others, Jt;
-    const Factor Ft = factorise(b, extra.leftCols(others.cols() + k));
-    const Eigen::VectorXd coef =
-        Ft.R.triangularView<Eigen::Upper>().solve(Ft.Q.transpose() * y).tail(k);
+    // Its amplitudes against the others' residual (Frisch-Waugh: the joint fit's).
+    const Eigen::MatrixXd RJ = Jt - F0.Q * (F0.Q.transpose() * Jt);
+    const Eigen::VectorXd coef = RJ.colPivHouseholderQr().solve(r0);
     extra.col(others.cols() + k) = thermal_columns(tau, true) * (M * coef);
-    ThermalFit out{factorise(b, extra), (y - Ft.Q * (Ft.Q.transpose() * y)).squaredNorm(),
-                   static_cast<int>(Ft.Q.rows() - Ft.Q.cols())};
+    ThermalFit out{factorise(b, extra), (r0 - RJ * coef).squaredNorm(),
+                   static_cast<int>(F0.Q.rows() - F0.Q.cols() - k)};
     const Factor& F = out.F;
-    const SequenceFit fit = fit_with(b, F, Eigen::Map<const Eigen::MatrixXd>(y.data(), b.P, b.T));
+    const double rss_F = (y - F.Q * (F.Q.transpose() * y)).squaredNorm();
+    const double dof_F = static_cast<double>(F.Q.rows() - F.Q.cols());
     cand.tau_s = tau;
     // τ's coefficient is the last unknown: its row of R⁻¹ is 1/R_nn.
     const Eigen::Index last = F.R.cols() - 1;
-    cand.u_tau_s = std::abs(F.R(last, last)) > 0 ? fit.sigma_um / std::abs(F.R(last, last)) : 0.0;
+    cand.u_tau_s = std::abs(F.R(last, last)) > 0 && dof_F > 0
+                       ? std::sqrt(rss_F / dof_F) / std::abs(F.R(last, last))
+                       : 0.0;
     return out;
   }
 };
@@ -755,7 +833,6 @@ SequenceRefineResult SequenceModel::Impl::refine(const Eigen::MatrixXd& m_um) {
       if (kind == SequenceEffectKind::drift) jd = static_cast<int>(j);
       if (kind == SequenceEffectKind::thermal) jt = static_cast<int>(j);
     }
-    auto S_of = [&](const Factor& F) { return fit_with(b, F, m_um).S_um; };
     if (jt >= 0) {
       with_tau = thermal_with_tau(key, static_cast<std::size_t>(jt), y, res.added[jt]);
       if (jd < 0) {
@@ -765,8 +842,7 @@ SequenceRefineResult SequenceModel::Impl::refine(const Eigen::MatrixXd& m_um) {
         const double rss_l = (y - Fl.Q * (Fl.Q.transpose() * y)).squaredNorm();
         const double F =
             with_tau->dof > 0 ? (rss_l - with_tau->rss) / (with_tau->rss / with_tau->dof) : 0.0;
-        if (!(f_test_p_value(F, 1, with_tau->dof) < o.alpha))
-          drift_form_dS = Pi * (S_of(Fl) - S_of(with_tau->F));
+        (void)F;
       }
     } else if (jd >= 0) {
       const auto j = static_cast<std::size_t>(jd);
@@ -804,20 +880,29 @@ SequenceRefineResult SequenceModel::Impl::refine(const Eigen::MatrixXd& m_um) {
           res.added[j] = th;
           key = alt;
           with_tau = std::move(tf);
-        } else {
-          drift_form_dS = Pi * (S_of(tf.F) - S_of(Fd));
         }
       }
     }
   }
   if (with_tau) Ff = &with_tau->F;
   res.after = key.empty() ? res.before : fit_with(b, *Ff, m_um);
+  {
+    int jf = -1, members = 0;
+    for (std::size_t j = 0; j < key.size(); ++j)
+      if (cands[static_cast<std::size_t>(key[j])].kind != SequenceEffectKind::traverse) {
+        jf = static_cast<int>(j);
+        ++members;
+      }
+    if (members == 1)
+      drift_form_dS = drift_form_spread(key, static_cast<std::size_t>(jf), y, res.after.S_um);
+  }
   res.u_S_drift_form_um = Eigen::VectorXd::Zero(b.P);
   if (drift_form_dS.size()) {
-    res.u_S_drift_form_um = drift_form_dS.cwiseAbs() / std::sqrt(3.0);
+    // The profile set's edge at 95 %: about 2 standard uncertainties.
+    res.u_S_drift_form_um = drift_form_dS.cwiseAbs() / 2.0;
     Eigen::MatrixXd& G = res.after.S_covariance_factor_um;
     G.conservativeResize(Eigen::NoChange, G.cols() + 1);
-    G.col(G.cols() - 1) = drift_form_dS / std::sqrt(3.0);
+    G.col(G.cols() - 1) = drift_form_dS / 2.0;
     res.after.u_S_um =
         (res.after.u_S_um.cwiseAbs2() + res.u_S_drift_form_um.cwiseAbs2()).cwiseSqrt();
   }
