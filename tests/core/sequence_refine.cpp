@@ -176,6 +176,7 @@ struct Cell {
   int said_not_identifiable = 0;           // runs with a "not identifiable" line for any effect
   int doubled = 0, halved_of_doubled = 0;  // runs where the effect at least doubles the clean error
   std::vector<double> clean, before, after;
+  std::vector<double> u_shown;  // RMS of the refined u_S in the runs where it found something
   double covered = 0, points = 0;
   double covered_shown = 0, points_shown = 0;  // runs where the refine found something, or clean
 };
@@ -206,6 +207,7 @@ Cell run_cell(Case c, const Plan& plan, double sigma = kSigma) {
     cell.after.push_back(r.err_after);
     cell.covered += r.covered;
     cell.points += r.points;
+    if (r.shown) cell.u_shown.push_back(r.u_rms);
     if (r.shown || c == Case::none) {
       cell.covered_shown += r.covered;
       cell.points_shown += r.points;
@@ -220,12 +222,14 @@ Cell run_cell(Case c, const Plan& plan, double sigma = kSigma) {
       "s %.2f %-12s %-22s identified %2d/%d  halved %2d (%2d of %2d doubled)  worse %2d  'not "
       "identifiable' %2d  ambiguous %2d  added %2d | S err um clean %.3f, before %.3f (worst "
       "%.3f), after %.3f "
-      "(worst %.3f) | cov 2u %.3f (%.3f in the runs where it found something)\n",
+      "(worst %.3f) | cov 2u %.3f (%.3f in the runs where it found something, u_S RMS median %.3f "
+      "max %.3f)\n",
       sigma, name(c), plan.label().c_str(), cell.identified, kSeeds, cell.halved,
       cell.halved_of_doubled, cell.doubled, cell.worse, cell.reported, cell.ambiguous, cell.added,
       median(cell.clean), median(cell.before), worst(cell.before), median(cell.after),
       worst(cell.after), cell.covered / cell.points,
-      cell.covered_shown / std::max(cell.points_shown, 1.0));
+      cell.covered_shown / std::max(cell.points_shown, 1.0), median(cell.u_shown),
+      worst(cell.u_shown));
   return cell;
 }
 

@@ -52,7 +52,18 @@
 // otherwise:
 //   u_add(x)² = (toS·V_seen·c)(x)² + s²·Σ_undetermined (toS·v_j)(x)²,
 // toS being what the fit puts into Ŝ (after the gauge) from readings along the effect's columns.
-// u_S = sqrt(u_S² + Σ_effects u_add²).
+// Each effect's own u_add is reported (u_S_added_um); u_S is widened once, by the same formula
+// applied to all detected effects' columns side by side (their joint seen and undetermined
+// directions), because they are often the same signal (a drift and a warm-up of the single
+// plan): u_S = sqrt(u_S² + u_add,joint²).
+//
+// The drift family.  A thermal drift added at a grid τ gets τ fitted (golden section between the
+// grid's neighbours) and carried in u_S by its Gauss-Newton column Σ_c Â_c·∂J_c/∂τ.  A linear
+// drift and a warm-up often fit the readings almost equally well yet give different S (what
+// differs is absorbed by S, γ, e); the thermal member replaces the linear one when it fits
+// significantly better (F-test on τ), and the form the data cannot reject (profile likelihood
+// over the linear member and 40 τ, 95 % bound) enters u_S at half the largest S difference
+// (u_S_drift_form_um).
 #include <Eigen/Core>
 #include <memory>
 #include <string>
