@@ -352,6 +352,31 @@ TEST_CASE("sequence fit: the minimum-zone straightness lies within its U of the 
   CHECK(frac <= 0.99);
 }
 
+// Issue 16 item 2/3: the traverse's direction reaches the residual trace of the refine
+// (RefineOptions::recorded_direction, filled by io::run_refine from the raw file's sequence).
+// The refine traces m1..m4, each configuration's first traverse, which every plan measures
+// forward: the trace then says it saw one direction per configuration, not "not recorded".
+TEST_CASE("the recorded direction reaches the refine's residual trace") {
+  FourSensorConfig cfg;
+  cfg.N = 40;
+  FourSensorSimOptions so;
+  so.sigma_um = kSigma;
+  so.seed = 5;
+  const auto sim = simulate_four_sensor(cfg, random_smooth_truth(cfg, 5), so);
+  auto direction_test = [&](const Eigen::MatrixXd& dir) {
+    RefineOptions o;
+    o.recorded_direction = dir;
+    const RefineResult r = refine_four_sensor(cfg, sim.m_um, {}, o);
+    for (const auto& t : r.trace.tests)
+      if (t.variable == "direction") return t;
+    FAIL("no direction test in the trace");
+    return DependenceTest{};
+  };
+  CHECK(direction_test({}).not_tested == "not recorded");
+  const Eigen::MatrixXd forward = Eigen::MatrixXd::Ones(sim.m_um.rows(), 4);
+  CHECK(direction_test(forward).not_tested == "every configuration measured in one direction only");
+}
+
 TEST_CASE("identifiability from the plan: what each sequence lets drift and a non-repeat show") {
   FourSensorConfig cfg;
   auto ids = [&](ScanSequenceKind k) {
