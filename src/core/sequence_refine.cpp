@@ -14,6 +14,7 @@
 #include "errsep/core/effect_thermal_drift.hpp"
 #include "errsep/core/effect_traverse.hpp"
 #include "errsep/core/four_sensor_system.hpp"
+#include "errsep/core/golden_section.hpp"
 #include "errsep/core/refine.hpp"
 #include "errsep/core/step_decision.hpp"
 
@@ -644,26 +645,8 @@ struct SequenceModel::Impl {
                                                cand_tau[static_cast<std::size_t>(grid[0])]
                                          : 2.0;
     const double lg = std::log(cand.tau_s);
-    double lo = lg - std::log(ratio), hi = lg + std::log(ratio);
-    const double phi = 0.5 * (std::sqrt(5.0) - 1.0);
-    double a = hi - phi * (hi - lo), c = lo + phi * (hi - lo);
-    double fa = rss(a), fc = rss(c);
-    for (int it = 0; it < 30 && hi - lo > 1e-4; ++it) {
-      if (fa < fc) {
-        hi = c;
-        c = a;
-        fc = fa;
-        a = hi - phi * (hi - lo);
-        fa = rss(a);
-      } else {
-        lo = a;
-        a = c;
-        fa = fc;
-        c = lo + phi * (hi - lo);
-        fc = rss(c);
-      }
-    }
-    double log_tau = 0.5 * (lo + hi);
+    double log_tau =
+        golden_section_minimum(rss, lg - std::log(ratio), lg + std::log(ratio), 1e-4, 30);
     if (!(rss(log_tau) < rss(lg))) log_tau = lg;  // never worse than the grid's point
     const double tau = std::exp(log_tau);
     // The fit at τ, then the Gauss-Newton column of τ from its amplitudes.
