@@ -12,6 +12,7 @@
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/reference_csv.hpp"
 #include "errsep/io/staged_directory.hpp"
+#include "errsep/service/four_sensor_pipeline.hpp"
 #include "errsep/version.hpp"
 
 int main(int argc, char** argv) {
@@ -150,10 +151,21 @@ int main(int argc, char** argv) {
       g.set_meta("run_id", stage.run_id());
       errsep::io::write_csv(work / "combined.csv", g);
     }
-    const auto res = combined ? errsep::core::separate_four_sensor_combined(cfg, sim.m_um, sim.g_um)
-                              : errsep::core::separate_four_sensor(cfg, sim.m_um);
-    errsep::io::write_four_sensor_result(
-        work, res, {out_dir + "/raw.csv", "X", "Y", {{"run_id", stage.run_id()}}});
+    errsep::core::FourSensorResult res;
+    if (sequence) {
+      // A scan sequence's result is its fit of every traverse: the four-sensor pipeline's, as
+      // errsep-separate, errsep-scan and errsep-daemon write it (service/four_sensor_pipeline).
+      auto run = errsep::service::FourSensorPipeline({}).separate(
+          raw, work, work / "raw.csv", out_dir + "/raw.csv", stage.run_id());
+      res = std::move(*run.separation);
+      for (const auto& w : run.warnings)
+        std::cerr << "warning: " << w << "\n";
+    } else {
+      res = combined ? errsep::core::separate_four_sensor_combined(cfg, sim.m_um, sim.g_um)
+                     : errsep::core::separate_four_sensor(cfg, sim.m_um);
+      errsep::io::write_four_sensor_result(
+          work, res, {out_dir + "/raw.csv", "X", "Y", {{"run_id", stage.run_id()}}});
+    }
     stage.commit();
     Eigen::VectorXd dS = res.S_um - sim.S_um;
     Eigen::VectorXd dg = res.gamma_rad - sim.gamma_rad;

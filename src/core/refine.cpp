@@ -1074,7 +1074,8 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
   {
     ResidualSpace traced = cur.space;
     if (res.gross.found()) traced.add(reduce_columns(cfg, res.gross.columns));
-    res.trace = trace_residual(traced, cur.m_c, RecordedVariables{t_s, {}, {}}, opts.trace);
+    res.trace = trace_residual(traced, cur.m_c, RecordedVariables{t_s, opts.recorded_direction, {}},
+                               opts.trace);
   }
   if (res.gross.found() && opts.remove_gross_errors) {
     FourSensorResult without = separate_without_gross_errors(cfg, res.m_corrected_um, &res.gross,

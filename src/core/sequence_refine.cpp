@@ -2,13 +2,19 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <map>
+#include <optional>
+#include <random>
 #include <stdexcept>
 
 #include "errsep/core/effect_thermal_drift.hpp"
 #include "errsep/core/effect_traverse.hpp"
 #include "errsep/core/four_sensor_system.hpp"
+#include "errsep/core/golden_section.hpp"
 #include "errsep/core/refine.hpp"
 #include "errsep/core/step_decision.hpp"
 
@@ -111,11 +117,6 @@ Eigen::VectorXd flatten(const Eigen::MatrixXd& m) {
   return y;
 }
 
-Eigen::MatrixXd thin_q(const Eigen::MatrixXd& X) {
-  Eigen::HouseholderQR<Eigen::MatrixXd> qr(X);
-  return qr.householderQ() * Eigen::MatrixXd::Identity(X.rows(), X.cols());
-}
-
 // Columns projected on the complement of span(Q), scaled to unit norm before projection; the SVD
 // of the result.
 struct Projected {
@@ -145,27 +146,57 @@ Projected project(const Eigen::MatrixXd& Q, const Eigen::MatrixXd& J, double tol
   return p;
 }
 
-}  // namespace
+// One column set [base, extra] factorised (X = Q·R, thin), and what the fit and the refine ask
+// of it.  Everything here depends on the plan and the column set only, never on the readings,
+// so a SequenceModel computes it once and every scan of the plan reuses it (the dense QR and Q
+// were ~90 % of a refine's time when rebuilt per call).
+struct Factor {
+  Eigen::MatrixXd extra;     // the columns beyond the base design
+  Eigen::MatrixXd Q, R;      // thin
+  Eigen::VectorXd u_S_unit;  // row norms of Π·(R⁻¹)_S·: u_S = σ̂·u_S_unit
+  Eigen::MatrixXd Rinv_S;    // (R⁻¹)_S·: Cov(Ŝ) = σ̂²·Rinv_S·Rinv_Sᵀ in the fit's gauge
+  Eigen::VectorXd u_gamma_unit, u_f_unit;  // row norms of 1e-6·(R⁻¹)_γ· and Bf·(R⁻¹)_f·
+  std::map<int, Projected> proj;           // candidate → its columns projected off span(Q)
+  std::map<int, Eigen::MatrixXd> toS;  // candidate → Π·(R⁻¹Qᵀ·J·D⁻¹)_S (what the fit puts in Ŝ)
+  std::map<int, Projected> rival;  // candidate's reduced directions of the parent model
+};
 
-SequenceFit fit_four_sensor_sequence(const FourSensorConfig& cfg, const ScanSequence& seq,
-                                     const Eigen::MatrixXd& m_um, const Eigen::MatrixXd& extra) {
-  const Base b = base_design(cfg, seq);
+// with_u: also what fit_with needs for the uncertainties (R⁻¹; a third of the cost); a model
+// used only for projections and residuals goes without.
+Factor factorise(const Base& b, const Eigen::MatrixXd& extra, bool with_u = true) {
+  Factor F;
+  F.extra = extra;
+  Eigen::MatrixXd X(b.X.rows(), b.X.cols() + extra.cols());
+  X.leftCols(b.X.cols()) = b.X;
+  if (extra.cols()) X.rightCols(extra.cols()) = extra;
+  Eigen::HouseholderQR<Eigen::MatrixXd> qr(X);
+  F.Q = qr.householderQ() * Eigen::MatrixXd::Identity(X.rows(), X.cols());
+  F.R = qr.matrixQR().topRows(X.cols()).triangularView<Eigen::Upper>();
+  if (!with_u) return F;
+  // Cov(β) = σ̂²·R⁻¹R⁻ᵀ; the S block about its best-fit bow: Π·Cov_SS·Π.
+  const Eigen::MatrixXd Rinv =
+      F.R.triangularView<Eigen::Upper>().solve(Eigen::MatrixXd::Identity(X.cols(), X.cols()));
+  F.Rinv_S = Rinv.middleRows(b.nf, b.P);
+  const Eigen::MatrixXd Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
+  F.u_S_unit = (Pi * F.Rinv_S).rowwise().norm();
+  F.u_gamma_unit = 1e-6 * Rinv.middleRows(b.nf + b.P, b.P).rowwise().norm();
+  F.u_f_unit = (b.Bf * Rinv.topRows(b.nf)).rowwise().norm();
+  return F;
+}
+
+SequenceFit fit_with(const Base& b, const Factor& F, const Eigen::MatrixXd& m_um) {
+  if (F.u_S_unit.size() != b.P) throw std::logic_error("sequence fit: factor without R^-1");
   if (m_um.rows() != b.P || m_um.cols() != b.T)
     throw std::invalid_argument("readings must be P x T (" + std::to_string(b.P) + " x " +
                                 std::to_string(b.T) + "), got " + std::to_string(m_um.rows()) +
                                 " x " + std::to_string(m_um.cols()));
-  if (extra.size() != 0 && extra.rows() != b.X.rows())
-    throw std::invalid_argument("extra columns must have P*T rows");
-  const Eigen::Index nb = b.X.cols(), q = extra.size() ? extra.cols() : 0;
-  Eigen::MatrixXd X(b.X.rows(), nb + q);
-  X.leftCols(nb) = b.X;
-  if (q) X.rightCols(q) = extra;
   const Eigen::VectorXd y = flatten(m_um);
-  Eigen::HouseholderQR<Eigen::MatrixXd> qr(X);
-  const Eigen::VectorXd beta = qr.solve(y);
-  const Eigen::VectorXd r = y - X * beta;
+  const Eigen::VectorXd qty = F.Q.transpose() * y;
+  const Eigen::VectorXd beta = F.R.triangularView<Eigen::Upper>().solve(qty);
+  const Eigen::VectorXd r = y - F.Q * qty;
+  const Eigen::Index q = F.extra.cols();
   SequenceFit out;
-  out.dof = static_cast<int>(X.rows() - X.cols());
+  out.dof = static_cast<int>(F.Q.rows() - F.Q.cols());
   out.rss_um2 = r.squaredNorm();
   out.sigma_um = out.dof > 0 ? std::sqrt(out.rss_um2 / out.dof) : 0.0;
   out.f_um = b.Bf * beta.head(b.nf);
@@ -179,15 +210,50 @@ SequenceFit fit_four_sensor_sequence(const FourSensorConfig& cfg, const ScanSequ
   out.residual_um.resize(b.P, b.T);
   for (int k = 0; k < b.T; ++k)
     out.residual_um.col(k) = r.segment(static_cast<Eigen::Index>(k) * b.P, b.P);
-  // Cov(β) = σ̂²·R⁻¹R⁻ᵀ; the S block about its best-fit bow: Π·Cov_SS·Π.
-  const Eigen::MatrixXd R = qr.matrixQR().topRows(X.cols()).triangularView<Eigen::Upper>();
-  const Eigen::MatrixXd Rinv_S = R.triangularView<Eigen::Upper>()
-                                     .solve(Eigen::MatrixXd::Identity(X.cols(), X.cols()))
-                                     .middleRows(b.nf, b.P);
-  const Eigen::MatrixXd Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
-  const Eigen::MatrixXd A = Pi * Rinv_S;  // Π·(R⁻¹)_S·: Cov = σ̂²·A·Aᵀ
-  out.u_S_um = out.sigma_um * A.rowwise().norm();
+  out.u_S_um = out.sigma_um * F.u_S_unit;
+  out.S_covariance_factor_um = out.sigma_um * F.Rinv_S;
+  out.u_gamma_rad = out.sigma_um * F.u_gamma_unit;
+  out.u_f_um = out.sigma_um * F.u_f_unit;
   return out;
+}
+
+}  // namespace
+
+SequenceFit fit_four_sensor_sequence(const FourSensorConfig& cfg, const ScanSequence& seq,
+                                     const Eigen::MatrixXd& m_um, const Eigen::MatrixXd& extra) {
+  const Base b = base_design(cfg, seq);
+  if (extra.size() != 0 && extra.rows() != b.X.rows())
+    throw std::invalid_argument("extra columns must have P*T rows");
+  return fit_with(b, factorise(b, extra.size() ? extra : Eigen::MatrixXd(b.X.rows(), 0)), m_um);
+}
+
+StraightnessEstimate sequence_straightness(const SequenceFit& fit, const Eigen::VectorXd& x_mm,
+                                           ReferenceLine reference, int draws) {
+  const Eigen::MatrixXd& G = fit.S_covariance_factor_um;
+  if (x_mm.size() != fit.S_um.size() || G.rows() != fit.S_um.size())
+    throw std::invalid_argument(
+        "sequence_straightness: x, S and the covariance factor differ in "
+        "length");
+  const std::vector<double> x(x_mm.data(), x_mm.data() + x_mm.size());
+  const std::vector<double> s(fit.S_um.data(), fit.S_um.data() + fit.S_um.size());
+  return estimate_straightness(
+      x, s,
+      [&G](const std::vector<double>& c) {
+        return (G.transpose() *
+                Eigen::Map<const Eigen::VectorXd>(c.data(), static_cast<Eigen::Index>(c.size())))
+            .squaredNorm();
+      },
+      [&G](std::uint64_t seed, std::vector<double>& dev) {
+        // A draw of the deviation with covariance G·Gᵀ: G·z, z standard normal.
+        std::mt19937_64 rng(seed);
+        std::normal_distribution<double> n01;
+        Eigen::VectorXd z(G.cols());
+        for (Eigen::Index j = 0; j < z.size(); ++j)
+          z(j) = n01(rng);
+        const Eigen::VectorXd d = G * z;
+        dev.assign(d.data(), d.data() + d.size());
+      },
+      reference, draws);
 }
 
 SequenceEffectColumns sequence_effect_columns(SequenceEffectKind kind, const FourSensorConfig& cfg,
@@ -239,39 +305,147 @@ SequenceEffectColumns sequence_effect_columns(SequenceEffectKind kind, const Fou
   return out;
 }
 
-namespace {
+// The plan's model: the base design, the candidates' columns (drift, thermal at each τ of the
+// grid, traverse; candidate i is an index into `cands`), and the factorisation of every column
+// set the refine has met, keyed by the candidates added in order (their directions are those of
+// the model before them, so the key fixes the columns).
+struct SequenceModel::Impl {
+  FourSensorConfig cfg;
+  ScanSequence seq;
+  SequenceRefineOptions o;
+  Base b;
+  Eigen::MatrixXd Pi;
+  std::vector<SequenceEffectColumns> cands;
+  std::vector<double> cand_tau;  // thermal: τ; else 0
+  std::map<std::vector<int>, Factor> factors;
+  std::vector<SequenceIdentifiability> ids;
 
-double representative_tau_s(const FourSensorConfig& cfg, const ScanSequence& seq, int grid) {
-  const auto g = ThermalDriftEffect::tau_grid_s(seq.times_s(cfg), grid);
-  return g[g.size() / 2];
-}
+  Impl(const FourSensorConfig& c, const ScanSequence& s, const SequenceRefineOptions& opt)
+      : cfg(c), seq(s), o(opt), b(base_design(c, s)) {
+    std::string why;
+    if (!o.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
+    Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
+    const auto taus = ThermalDriftEffect::tau_grid_s(seq.times_s(cfg), o.thermal_grid);
+    auto add = [&](SequenceEffectKind k, double tau) {
+      cands.push_back(
+          sequence_effect_columns(k, cfg, seq, tau > 0 ? tau : 40.0, o.traverse_degree));
+      cand_tau.push_back(tau);
+    };
+    add(SequenceEffectKind::drift, 0.0);
+    for (double tau : taus)
+      add(SequenceEffectKind::thermal, tau);
+    add(SequenceEffectKind::traverse, 0.0);
+    factors.emplace(std::vector<int>{}, factorise(b, Eigen::MatrixXd(b.X.rows(), 0)));
+    ids = identifiability();
+  }
 
-// The widening of the header's file comment, for each detected-but-unidentifiable effect, on the
-// final model (base + added effects): res.after.u_S_um and the candidates' u_S_added_um.
-void widen_for_unidentifiable(const FourSensorConfig& cfg, const ScanSequence& seq, const Base& b,
-                              const Eigen::MatrixXd& extra, const Eigen::VectorXd& y,
-                              const SequenceRefineOptions& o, SequenceRefineResult& res) {
-  res.u_S_widening_um = Eigen::VectorXd::Zero(b.P);
-  if (res.detected_not_identifiable.empty()) return;
-  Eigen::MatrixXd X(b.X.rows(), b.X.cols() + extra.cols());
-  X << b.X, extra;
-  Eigen::HouseholderQR<Eigen::MatrixXd> qr(X);
-  const Eigen::MatrixXd Q = qr.householderQ() * Eigen::MatrixXd::Identity(X.rows(), X.cols());
-  const Eigen::MatrixXd R = qr.matrixQR().topRows(X.cols()).triangularView<Eigen::Upper>();
-  const Eigen::MatrixXd Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
-  const Eigen::VectorXd r = y - Q * (Q.transpose() * y);
-  const double s2_noise = res.after.sigma_um * res.after.sigma_um;
-  Eigen::VectorXd var = Eigen::VectorXd::Zero(b.P);
-  for (auto& c : res.detected_not_identifiable) {
-    const auto cols =
-        sequence_effect_columns(c.kind, cfg, seq, c.tau_s > 0 ? c.tau_s : 40.0, o.traverse_degree);
-    const Projected pj = project(Q, cols.J, o.identifiability_tol, o.weak_direction_sv);
-    const Eigen::MatrixXd Js = cols.J * pj.D.cwiseInverse().asDiagonal();
-    const Eigen::MatrixXd toS =
-        Pi * R.triangularView<Eigen::Upper>().solve(Q.transpose() * Js).middleRows(b.nf, b.P);
+  std::vector<int> candidates_of(SequenceEffectKind k) const {
+    std::vector<int> v;
+    for (std::size_t i = 0; i < cands.size(); ++i)
+      if (cands[i].kind == k) v.push_back(static_cast<int>(i));
+    return v;
+  }
+
+  bool identifiable_from_plan(SequenceEffectKind k) const {
+    return std::any_of(ids.begin(), ids.end(),
+                       [k](const auto& c) { return c.kind == k && c.identifiable_from_plan; });
+  }
+
+  const Projected& projection(Factor& F, int i) {
+    auto it = F.proj.find(i);
+    if (it == F.proj.end())
+      it = F.proj
+               .emplace(i, project(F.Q, cands[static_cast<std::size_t>(i)].J, o.identifiability_tol,
+                                   o.weak_direction_sv))
+               .first;
+    return it->second;
+  }
+
+  // What the fit of model F puts into Ŝ (after the gauge) from readings along candidate i's
+  // unit-scaled columns: Π·(R⁻¹Qᵀ·J·D⁻¹)_S.
+  const Eigen::MatrixXd& to_S(Factor& F, int i) {
+    auto it = F.toS.find(i);
+    if (it == F.toS.end()) {
+      const Projected& pj = projection(F, i);
+      const Eigen::MatrixXd Js =
+          cands[static_cast<std::size_t>(i)].J * pj.D.cwiseInverse().asDiagonal();
+      it = F.toS
+               .emplace(i, Pi * F.R.triangularView<Eigen::Upper>()
+                                    .solve(F.Q.transpose() * Js)
+                                    .middleRows(b.nf, b.P))
+               .first;
+    }
+    return it->second;
+  }
+
+  // The directions candidate i is fitted on in model F: an effect the plan identifies keeps its
+  // weakly determined directions too (by the plan's measure they do not reach S, and without them
+  // the effect is incomplete: a drift fitted on three of its four directions leaves a residual
+  // another effect takes).  One it does not is scored on its well-determined directions, or,
+  // when the plan determines none well (the single plan's non-repeating traverse), on every
+  // direction the data see: the F-test is exact on any of them, and a suspected effect must be
+  // told.
+  int scored_directions(Factor& F, int i) {
+    const Projected& pj = projection(F, i);
+    const bool identifiable = identifiable_from_plan(cands[static_cast<std::size_t>(i)].kind);
+    return identifiable || pj.strong == 0 ? pj.identifiable : pj.strong;
+  }
+  Eigen::MatrixXd directions(Factor& F, int i) {
+    const Projected& pj = projection(F, i);
+    return cands[static_cast<std::size_t>(i)].J * pj.D.cwiseInverse().asDiagonal() *
+           pj.V.leftCols(scored_directions(F, i));
+  }
+
+  Factor& factor(const std::vector<int>& key) {
+    auto it = factors.find(key);
+    if (it != factors.end()) return it->second;
+    const std::vector<int> parent(key.begin(), key.end() - 1);
+    Factor& Fp = factor(parent);
+    const Eigen::MatrixXd d = directions(Fp, key.back());
+    Eigen::MatrixXd extra(b.X.rows(), Fp.extra.cols() + d.cols());
+    extra << Fp.extra, d;
+    return factors.emplace(key, factorise(b, extra)).first->second;
+  }
+
+  std::vector<SequenceIdentifiability> identifiability() {
+    Factor& F = factor({});
+    const auto thermal = candidates_of(SequenceEffectKind::thermal);
+    std::vector<SequenceIdentifiability> out;
+    for (auto kind :
+         {SequenceEffectKind::drift, SequenceEffectKind::thermal, SequenceEffectKind::traverse}) {
+      // The thermal drift at the grid's middle τ represents the family.
+      const int i = kind == SequenceEffectKind::thermal ? thermal[thermal.size() / 2]
+                                                        : candidates_of(kind).front();
+      const Projected& pj = projection(F, i);
+      SequenceIdentifiability id;
+      id.kind = kind;
+      id.parameters = static_cast<int>(pj.D.size());
+      id.identifiable = pj.identifiable;
+      id.strong = pj.strong;
+      id.relative_sv = pj.sv;
+      // A unit column spread over the P·T readings has RMS 1/sqrt(P·T); the RMS change of S it
+      // causes is |toS·v|/sqrt(P): the gain from the effect's reading RMS to S's is
+      // |toS·v|·sqrt(T).
+      const Eigen::Index k0 = id.parameters - pj.strong;
+      if (k0 > 0) {
+        const Eigen::MatrixXd Sh = to_S(F, i) * pj.V.rightCols(k0);
+        id.undetermined_S_gain =
+            Eigen::JacobiSVD<Eigen::MatrixXd>(Sh).singularValues()(0) * std::sqrt(double(b.T));
+      }
+      id.identifiable_from_plan = id.undetermined_S_gain <= o.undetermined_S_max;
+      out.push_back(id);
+    }
+    return out;
+  }
+
+  // What an effect with columns projected as `pj` (its S response toS) could do to S, as
+  // columns of the covariance factor (header's file comment): the seen part's S change and,
+  // per undetermined direction, its S change at the seen coefficients' mean size.
+  Eigen::MatrixXd widening_columns(const Projected& pj, const Eigen::MatrixXd& toS,
+                                   const Eigen::VectorXd& r, double s2_noise) const {
     // The directions that size the effect: the well-determined ones, or every seen one when the
     // plan determines none well (their noise is removed from the squared coefficients).
-    const Eigen::Index q = cols.J.cols();
+    const Eigen::Index q = pj.D.size();
     const Eigen::Index ks = pj.strong > 0 ? pj.strong : pj.identifiable;
     Eigen::VectorXd coef = Eigen::VectorXd::Zero(ks);
     double s2 = 0.0;
@@ -286,54 +460,241 @@ void widen_for_unidentifiable(const FourSensorConfig& cfg, const ScanSequence& s
       s2 += c2;
     }
     if (ks > 0) s2 /= static_cast<double>(ks);
-    const Eigen::VectorXd seen = toS * pj.V.leftCols(ks) * coef;
-    const Eigen::VectorXd unseen = (toS * pj.V.rightCols(q - ks)).rowwise().squaredNorm();
-    const Eigen::VectorXd add = seen.cwiseAbs2() + s2 * unseen;
-    c.u_S_added_um = std::sqrt(add.mean());
-    var += add;
+    Eigen::MatrixXd G(b.P, 1 + (q - ks));
+    G.col(0) = toS * pj.V.leftCols(ks) * coef;
+    G.rightCols(q - ks) = std::sqrt(s2) * (toS * pj.V.rightCols(q - ks));
+    return G;
   }
-  res.u_S_widening_um = var.cwiseSqrt();
-  res.after.u_S_um = (res.after.u_S_um.cwiseAbs2() + var).cwiseSqrt();
+
+  // The widening of the header's file comment for the detected-but-unidentifiable effects
+  // (candidate index in `which`) on the final model F.  Each effect's own widening is reported
+  // (u_S_added_um); u_S is widened once, by what the effects could do to S jointly: their
+  // columns side by side, projected together, so that a direction two of them share (a drift
+  // and a warm-up of the single plan are much the same signal) counts once, not once per effect
+  // (summed in quadrature they double-counted: a large drift in the single plan had traverse
+  // alone add 34 um RMS).
+  void widen_for_unidentifiable(Factor& F, const Eigen::VectorXd& y, const std::vector<int>& which,
+                                SequenceRefineResult& res) {
+    res.u_S_widening_um = Eigen::VectorXd::Zero(b.P);
+    if (res.detected_not_identifiable.empty()) return;
+    const Eigen::VectorXd r = y - F.Q * (F.Q.transpose() * y);
+    const double s2_noise = res.after.sigma_um * res.after.sigma_um;
+    Eigen::MatrixXd J(b.X.rows(), 0);
+    for (std::size_t ci = 0; ci < which.size(); ++ci) {
+      const Eigen::MatrixXd Gi =
+          widening_columns(projection(F, which[ci]), to_S(F, which[ci]), r, s2_noise);
+      res.detected_not_identifiable[ci].u_S_added_um = std::sqrt(Gi.rowwise().squaredNorm().mean());
+      const Eigen::MatrixXd& Ji = cands[static_cast<std::size_t>(which[ci])].J;
+      J.conservativeResize(Eigen::NoChange, J.cols() + Ji.cols());
+      J.rightCols(Ji.cols()) = Ji;
+    }
+    Eigen::MatrixXd G;
+    if (which.size() == 1) {
+      G = widening_columns(projection(F, which[0]), to_S(F, which[0]), r, s2_noise);
+    } else {
+      const Projected pj = project(F.Q, J, o.identifiability_tol, o.weak_direction_sv);
+      const Eigen::MatrixXd toS =
+          Pi * F.R.triangularView<Eigen::Upper>()
+                   .solve(F.Q.transpose() * (J * pj.D.cwiseInverse().asDiagonal()))
+                   .middleRows(b.nf, b.P);
+      // Sized by the joint seen directions' mean.  Measured on the single plan (sigma 0.1): the
+      // detected runs' u_S RMS (median) fell from 13-25 um (per effect, in quadrature) to
+      // 2.6-4.7 um, their coverage stayed 1.000 (drift) and fell from 0.999 to 0.860 (warm-up
+      // on all configurations); the largest single effect's size instead widened beyond the
+      // quadrature sum (18-27 um).
+      G = widening_columns(pj, toS, r, s2_noise);
+    }
+    const Eigen::VectorXd var = G.rowwise().squaredNorm();
+    Eigen::MatrixXd& Gs = res.after.S_covariance_factor_um;
+    Gs.conservativeResize(Eigen::NoChange, Gs.cols() + G.cols());
+    Gs.rightCols(G.cols()) = G;
+    res.u_S_widening_um = var.cwiseSqrt();
+    res.after.u_S_um = (res.after.u_S_um.cwiseAbs2() + var).cwiseSqrt();
+  }
+
+  SequenceRefineResult refine(const Eigen::MatrixXd& m_um);
+
+  // The drift family's form by profile likelihood: the linear drift and the thermal one at 40 τ
+  // (log-spaced over the grid's range and one grid step beyond), each fitted with the model's
+  // other columns (Frisch-Waugh: the family's columns against the residual of the others; Ŝ
+  // updated by the others' R⁻¹Qᵀ).  The members whose residual is within the 95 % profile
+  // bound of the best (rss <= rss_min + 3.84·σ̂², one parameter τ) are those the data do not
+  // reject; returns Π·(Ŝ_m − Ŝ_chosen) of the one farthest from the chosen S (RMS), or empty
+  // when none differs.
+  Eigen::VectorXd drift_form_spread(const std::vector<int>& key, std::size_t j,
+                                    const Eigen::VectorXd& y, const Eigen::VectorXd& S_chosen) {
+    std::optional<Factor> own;
+    const Factor& F0 = without_block(key, j, own);
+    const Eigen::VectorXd qty0 = F0.Q.transpose() * y;
+    const Eigen::VectorXd r0 = y - F0.Q * qty0;
+    const Eigen::VectorXd S0 = F0.R.triangularView<Eigen::Upper>().solve(qty0).segment(b.nf, b.P);
+    Factor& Fp = factor(std::vector<int>(key.begin(), key.begin() + static_cast<long>(j)));
+    auto amplitudes = [&](int i) {  // the amplitudes the plan lets the fit take (M = D⁻¹·V_k)
+      const Projected& pj = projection(Fp, i);
+      return Eigen::MatrixXd(pj.D.cwiseInverse().asDiagonal() *
+                             pj.V.leftCols(scored_directions(Fp, i)));
+    };
+    const auto grid = candidates_of(SequenceEffectKind::thermal);
+    const Eigen::MatrixXd Mt = amplitudes(grid[grid.size() / 2]);
+    const Eigen::MatrixXd Md = amplitudes(candidates_of(SequenceEffectKind::drift).front());
+    std::vector<double> rss;
+    std::vector<Eigen::VectorXd> S;
+    auto member = [&](const Eigen::MatrixXd& Jt) {
+      const Eigen::MatrixXd QtJ = F0.Q.transpose() * Jt;
+      const Eigen::MatrixXd RJ = Jt - F0.Q * QtJ;
+      const Eigen::VectorXd c = RJ.colPivHouseholderQr().solve(r0);
+      rss.push_back((r0 - RJ * c).squaredNorm());
+      S.push_back(S0 - F0.R.triangularView<Eigen::Upper>().solve(QtJ).middleRows(b.nf, b.P) * c);
+    };
+    member(cands[static_cast<std::size_t>(candidates_of(SequenceEffectKind::drift).front())].J *
+           Md);
+    const double lo = cand_tau[static_cast<std::size_t>(grid.front())],
+                 hi = cand_tau[static_cast<std::size_t>(grid.back())];
+    const double ratio = grid.size() > 1 ? std::pow(hi / lo, 1.0 / (grid.size() - 1)) : 2.0;
+    constexpr int kProfile = 40;
+    for (int q = 0; q < kProfile; ++q) {
+      const double tau =
+          lo / ratio * std::pow(hi * ratio / (lo / ratio), static_cast<double>(q) / (kProfile - 1));
+      member(thermal_columns(tau, false) * Mt);
+    }
+    const double rss_min = *std::min_element(rss.begin(), rss.end());
+    const int dof = static_cast<int>(F0.Q.rows() - F0.Q.cols() - Mt.cols() - 1);
+    const double bound = rss_min * (1.0 + 3.84 / std::max(dof, 1));
+    Eigen::VectorXd out;
+    double far = 0.0;
+    for (std::size_t q = 0; q < rss.size(); ++q) {
+      if (rss[q] > bound) continue;
+      const Eigen::VectorXd d = Pi * (S[q] - S_chosen);
+      if (d.squaredNorm() > far) {
+        far = d.squaredNorm();
+        out = d;
+      }
+    }
+    return out;
+  }
+
+  // The thermal columns at τ, and their derivative with respect to τ (P·T × 4).
+  Eigen::MatrixXd thermal_columns(double tau_s, bool derivative) const {
+    const Eigen::MatrixXd t = seq.times_s(cfg);
+    const double t0 = t.minCoeff();
+    Eigen::MatrixXd J = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(b.P) * b.T, 4);
+    for (int k = 0; k < b.T; ++k)
+      for (int n = 0; n < b.P; ++n) {
+        const double tt = t(n, k) - t0, e = std::exp(-tt / tau_s);
+        J(static_cast<Eigen::Index>(k) * b.P + n,
+          seq.traverses[static_cast<std::size_t>(k)].configuration) =
+            derivative ? -tt / (tau_s * tau_s) * e : 1.0 - e;
+      }
+    return J;
+  }
+
+  // A thermal drift added at a grid τ (candidate key[j]): τ is a parameter of the fit, not a
+  // constant (issue 16 item 2: u_S lacked τ's uncertainty; the applied thermal cells covered
+  // 0.59-0.79).  τ is searched by least squares between the grid's neighbours (golden section
+  // on log τ, the residual of the other columns projected out), then the model is linearised in
+  // τ at its optimum (Gauss-Newton): the column ∂(effect)/∂τ = Σ_c Â_c·∂J_c/∂τ joins the design,
+  // so the covariance of Ŝ carries τ's uncertainty to first order.  Returns the final model's
+  // factorisation (its extra columns: the others, the thermal directions at τ, ∂/∂τ) and sets
+  // the candidate's tau_s and u_tau_s.
+  // The model without the drift family's block key[j] (its other columns kept): the cached
+  // parent when the block is the last one, else factorised here into `own`.
+  const Factor& without_block(const std::vector<int>& key, std::size_t j,
+                              std::optional<Factor>& own) {
+    if (j + 1 == key.size())
+      return factor(std::vector<int>(key.begin(), key.begin() + static_cast<long>(j)));
+    std::vector<Eigen::Index> start(key.size() + 1, 0);
+    for (std::size_t q = 0; q < key.size(); ++q) {
+      Factor& Fq = factor(std::vector<int>(key.begin(), key.begin() + static_cast<long>(q)));
+      start[q + 1] = start[q] + scored_directions(Fq, key[q]);
+    }
+    const Factor& Ff = factor(key);
+    Eigen::MatrixXd others(b.X.rows(), Ff.extra.cols() - (start[j + 1] - start[j]));
+    others << Ff.extra.leftCols(start[j]), Ff.extra.rightCols(Ff.extra.cols() - start[j + 1]);
+    own = factorise(b, others, false);
+    return *own;
+  }
+
+  struct ThermalFit {
+    Factor F;        // the model with ∂/∂τ
+    double rss = 0;  // of the model at τ without ∂/∂τ
+    int dof = 0;
+  };
+  ThermalFit thermal_with_tau(const std::vector<int>& key, std::size_t j, const Eigen::VectorXd& y,
+                              SequenceCandidate& cand) {
+    // The blocks of the final model's extra columns, in key order.
+    Factor& Fp = factor(std::vector<int>(key.begin(), key.begin() + static_cast<long>(j)));
+    const Projected& pj = projection(Fp, key[j]);
+    // The amplitudes the plan lets the fit take: a = M·c (M = D⁻¹·V_k, the reduced directions).
+    const Eigen::MatrixXd M =
+        pj.D.cwiseInverse().asDiagonal() * pj.V.leftCols(scored_directions(Fp, key[j]));
+    const Eigen::Index k = M.cols();
+    std::optional<Factor> own;
+    const Factor& F0 = without_block(key, j, own);
+    const Eigen::MatrixXd& others = F0.extra;
+    const Eigen::VectorXd r0 = y - F0.Q * (F0.Q.transpose() * y);
+    auto rss = [&](double log_tau) {
+      const Eigen::MatrixXd Jt = thermal_columns(std::exp(log_tau), false) * M;
+      const Eigen::MatrixXd RJ = Jt - F0.Q * (F0.Q.transpose() * Jt);
+      Eigen::HouseholderQR<Eigen::MatrixXd> qr(RJ);
+      const Eigen::MatrixXd Qj = qr.householderQ() * Eigen::MatrixXd::Identity(RJ.rows(), k);
+      return r0.squaredNorm() - (Qj.transpose() * r0).squaredNorm();
+    };
+    // Between the neighbouring grid points (the grid's ratio; one step beyond the grid's ends).
+    const auto grid = candidates_of(SequenceEffectKind::thermal);
+    const double ratio = grid.size() > 1 ? cand_tau[static_cast<std::size_t>(grid[1])] /
+                                               cand_tau[static_cast<std::size_t>(grid[0])]
+                                         : 2.0;
+    const double lg = std::log(cand.tau_s);
+    double log_tau =
+        golden_section_minimum(rss, lg - std::log(ratio), lg + std::log(ratio), 1e-4, 30);
+    if (!(rss(log_tau) < rss(lg))) log_tau = lg;  // never worse than the grid's point
+    const double tau = std::exp(log_tau);
+    // The fit at τ, then the Gauss-Newton column of τ from its amplitudes.
+    const Eigen::MatrixXd Jt = thermal_columns(tau, false) * M;
+    Eigen::MatrixXd extra(b.X.rows(), others.cols() + k + 1);
+    extra.leftCols(others.cols() + k) << others, Jt;
+    // Its amplitudes against the others' residual (Frisch-Waugh: the joint fit's).
+    const Eigen::MatrixXd RJ = Jt - F0.Q * (F0.Q.transpose() * Jt);
+    const Eigen::VectorXd coef = RJ.colPivHouseholderQr().solve(r0);
+    extra.col(others.cols() + k) = thermal_columns(tau, true) * (M * coef);
+    ThermalFit out{factorise(b, extra), (r0 - RJ * coef).squaredNorm(),
+                   static_cast<int>(F0.Q.rows() - F0.Q.cols() - k)};
+    const Factor& F = out.F;
+    const double rss_F = (y - F.Q * (F.Q.transpose() * y)).squaredNorm();
+    const double dof_F = static_cast<double>(F.Q.rows() - F.Q.cols());
+    cand.tau_s = tau;
+    // τ's coefficient is the last unknown: its row of R⁻¹ is 1/R_nn.
+    const Eigen::Index last = F.R.cols() - 1;
+    cand.u_tau_s = std::abs(F.R(last, last)) > 0 && dof_F > 0
+                       ? std::sqrt(rss_F / dof_F) / std::abs(F.R(last, last))
+                       : 0.0;
+    return out;
+  }
+};
+
+SequenceModel::SequenceModel(const FourSensorConfig& cfg, const ScanSequence& seq,
+                             const SequenceRefineOptions& o)
+    : impl_(std::make_unique<Impl>(cfg, seq, o)) {}
+SequenceModel::~SequenceModel() = default;
+SequenceModel::SequenceModel(SequenceModel&&) noexcept = default;
+SequenceModel& SequenceModel::operator=(SequenceModel&&) noexcept = default;
+
+const std::vector<SequenceIdentifiability>& SequenceModel::identifiability() const {
+  return impl_->ids;
 }
 
-}  // namespace
+SequenceFit SequenceModel::fit(const Eigen::MatrixXd& m_um) const {
+  return fit_with(impl_->b, impl_->factors.at({}), m_um);
+}
+
+SequenceRefineResult SequenceModel::refine(const Eigen::MatrixXd& m_um) {
+  return impl_->refine(m_um);
+}
 
 std::vector<SequenceIdentifiability> sequence_identifiability(const FourSensorConfig& cfg,
                                                               const ScanSequence& seq,
                                                               const SequenceRefineOptions& o) {
-  const Base b = base_design(cfg, seq);
-  Eigen::HouseholderQR<Eigen::MatrixXd> qr(b.X);
-  const Eigen::MatrixXd Q = qr.householderQ() * Eigen::MatrixXd::Identity(b.X.rows(), b.X.cols());
-  const Eigen::MatrixXd R = qr.matrixQR().topRows(b.X.cols()).triangularView<Eigen::Upper>();
-  const Eigen::MatrixXd Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
-  const double tau = representative_tau_s(cfg, seq, o.thermal_grid);
-  std::vector<SequenceIdentifiability> out;
-  for (auto kind :
-       {SequenceEffectKind::drift, SequenceEffectKind::thermal, SequenceEffectKind::traverse}) {
-    const auto cols = sequence_effect_columns(kind, cfg, seq, tau, o.traverse_degree);
-    const Projected pj = project(Q, cols.J, o.identifiability_tol, o.weak_direction_sv);
-    SequenceIdentifiability id;
-    id.kind = kind;
-    id.parameters = static_cast<int>(cols.J.cols());
-    id.identifiable = pj.identifiable;
-    id.strong = pj.strong;
-    id.relative_sv = pj.sv;
-    // What the base fit puts into S from readings J·D⁻¹·v: (R⁻¹Qᵀ)_S·J·D⁻¹·v, after the gauge.
-    const Eigen::MatrixXd Js = cols.J * pj.D.cwiseInverse().asDiagonal();
-    const Eigen::MatrixXd toS =
-        Pi * R.triangularView<Eigen::Upper>().solve(Q.transpose() * Js).middleRows(b.nf, b.P);
-    // A unit column spread over the P·T readings has RMS 1/sqrt(P·T); the RMS change of S it
-    // causes is |toS·v|/sqrt(P): the gain from the effect's reading RMS to S's is |toS·v|·sqrt(T).
-    const Eigen::Index k0 = id.parameters - pj.strong;
-    if (k0 > 0) {
-      const Eigen::MatrixXd Sh = toS * pj.V.rightCols(k0);
-      id.undetermined_S_gain =
-          Eigen::JacobiSVD<Eigen::MatrixXd>(Sh).singularValues()(0) * std::sqrt(double(b.T));
-    }
-    id.identifiable_from_plan = id.undetermined_S_gain <= o.undetermined_S_max;
-    out.push_back(id);
-  }
-  return out;
+  return SequenceModel(cfg, seq, o).identifiability();
 }
 
 bool SequenceRefineResult::identified(SequenceEffectKind k) const {
@@ -349,66 +710,56 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
                                                  const ScanSequence& seq,
                                                  const Eigen::MatrixXd& m_um,
                                                  const SequenceRefineOptions& o) {
-  std::string why;
-  if (!o.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
+  return SequenceModel(cfg, seq, o).refine(m_um);
+}
+
+SequenceRefineResult SequenceModel::Impl::refine(const Eigen::MatrixXd& m_um) {
   SequenceRefineResult res;
   res.plan = seq.name;
-  res.before = fit_four_sensor_sequence(cfg, seq, m_um);
-  res.plan_identifiability = sequence_identifiability(cfg, seq, o);
-  const Base b = base_design(cfg, seq);
+  res.before = fit_with(b, factor({}), m_um);
+  res.plan_identifiability = ids;
   const Eigen::VectorXd y = flatten(m_um);
-  const auto taus = ThermalDriftEffect::tau_grid_s(seq.times_s(cfg), o.thermal_grid);
   const std::vector<SequenceEffectKind> kinds = {
       SequenceEffectKind::drift, SequenceEffectKind::thermal, SequenceEffectKind::traverse};
-  Eigen::MatrixXd extra(b.X.rows(), 0);
+  std::vector<int> key;           // the candidates added, in order
+  std::vector<int> detected_ids;  // candidate of each res.detected_not_identifiable
   for (int round = 0; round < o.max_effects; ++round) {
-    Eigen::MatrixXd X(b.X.rows(), b.X.cols() + extra.cols());
-    X << b.X, extra;
-    const Eigen::MatrixXd Q = thin_q(X);
-    const Eigen::VectorXd r = y - Q * (Q.transpose() * y);
+    Factor& F = factor(key);
+    const Eigen::VectorXd r = y - F.Q * (F.Q.transpose() * y);
     const double rss = r.squaredNorm();
-    const int dof = static_cast<int>(X.rows() - X.cols());
+    const int dof = static_cast<int>(F.Q.rows() - F.Q.cols());
     std::vector<SequenceCandidate> scored;
-    std::vector<Eigen::MatrixXd> directions;
+    std::vector<int> best_of;  // candidate index of each scored entry, or -1 (no directions)
     for (auto kind : kinds) {
       if (res.identified(kind)) continue;
       SequenceCandidate best;
       best.kind = kind;
-      const bool identifiable = res.identifiable_from_plan(kind);
-      Eigen::MatrixXd best_dirs;
-      const std::vector<double> grid =
-          kind == SequenceEffectKind::thermal ? taus : std::vector<double>{0.0};
-      for (double tau : grid) {
-        const auto cols = sequence_effect_columns(kind, cfg, seq, tau, o.traverse_degree);
-        const Projected pj = project(Q, cols.J, o.identifiability_tol, o.weak_direction_sv);
-        // An effect the plan identifies keeps its weakly determined directions too: by the
-        // plan's measure they do not reach S, and without them the effect is incomplete (a
-        // drift fitted on three of its four directions leaves a residual another effect takes).
-        // One it does not is scored on its well-determined directions, or, when the plan
-        // determines none well (the single plan's non-repeating traverse), on every direction
-        // the data see: the F-test is exact on any of them, and a suspected effect must be told.
-        const int kid = identifiable || pj.strong == 0 ? pj.identifiable : pj.strong;
+      int best_i = -1;
+      const std::vector<int> grid = candidates_of(kind);
+      for (int i : grid) {
+        const Projected& pj = projection(F, i);
+        const int kid = scored_directions(F, i);
         if (kid == 0 || dof - kid <= 0) continue;
         double d = 0.0;
         for (int j = 0; j < kid; ++j)
           d += std::pow(pj.U.col(j).dot(r), 2);
-        const double F = (d / kid) / ((rss - d) / (dof - kid));
-        const double p = f_test_p_value(F, kid, dof - kid);
-        if (best_dirs.size() == 0 || p < best.p_value) {
-          best.description = cols.description;
-          best.tau_s = kind == SequenceEffectKind::thermal ? tau : 0.0;
+        const double Fs = (d / kid) / ((rss - d) / (dof - kid));
+        const double p = f_test_p_value(Fs, kid, dof - kid);
+        if (best_i < 0 || p < best.p_value) {
+          best.description = cands[static_cast<std::size_t>(i)].description;
+          best.tau_s = cand_tau[static_cast<std::size_t>(i)];
           best.identifiable = kid;
-          best.F = F;
+          best.F = Fs;
           best.p_value = p;
           best.delta_rss_um2 = d;
-          best_dirs = cols.J * pj.D.cwiseInverse().asDiagonal() * pj.V.leftCols(kid);
+          best_i = i;
         }
       }
       // Šidák over the τ grid (neighbouring values are correlated: conservative).
       if (grid.size() > 1)
         best.p_value = -std::expm1(static_cast<double>(grid.size()) * std::log1p(-best.p_value));
       scored.push_back(best);
-      directions.push_back(best_dirs);
+      best_of.push_back(best_i);
     }
     if (round == 0) res.first_round = scored;
     if (scored.empty()) break;
@@ -417,11 +768,13 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
     const double threshold = o.alpha / static_cast<double>(scored.size());
     std::size_t ib = scored.size();
     for (std::size_t i = 0; i < scored.size(); ++i) {
-      if (!(scored[i].p_value < threshold) || directions[i].size() == 0) continue;
-      if (!res.identifiable_from_plan(scored[i].kind)) {
+      if (!(scored[i].p_value < threshold) || best_of[i] < 0) continue;
+      if (!identifiable_from_plan(scored[i].kind)) {
         if (std::none_of(res.detected_not_identifiable.begin(), res.detected_not_identifiable.end(),
-                         [&](const auto& c) { return c.kind == scored[i].kind; }))
+                         [&](const auto& c) { return c.kind == scored[i].kind; })) {
           res.detected_not_identifiable.push_back(scored[i]);
+          detected_ids.push_back(best_of[i]);
+        }
         continue;
       }
       if (ib == scored.size() || scored[i].p_value < scored[ib].p_value) ib = i;
@@ -438,19 +791,25 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
     };
     std::string rival;
     for (std::size_t i = 0; i < scored.size(); ++i) {
-      if (i == ib || !(scored[i].p_value < threshold) || directions[i].size() == 0) continue;
+      if (i == ib || !(scored[i].p_value < threshold) || best_of[i] < 0) continue;
       if (is_drift(scored[i].kind) && is_drift(scored[ib].kind)) continue;
-      Eigen::MatrixXd Xr(X.rows(), X.cols() + directions[i].cols());
-      Xr << X, directions[i];
-      const Eigen::MatrixXd Qr = thin_q(Xr);
-      const Eigen::VectorXd rr = y - Qr * (Qr.transpose() * y);
-      const Projected pb = project(Qr, directions[ib], o.identifiability_tol, 0.0);
-      const int kb = pb.identifiable, dof_r = static_cast<int>(Xr.rows() - Xr.cols()) - kb;
+      std::vector<int> rkey = key;
+      rkey.push_back(best_of[i]);
+      Factor& Fr = factor(rkey);  // the model with the rival's directions
+      auto it = Fr.rival.find(best_of[ib]);
+      if (it == Fr.rival.end())
+        it = Fr.rival
+                 .emplace(best_of[ib], project(Fr.Q, directions(factor(key), best_of[ib]),
+                                               o.identifiability_tol, 0.0))
+                 .first;
+      const Projected& pb = it->second;
+      const Eigen::VectorXd rr = y - Fr.Q * (Fr.Q.transpose() * y);
+      const int kb = pb.identifiable, dof_r = static_cast<int>(Fr.Q.rows() - Fr.Q.cols()) - kb;
       double d = 0.0;
       for (int j = 0; j < kb; ++j)
         d += std::pow(pb.U.col(j).dot(rr), 2);
-      const double F = kb > 0 && dof_r > 0 ? (d / kb) / ((rr.squaredNorm() - d) / dof_r) : 0.0;
-      if (!(f_test_p_value(F, kb, dof_r) < threshold)) rival = to_string(scored[i].kind);
+      const double Fs = kb > 0 && dof_r > 0 ? (d / kb) / ((rr.squaredNorm() - d) / dof_r) : 0.0;
+      if (!(f_test_p_value(Fs, kb, dof_r) < threshold)) rival = to_string(scored[i].kind);
     }
     if (!rival.empty()) {
       char amb[300];
@@ -462,17 +821,118 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
       res.ambiguous.push_back(amb);
       break;
     }
-    Eigen::MatrixXd grown(extra.rows(), extra.cols() + directions[ib].cols());
-    grown << extra, directions[ib];
-    extra = grown;
+    key.push_back(best_of[ib]);
     res.added.push_back(scored[ib]);
   }
-  res.after = extra.cols() ? fit_four_sensor_sequence(cfg, seq, m_um, extra) : res.before;
-  widen_for_unidentifiable(cfg, seq, b, extra, y, o, res);
+  Factor* Ff = &factor(key);
+  std::optional<ThermalFit> with_tau;
+  // The drift family (a linear drift is the long-τ limit of the thermal one): which member was
+  // added, and whether the data tell the two apart.  They often do not: the readings differ by
+  // little (what differs is mostly absorbed by S, γ, e), yet S does (reversed plan, thermal on all
+  // configurations taken for a line: S covered 0.10-0.56 in those runs).  So the other member is
+  // fitted too (the thermal one with τ fitted); it replaces the one added when it fits
+  // significantly better (F-test on the one parameter τ at the step's level), and when neither
+  // does, what the choice does to S, ΔS = Ŝ_other − Ŝ_chosen (after the gauge), enters u_S as
+  // a type-B term between the two (u = |ΔS|/√3, uniform between them).
+  Eigen::VectorXd drift_form_dS;
+  {
+    int jd = -1, jt = -1;
+    for (std::size_t j = 0; j < key.size(); ++j) {
+      const auto kind = cands[static_cast<std::size_t>(key[j])].kind;
+      if (kind == SequenceEffectKind::drift) jd = static_cast<int>(j);
+      if (kind == SequenceEffectKind::thermal) jt = static_cast<int>(j);
+    }
+    if (jt >= 0) {
+      with_tau = thermal_with_tau(key, static_cast<std::size_t>(jt), y, res.added[jt]);
+      if (jd < 0) {
+        std::vector<int> lin = key;
+        lin[static_cast<std::size_t>(jt)] = candidates_of(SequenceEffectKind::drift).front();
+        const Factor& Fl = factor(lin);
+        const double rss_l = (y - Fl.Q * (Fl.Q.transpose() * y)).squaredNorm();
+        const double F =
+            with_tau->dof > 0 ? (rss_l - with_tau->rss) / (with_tau->rss / with_tau->dof) : 0.0;
+        (void)F;
+      }
+    } else if (jd >= 0) {
+      const auto j = static_cast<std::size_t>(jd);
+      std::vector<int> alt = key;
+      int best = -1;
+      double best_rss = 0;
+      Factor& Fp = factor(std::vector<int>(key.begin(), key.begin() + static_cast<long>(j)));
+      const Eigen::VectorXd rp = y - Fp.Q * (Fp.Q.transpose() * y);
+      for (int i : candidates_of(SequenceEffectKind::thermal)) {
+        const Projected& pj = projection(Fp, i);
+        const int kid = scored_directions(Fp, i);
+        double d = 0.0;
+        for (int q = 0; q < kid; ++q)
+          d += std::pow(pj.U.col(q).dot(rp), 2);
+        if (best < 0 || rp.squaredNorm() - d < best_rss) {
+          best = i;
+          best_rss = rp.squaredNorm() - d;
+        }
+      }
+      if (best >= 0) {
+        alt[j] = best;
+        SequenceCandidate th = res.added[j];
+        th.kind = SequenceEffectKind::thermal;
+        th.tau_s = cand_tau[static_cast<std::size_t>(best)];
+        th.description = cands[static_cast<std::size_t>(best)].description;
+        ThermalFit tf = thermal_with_tau(alt, j, y, th);
+        const Factor& Fd = factor(key);
+        const double rss_d = (y - Fd.Q * (Fd.Q.transpose() * y)).squaredNorm();
+        const double F = tf.dof > 0 ? (rss_d - tf.rss) / (tf.rss / tf.dof) : 0.0;
+        if (f_test_p_value(F, 1, tf.dof) < o.alpha) {
+          char note[120];
+          std::snprintf(note, sizeof note, " (fits better than a linear drift: F = %.3g)", F);
+          th.description += note;
+          th.identifiable = scored_directions(Fp, best);
+          res.added[j] = th;
+          key = alt;
+          with_tau = std::move(tf);
+        }
+      }
+    }
+  }
+  if (with_tau) Ff = &with_tau->F;
+  res.after = key.empty() ? res.before : fit_with(b, *Ff, m_um);
+  {
+    int jf = -1, members = 0;
+    for (std::size_t j = 0; j < key.size(); ++j)
+      if (cands[static_cast<std::size_t>(key[j])].kind != SequenceEffectKind::traverse) {
+        jf = static_cast<int>(j);
+        ++members;
+      }
+    if (members == 1)
+      drift_form_dS = drift_form_spread(key, static_cast<std::size_t>(jf), y, res.after.S_um);
+  }
+  res.u_S_drift_form_um = Eigen::VectorXd::Zero(b.P);
+  if (drift_form_dS.size()) {
+    // The profile set's edge at 95 %: about 2 standard uncertainties.
+    res.u_S_drift_form_um = drift_form_dS.cwiseAbs() / 2.0;
+    Eigen::MatrixXd& G = res.after.S_covariance_factor_um;
+    G.conservativeResize(Eigen::NoChange, G.cols() + 1);
+    G.col(G.cols() - 1) = drift_form_dS / 2.0;
+    res.after.u_S_um =
+        (res.after.u_S_um.cwiseAbs2() + res.u_S_drift_form_um.cwiseAbs2()).cwiseSqrt();
+  }
+  widen_for_unidentifiable(*Ff, y, detected_ids, res);
   char buf[600];
   for (const auto& a : res.added) {
     std::snprintf(buf, sizeof buf, "%s identified: %s, %d direction(s), F = %.3g, p = %.2g",
                   to_string(a.kind), a.description.c_str(), a.identifiable, a.F, a.p_value);
+    if (a.kind == SequenceEffectKind::thermal) {
+      char t[120];
+      std::snprintf(t, sizeof t, "; tau fitted %.3g +- %.2g s (carried in u_S)", a.tau_s,
+                    a.u_tau_s);
+      std::strncat(buf, t, sizeof buf - std::strlen(buf) - 1);
+    }
+    res.report.push_back(buf);
+  }
+  if (drift_form_dS.size()) {
+    std::snprintf(buf, sizeof buf,
+                  "drift: linear or thermal (warm-up) form not told apart by the data; S differs "
+                  "by %.2g um RMS between them: carried in u_S",
+                  std::sqrt(drift_form_dS.squaredNorm() / static_cast<double>(b.P)));
     res.report.push_back(buf);
   }
   res.report.insert(res.report.end(), res.ambiguous.begin(), res.ambiguous.end());

@@ -95,6 +95,8 @@ void write_four_sensor_result(const std::filesystem::path& dir, const core::Four
       motion.set_meta(key + "_bias_um", fmt(e.bias_um));
       motion.set_meta(key + "_of_estimate_um", fmt(e.zone.straightness_um));
     }
+  for (const auto& [k, v] : info.motion_metadata)
+    motion.set_meta(k, v);
 
   CsvTable ref;
   common_meta(ref, r, info);
@@ -154,6 +156,8 @@ void write_four_sensor_result(const std::filesystem::path& dir, const core::Four
           << "lambda: " << core::to_string(r.rule) << ", L-curve branch " << r.lcurve.branch_decades
           << " decades, fallback " << core::to_string(r.lambda_fallback) << "\n";
   if (!r.determination_note.empty()) summary << "not determined: " << r.determination_note << "\n";
+  for (const auto& line : info.summary_notes)
+    summary << line << "\n";
 
   write_csv(dir / "motion.csv", motion);
   write_csv(dir / "reference.csv", ref);

@@ -167,8 +167,20 @@ RefineRunResult run_refine(const FourSensorInputs& in, const fs::path& out_dir,
   if (opts.reference_csv) (void)read_reference_csv(*opts.reference_csv);
 
   RefineRunResult out;
-  out.result =
-      core::refine_four_sensor(in.cfg, in.m_um, in.t_s, opts.refine, truth ? &*truth : nullptr);
+  core::RefineOptions ro = opts.refine;
+  if (in.sequence) {
+    // The direction of each configuration's first traverse (m1..m4 are those traverses), for
+    // the residual trace.
+    const core::ScanSequence& seq = in.sequence->first;
+    ro.recorded_direction = Eigen::MatrixXd::Ones(in.m_um.rows(), 4);
+    for (int c = 0; c < 4; ++c)
+      for (const auto& tr : seq.traverses)
+        if (tr.configuration == c) {
+          if (tr.direction == core::TraverseDirection::backward) ro.recorded_direction.col(c) *= -1;
+          break;
+        }
+  }
+  out.result = core::refine_four_sensor(in.cfg, in.m_um, in.t_s, ro, truth ? &*truth : nullptr);
   const core::RefineResult& r = out.result;
   if (opts.reference_csv)
     out.reference =

@@ -552,7 +552,13 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
       html.configuration.emplace_back("residual rms (um)",
                                       sig(std::sqrt(sq / static_cast<double>(rr.size()))));
     }
-    if (fs::exists(dir / "lcurve.csv")) {
+    // A least-squares result (λ = 0: a scan sequence's fit, --rule ls) has no λ search to draw:
+    // its lcurve.csv has no rows.
+    const bool no_lambda_search = fs::exists(dir / "lcurve.csv") && [&] {
+      const auto t = read_csv(dir / "lcurve.csv", {.allow_non_finite = false, .min_rows = 0});
+      return t.rows.empty() && t.meta("lambda_rule") == std::optional<std::string>("least_squares");
+    }();
+    if (fs::exists(dir / "lcurve.csv") && !no_lambda_search) {
       const auto t = read_csv(dir / "lcurve.csv", {.allow_non_finite = false, .min_rows = 2});
       const auto lam = t.column("lambda", dir / "lcurve.csv");
       // The L-curve (rule lcurve), or the criterion a likelihood rule minimised over λ.

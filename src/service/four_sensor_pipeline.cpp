@@ -1,7 +1,10 @@
 #include "errsep/service/four_sensor_pipeline.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
+
+#include "errsep/core/four_sensor_system.hpp"
 
 #include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/refine_run.hpp"
@@ -34,6 +37,54 @@ FourSensorPipelineOptions pipeline_options(const io::MachineConfig& cfg, const s
   return o;
 }
 
+namespace {
+
+// The result of a scan sequence's refined fit in the single separation's form (motion.csv and
+// the rest are written from it): S, γ, f and their uncertainties in the fit's gauge (the same
+// gauge as the default separation: f's ends at 0, f without bow), the residuals of each
+// configuration's first traverse (residuals.csv holds one per configuration), λ = 0.
+core::FourSensorResult result_of_sequence(const core::FourSensorResult& single,
+                                          const core::ScanSequence& seq,
+                                          const core::SequenceRefineResult& sr) {
+  const core::SequenceFit& fit = sr.after;
+  core::FourSensorResult r;
+  r.config = single.config;
+  r.x_mm = single.x_mm;
+  r.f_x_mm = single.f_x_mm;
+  r.S_um = fit.S_um;
+  r.gamma_rad = fit.gamma_rad;
+  r.f_um = fit.f_um;
+  r.u_S_um = fit.u_S_in_gauge_um();
+  r.u_gamma_rad = fit.u_gamma_rad;
+  r.u_f_um = fit.u_f_um;
+  r.sensor_residual_um.resize(fit.residual_um.rows(), 4);
+  for (int c = 0; c < 4; ++c)
+    for (int k = 0; k < seq.size(); ++k)
+      if (seq.traverses[static_cast<std::size_t>(k)].configuration == c) {
+        r.sensor_residual_um.col(c) = fit.residual_um.col(k);
+        r.e_um(c) = fit.e_um(k);
+        break;
+      }
+  r.lambda = 0.0;
+  r.rule = core::LambdaRule::least_squares;
+  r.estimator = single.estimator;
+  r.penalty = core::Penalty::none;
+  r.gauge = core::CurvatureGauge::reference_without_curvature;
+  r.sigma_um = fit.sigma_um;
+  r.redundancy_dof = fit.dof;
+  r.edf = static_cast<double>(fit.residual_um.size() - fit.dof);
+  r.residual_norm = std::sqrt(fit.rss_um2);
+  return r;
+}
+
+std::string format_um(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.10g", v);
+  return b;
+}
+
+}  // namespace
+
 FourSensorPipeline::FourSensorPipeline(FourSensorPipelineOptions opts) : opts_(std::move(opts)) {
   std::string why;
   if (!opts_.is_valid(&why)) throw std::invalid_argument("four-sensor pipeline: " + why);
@@ -53,9 +104,52 @@ FourSensorPipelineResult FourSensorPipeline::separate(const io::RawFourSensorSca
 
   FourSensorPipelineResult out;
   out.separation = core::separate_four_sensor(*raw.geometry, m, opts_.separation);
-  const core::FourSensorResult& res = *out.separation;
   io::ResultWriteInfo info{source, "X", "Y", {{"run_id", run_id}}};
   io::carry_machine_axes(raw.metadata, info);  // where the scan ran, machine coordinates
+  if (raw.sequence) {
+    // A scan sequence: its fit of all traverses is the result (file comment).
+    const auto [seq, m_seq] = io::scan_sequence_of(raw);
+    if (seq.redundant() || seq.name != core::to_string(core::ScanSequenceKind::single)) {
+      core::SequenceRefineOptions so;
+      so.alpha = opts_.refine_alpha;
+      out.sequence_refine = core::refine_four_sensor_sequence(*raw.geometry, seq, m_seq, so);
+      const core::SequenceRefineResult& sr = *out.sequence_refine;
+      out.single_scan = std::move(out.separation);
+      out.separation = result_of_sequence(*out.single_scan, seq, sr);
+      std::string added;
+      for (const auto& a : sr.added)
+        added += (added.empty() ? "" : ", ") + std::string(core::to_string(a.kind));
+      const std::string what =
+          "scan sequence fit (plan: " + seq.name + ", " + std::to_string(seq.size()) +
+          " traverses, least squares), effects applied: " + (added.empty() ? "none" : added);
+      info.extra_metadata.emplace_back("scan_plan", seq.name);
+      info.extra_metadata.emplace_back("separation", what);
+      info.summary_notes.push_back("result: " + what + "; sigma_hat " +
+                                   format_um(sr.after.sigma_um) + " um (" +
+                                   std::to_string(sr.after.dof) + " dof)");
+      if (sr.u_S_widening_um.size() && sr.u_S_widening_um.maxCoeff() > 0)
+        info.summary_notes.push_back(
+            "u_S includes what effects detected but not identifiable from this plan could do to "
+            "S (see the findings)");
+      for (const auto& line : sr.report) {
+        info.summary_notes.push_back("finding: " + line);
+        out.warnings.push_back("scan sequence (" + sr.plan + "): " + line);
+      }
+      // ISO 230-1 straightness with U from the fit's covariance (as the separation writes its
+      // own from its posterior covariance).
+      for (const auto ref : {core::ReferenceLine::end_points, core::ReferenceLine::least_squares,
+                             core::ReferenceLine::minimum_zone}) {
+        const auto e = core::sequence_straightness(sr.after, out.separation->x_mm, ref);
+        const std::string key = std::string("straightness_") + core::to_string(ref);
+        info.motion_metadata.emplace_back(key + "_um", format_um(e.straightness_um));
+        info.motion_metadata.emplace_back(key + "_U_um", format_um(e.expanded_um));
+        info.motion_metadata.emplace_back(key + "_bias_um", format_um(e.bias_um));
+        info.motion_metadata.emplace_back(key + "_of_estimate_um",
+                                          format_um(e.zone.straightness_um));
+      }
+    }
+  }
+  const core::FourSensorResult& res = *out.separation;
   io::write_four_sensor_result(dir, res, info);
   out.files = {"motion.csv", "reference.csv", "lcurve.csv", "residuals.csv", "summary.txt"};
   if (res.lambda_fallback == core::LambdaFallback::discrepancy)
@@ -79,7 +173,9 @@ FourSensorPipelineResult FourSensorPipeline::separate(const io::RawFourSensorSca
           "see refine/refine_report.txt");
     out.refine = std::move(run.result);
     out.files.push_back("refine/");
-    if (run.sequence) {
+    // A sequence that is the result was refined above (its findings are in `warnings`);
+    // run_refine makes the same refine.
+    if (run.sequence && !out.sequence_refine) {
       for (const auto& line : run.sequence->report)
         out.warnings.push_back("scan sequence (" + run.sequence->plan + "): " + line);
       out.sequence_refine = std::move(run.sequence);

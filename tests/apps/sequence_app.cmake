@@ -1,6 +1,7 @@
 # errsep-simulate and errsep-scan (against errsep-devsim, started by the test on an ephemeral
 # loopback port) write scan sequences with an injected drift; errsep-refine, errsep-scan --refine
 # and errsep-report find and print it (all built with the test).
-add_dependencies(${test_target} errsep-simulate errsep-refine errsep-report errsep-scan errsep-devsim)
+add_dependencies(${test_target} errsep-simulate errsep-separate errsep-refine errsep-report errsep-scan
+                 errsep-devsim)
 catch_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "apps/sequence_app: "
                      PROPERTIES TIMEOUT 180 LABELS "apps;modbus")

@@ -57,6 +57,9 @@ struct RefineOptions {
   /// (a barely determined direction would carry its large uncertainty into S, γ and f).
   double direction_threshold = 0.0;
   double speed_mm_per_s = 10.0;  ///< for scan-order times when none were recorded
+  /// P × 4: the direction of each reading (+1 forward, −1 backward) as recorded, for the residual
+  /// trace (residual_trace.hpp RecordedVariables::direction); empty: not recorded.
+  Eigen::MatrixXd recorded_direction;
   /// Whether a significant effect's correction is applied (step_decision.hpp): on the expected
   /// error of S, γ and f, not on the F-test alone.
   StepDecisionOptions decision;

@@ -52,12 +52,25 @@
 // otherwise:
 //   u_add(x)² = (toS·V_seen·c)(x)² + s²·Σ_undetermined (toS·v_j)(x)²,
 // toS being what the fit puts into Ŝ (after the gauge) from readings along the effect's columns.
-// u_S = sqrt(u_S² + Σ_effects u_add²).
+// Each effect's own u_add is reported (u_S_added_um); u_S is widened once, by the same formula
+// applied to all detected effects' columns side by side (their joint seen and undetermined
+// directions), because they are often the same signal (a drift and a warm-up of the single
+// plan): u_S = sqrt(u_S² + u_add,joint²).
+//
+// The drift family.  A thermal drift added at a grid τ gets τ fitted (golden section between the
+// grid's neighbours) and carried in u_S by its Gauss-Newton column Σ_c Â_c·∂J_c/∂τ.  A linear
+// drift and a warm-up often fit the readings almost equally well yet give different S (what
+// differs is absorbed by S, γ, e); the thermal member replaces the linear one when it fits
+// significantly better (F-test on τ), and the form the data cannot reject (profile likelihood
+// over the linear member and 40 τ, 95 % bound) enters u_S at half the largest S difference
+// (u_S_drift_form_um).
 #include <Eigen/Core>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "errsep/core/four_sensor_config.hpp"
+#include "errsep/core/iso230.hpp"
 #include "errsep/core/scan_sequence.hpp"
 
 namespace errsep::core {
@@ -68,7 +81,17 @@ const char* to_string(SequenceEffectKind k);
 struct SequenceFit {
   Eigen::VectorXd f_um, S_um, gamma_rad;  ///< N, P, P
   Eigen::VectorXd e_um;                   ///< T zero-adjustment values, one per traverse
-  Eigen::VectorXd u_S_um;              ///< of S about its best-fit constant, line and bow (k = 1)
+  Eigen::VectorXd u_S_um;  ///< of S about its best-fit constant, line and bow (k = 1)
+  /// G (P × k): Cov(Ŝ) = G·Gᵀ in the fit's own gauge (f(x_0) = f(x_{N−1}) = 0, f ⟂ bow, e of
+  /// traverse 1 and configuration 4 held at 0), the bow of S included: what an ISO 230-1
+  /// straightness of Ŝ needs (sequence_straightness).  After a refine it also holds the
+  /// widening's columns (SequenceRefineResult::u_S_widening_um).
+  Eigen::MatrixXd S_covariance_factor_um;
+  /// Standard uncertainties (k = 1) in the fit's gauge: γ up to the constant that e_4 = 0 sets
+  /// (as Eq. 19), f with its ends at 0.
+  Eigen::VectorXd u_gamma_rad, u_f_um;
+  /// The row norms of S_covariance_factor_um: u(Ŝ) in the fit's gauge, the bow included.
+  Eigen::VectorXd u_S_in_gauge_um() const { return S_covariance_factor_um.rowwise().norm(); }
   Eigen::VectorXd extra_coefficients;  ///< along the extra columns
   Eigen::MatrixXd residual_um;         ///< P × T
   double rss_um2 = 0, sigma_um = 0;
@@ -80,6 +103,13 @@ struct SequenceFit {
 SequenceFit fit_four_sensor_sequence(const FourSensorConfig& cfg, const ScanSequence& seq,
                                      const Eigen::MatrixXd& m_um,
                                      const Eigen::MatrixXd& extra = {});
+
+/// The ISO 230-1 straightness of fit.S_um about `reference` with its U (k = 2) from the fit's
+/// covariance (S_covariance_factor_um; the bias by `draws` Monte-Carlo draws, seeded): as
+/// four_sensor_straightness for a single scan.  Throws std::invalid_argument as
+/// estimate_straightness.
+StraightnessEstimate sequence_straightness(const SequenceFit& fit, const Eigen::VectorXd& x_mm,
+                                           ReferenceLine reference, int draws = 100);
 
 /// An effect's columns for a sequence (rows k·P + n), at time constant tau_s for thermal.
 struct SequenceEffectColumns {
@@ -124,7 +154,10 @@ struct SequenceCandidate {
   std::string description;
   int identifiable = 0;
   double F = 0, p_value = 1, delta_rss_um2 = 0;
-  double tau_s = 0;  ///< thermal: the time constant of the best score
+  /// thermal: the time constant of the best score on the grid; once added, the least-squares τ
+  /// (searched between the grid's neighbours), with its standard uncertainty u_tau_s.
+  double tau_s = 0;
+  double u_tau_s = 0;
   /// Detected but not identifiable: the RMS over x of what it adds to u_S (widen_u_S_um).
   double u_S_added_um = 0;
 };
@@ -140,6 +173,9 @@ struct SequenceRefineResult {
   /// P: the part of after.u_S_um that the detected-but-unidentifiable effects add (quadrature);
   /// zero when there are none.
   Eigen::VectorXd u_S_widening_um;
+  /// P: the part of after.u_S_um that the drift's form adds when the data do not tell a linear
+  /// drift from a thermal one (|ΔS|/√3, ΔS the difference of Ŝ between them); zero otherwise.
+  Eigen::VectorXd u_S_drift_form_um;
   /// Significant candidates the data cannot tell apart (one explains the other's signal): not
   /// applied; one line each, also in `report`.
   std::vector<std::string> ambiguous;
@@ -158,10 +194,42 @@ std::vector<SequenceIdentifiability> sequence_identifiability(const FourSensorCo
                                                               const SequenceRefineOptions& o = {});
 
 /// The loop on readings m (P × T, column k = traverse k).  Throws std::invalid_argument for bad
-/// inputs.
+/// inputs.  One call builds a SequenceModel and discards it; to refine several scans of one plan,
+/// keep the model.
 SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
                                                  const ScanSequence& seq,
                                                  const Eigen::MatrixXd& m_um,
                                                  const SequenceRefineOptions& o = {});
+
+/// The plan's side of the fit and the refine: everything that depends on the configuration, the
+/// sequence (its reading times included) and the options, never on the readings: the base design,
+/// the candidates' columns (drift, thermal at each τ of the grid, traverse), the factorisation of
+/// every column set the refine meets (the base, then the base with each added effect), the
+/// projections and the identifiability.  Built once, it makes each later fit or refine of a scan
+/// of the same plan a few matrix-vector products (a refine of the reversed plan: ~30 ms rebuilt
+/// per call, ~2 ms with the model kept).  refine() fills its caches as it meets new column sets:
+/// not thread-safe; one model per thread.  Results equal those of the free functions.
+class SequenceModel {
+ public:
+  /// Throws std::invalid_argument for a bad configuration, sequence or options.
+  SequenceModel(const FourSensorConfig& cfg, const ScanSequence& seq,
+                const SequenceRefineOptions& o = {});
+  ~SequenceModel();
+  SequenceModel(SequenceModel&&) noexcept;
+  SequenceModel& operator=(SequenceModel&&) noexcept;
+  SequenceModel(const SequenceModel&) = delete;
+  SequenceModel& operator=(const SequenceModel&) = delete;
+
+  /// fit_four_sensor_sequence without extra columns.
+  SequenceFit fit(const Eigen::MatrixXd& m_um) const;
+  /// refine_four_sensor_sequence.
+  SequenceRefineResult refine(const Eigen::MatrixXd& m_um);
+  /// sequence_identifiability.
+  const std::vector<SequenceIdentifiability>& identifiability() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 }  // namespace errsep::core

@@ -23,6 +23,11 @@ struct ResultWriteInfo {
   std::string axis = "X";                    ///< moving axis (ISO 230-1 naming)
   std::string straightness_direction = "Y";  ///< direction of S
   std::vector<std::pair<std::string, std::string>> extra_metadata;
+  /// motion.csv only: e.g. the straightness_* figures of a result whose covariance is not a
+  /// core::FourSensorCovariance (a scan sequence's fit), written where the separation's own are.
+  std::vector<std::pair<std::string, std::string>> motion_metadata = {};
+  /// Lines appended to summary.txt (what the result is, when it is not the single separation).
+  std::vector<std::string> summary_notes = {};
 };
 
 /// The machine axes a raw scan records (io/machine_axes_metadata.hpp) carried into a result:

@@ -14,6 +14,15 @@
 //                           with a raw scan that records a scan sequence (io/raw_scan_csv.hpp)
 //                           also refine/sequence_refine.csv (core/sequence_refine.hpp)
 //
+// A raw scan that records a scan sequence (more than one traverse of a configuration, or a plan
+// other than single: io/raw_scan_csv.hpp) is separated from all its traverses: motion.csv,
+// reference.csv, residuals.csv and summary.txt are then the sequence fit's
+// (core/sequence_refine.hpp, least squares, λ = 0) after its refine (effects the plan identifies
+// applied, u_S widened for those it detects but cannot identify), with the ISO 230-1 straightness
+// and its U from that fit's covariance and the plan named in summary.txt and motion.csv's
+// metadata (`scan_plan`, `separation`); the single-scan separation of m1..m4 is kept in the
+// pipeline's result for comparison only.  This is done with refine off too: it is the result.
+//
 // write_result_set() makes the whole folder one result set (io/staged_directory.hpp): written
 // beside the target and moved into place in one rename, so a kill at any moment leaves the earlier
 // set or the new one.  A separation that fails leaves a set holding the raw scan alone (no result
@@ -50,9 +59,14 @@ FourSensorPipelineOptions pipeline_options(const io::MachineConfig& cfg, const s
 
 /// What the pipeline did.
 struct FourSensorPipelineResult {
-  std::optional<core::FourSensorResult> separation;  ///< none when it failed (see error)
-  std::optional<core::RefineResult> refine;          ///< with refine on
-  /// With refine on and a recorded scan sequence; its findings are also in `warnings`.
+  /// The result written (motion.csv): the sequence fit's with a recorded sequence (file
+  /// comment), else the separation of m1..m4.  None when it failed (see error).
+  std::optional<core::FourSensorResult> separation;
+  /// With a recorded sequence: the single-scan separation of m1..m4 (not the result).
+  std::optional<core::FourSensorResult> single_scan;
+  std::optional<core::RefineResult> refine;  ///< with refine on
+  /// With a recorded scan sequence: its fit and refine (the result's source); its findings are
+  /// also in `warnings`.
   std::optional<core::SequenceRefineResult> sequence_refine;
   std::vector<std::string> files;     ///< written, relative to the folder ("refine/" for the set)
   std::vector<std::string> warnings;  ///< for the user (λ fallbacks, an incomplete refined model)
