@@ -383,6 +383,7 @@ namespace {
 struct Criterion {
   double value = std::numeric_limits<double>::infinity();
   bool ok = false;
+  std::string rejected;  ///< why λ could not be evaluated (the factor's failure), if so
 };
 
 // REML, σ held at σ̂ (issue 15: "σ fixed at the σ̂ of the redundant equations"):
@@ -395,7 +396,10 @@ Criterion reml_at(TikhonovSolver& s, const Eigen::VectorXd& Atb, double bb, doub
   // ‖b − Ax‖² + λ²xᵀPx = bᵀb − (Aᵀb)ᵀM⁻¹(Aᵀb) at x = M⁻¹Aᵀb: the forward substitution alone,
   // no back substitution and no x.
   double q = 0.0;
-  if (s.factorize_and_quadratic_form(lambda, Atb, q) != SolverStatus::success) return c;
+  if (s.factorize_and_quadratic_form(lambda, Atb, q) != SolverStatus::success) {
+    c.rejected = s.failure().message();
+    return c;
+  }
   const double l2 = lambda * lambda;
   c.value = std::max(0.0, bb - q) / sigma2 + s.log_det() - rank * std::log(l2);
   c.ok = std::isfinite(c.value);
@@ -407,7 +411,10 @@ Criterion gcv_at(TikhonovSolver& s, const Eigen::VectorXd& b, const Eigen::Vecto
                  double lambda) {
   Criterion c;
   Eigen::VectorXd x;
-  if (s.factorize_and_solve(lambda, Atb, x) != SolverStatus::success) return c;
+  if (s.factorize_and_solve(lambda, Atb, x) != SolverStatus::success) {
+    c.rejected = s.failure().message();
+    return c;
+  }
   const double rss = (s.A() * x - b).squaredNorm();
   const double edf = s.trace_inverse_normal(s.selected_inverse());
   const auto n = static_cast<double>(b.size());
@@ -422,6 +429,7 @@ struct SearchOutcome {
   bool at_edge = false;
   int worker_factorizations = 0;  ///< done by the worker threads (not in the solver's stats)
   std::vector<double> grid_lambda, grid_criterion;  ///< the grid's finite points
+  std::vector<std::string> rejected;                ///< λ that could not be evaluated, and why
 };
 
 // Grid in log λ (on `threads` threads, each with its own factor), then a refinement around the
@@ -459,18 +467,25 @@ SearchOutcome minimise_over_lambda(TikhonovSolver& solver, const LambdaSearchOpt
       th.join();
     if (err) std::rethrow_exception(err);
   };
-  // A failed factorisation or a non-finite criterion (round-off at the top of the range: negative
-  // pivots make log det NaN) counts as +∞: NaN compares false both ways and would stall the
-  // minimum at the first grid point.
-  auto eval = [&](TikhonovSolver& s, double log_lambda) {
-    const Criterion c = crit(s, std::pow(10.0, log_lambda));
+  // A refused factorisation (on long scans AᵀA + λ²P is singular to working precision at some λ:
+  // the factor reports the pivot it lost, FactorFailure) or a non-finite criterion counts as +∞
+  // and is recorded: NaN compares false both ways and would stall the minimum at the first grid
+  // point.
+  // Why a λ was rejected goes into `why` (one slot per evaluation: the threads write apart).
+  auto eval = [&](TikhonovSolver& s, double log_lambda, std::string& why) {
+    Criterion c = crit(s, std::pow(10.0, log_lambda));
+    if (!c.rejected.empty()) why = std::move(c.rejected);
     return c.ok ? c.value : std::numeric_limits<double>::infinity();
   };
+  std::vector<std::string> why(grid.size());
   in_parallel(threads, [&](int t, TikhonovSolver& s) {
     for (int i = t; i < count; i += threads)
-      val[static_cast<std::size_t>(i)] = eval(s, grid[static_cast<std::size_t>(i)]);
+      val[static_cast<std::size_t>(i)] =
+          eval(s, grid[static_cast<std::size_t>(i)], why[static_cast<std::size_t>(i)]);
   });
   SearchOutcome out;
+  for (auto& w : why)
+    if (!w.empty()) out.rejected.push_back(std::move(w));
   for (std::size_t q = 0; q < grid.size(); ++q)
     if (std::isfinite(val[q])) {
       out.grid_lambda.push_back(std::pow(10.0, grid[q]));
@@ -489,14 +504,17 @@ SearchOutcome minimise_over_lambda(TikhonovSolver& solver, const LambdaSearchOpt
     const double at[2] = {best_l - h, best_l + h};
     double v[2] = {std::numeric_limits<double>::infinity(),
                    std::numeric_limits<double>::infinity()};
+    std::string w[2];
     auto job = [&](int t, TikhonovSolver& s) {
       for (int i = t; i < 2; i += std::min(threads, 2))
         if (at[i] >= lo - 1e-12 && at[i] <= hi + 1e-12)  // inside the range only
-          v[i] = eval(s, at[i]);
+          v[i] = eval(s, at[i], w[i]);
     };
     in_parallel(std::min(threads, 2), job);
-    for (int i = 0; i < 2; ++i)
+    for (int i = 0; i < 2; ++i) {
       if (v[i] < best_v) best_v = v[i], best_l = at[i];
+      if (!w[i].empty()) out.rejected.push_back(std::move(w[i]));
+    }
   }
   for (const auto& w : workers)
     out.worker_factorizations += w->stats().factorizations;
@@ -537,7 +555,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
     throw std::runtime_error(
         "the four-sensor system is rank-deficient beyond the gauge (spacings s = (" +
         std::to_string(cfg.s2) + ", " + std::to_string(cfg.s3) + ", " + std::to_string(cfg.s4) +
-        ") with N = " + std::to_string(N) + ")");
+        ") with N = " + std::to_string(N) + "): " + ls->failure().message());
   const Eigen::VectorXd x_ls = ls->solve(b);
   res.redundancy_dof = 2 * P - (N - 1);
   if (res.redundancy_dof < 1)
@@ -575,6 +593,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         extra_factorizations = o.worker_factorizations;
         res.lambda_grid = o.grid_lambda;
         res.lambda_criterion = o.grid_criterion;
+        res.lambda_rejected = o.rejected;
         break;
       }
       case LambdaRule::gcv: {
@@ -586,6 +605,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         extra_factorizations = o.worker_factorizations;
         res.lambda_grid = o.grid_lambda;
         res.lambda_criterion = o.grid_criterion;
+        res.lambda_rejected = o.rejected;
         break;
       }
       case LambdaRule::lcurve: {
@@ -619,8 +639,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         break;
     }
     if (solver->factorize(lambda) != SolverStatus::success)
-      throw std::runtime_error("factorisation failed at the chosen lambda = " +
-                               std::to_string(lambda));
+      throw std::runtime_error("factorisation failed at the chosen " + solver->failure().message());
   }
   if (prior) {
     const SelectedInverse z = solver->selected_inverse();
@@ -792,6 +811,14 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
                   "the level of u_S up to %.3g um",
                   to_string(opts.penalty), res.edf_f, rejected_lambda, umax);
     res.determination_note += note;
+  }
+  if (!res.lambda_rejected.empty()) {
+    // The search went on without these λ; say so, with the first reason (issue 15).
+    std::snprintf(note, sizeof note,
+                  "; %zu lambda value(s) of the search rejected because the factor of "
+                  "A'A + lambda^2 P lost precision (first: ",
+                  res.lambda_rejected.size());
+    res.determination_note += note + res.lambda_rejected.front() + ")";
   }
   res.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return res;
