@@ -547,26 +547,47 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
   res.estimator = Estimator::posterior;
   res.gauge = CurvatureGauge::reference_without_curvature;
 
-  // σ̂ from the redundancy: the unregularised fit leaves 2P rows explained by N − 1 unknowns.
-  PinnedSystem ls_sys = assemble_pinned_system(cfg, m_um, false);
-  const Eigen::VectorXd b = ls_sys.b;
-  auto ls = std::make_unique<TikhonovSolver>(std::move(ls_sys.A), ls_sys.border);
-  if (ls->factorize(0.0) != SolverStatus::success)
-    throw std::runtime_error(
-        "the four-sensor system is rank-deficient beyond the gauge (spacings s = (" +
-        std::to_string(cfg.s2) + ", " + std::to_string(cfg.s3) + ", " + std::to_string(cfg.s4) +
-        ") with N = " + std::to_string(N) + "): " + ls->failure().message());
-  const Eigen::VectorXd x_ls = ls->solve(b);
   res.redundancy_dof = 2 * P - (N - 1);
   if (res.redundancy_dof < 1)
     throw std::invalid_argument("N = " + std::to_string(N) +
                                 " leaves no redundant readings to estimate the noise from");
-  res.sigma_um = known_sigma_um > 0.0
-                     ? known_sigma_um
-                     : std::sqrt((ls->A() * x_ls - b).squaredNorm() / res.redundancy_dof);
-  const double sigma2 = std::max(res.sigma_um * res.sigma_um, 1e-30);
-
   const bool prior = opts.penalty != Penalty::none && opts.rule != LambdaRule::least_squares;
+  // σ̂ from the redundancy: the unregularised fit leaves 2P rows explained by N − 1 unknowns.
+  // With a prior and two threads it runs beside the prior's assembly (they share nothing but
+  // the readings): at N = 10⁶ each is ~1 s.
+  std::unique_ptr<TikhonovSolver> ls;
+  PinnedSystem ls_sys;
+  double sigma_um = 0.0;
+  auto least_squares = [&] {
+    ls_sys = assemble_pinned_system(cfg, m_um, false);
+    ls = std::make_unique<TikhonovSolver>(std::move(ls_sys.A), ls_sys.border);
+    if (ls->factorize(0.0) != SolverStatus::success)
+      throw std::runtime_error(
+          "the four-sensor system is rank-deficient beyond the gauge (spacings s = (" +
+          std::to_string(cfg.s2) + ", " + std::to_string(cfg.s3) + ", " + std::to_string(cfg.s4) +
+          ") with N = " + std::to_string(N) + "): " + ls->failure().message());
+    const Eigen::VectorXd x_ls = ls->solve(ls_sys.b);
+    sigma_um = known_sigma_um > 0.0
+                   ? known_sigma_um
+                   : std::sqrt((ls->A() * x_ls - ls_sys.b).squaredNorm() / res.redundancy_dof);
+  };
+  std::exception_ptr ls_error;
+  std::thread ls_thread;
+  if (prior && opts.search.threads >= 2)
+    ls_thread = std::thread([&] {
+      try {
+        least_squares();
+      } catch (...) {
+        ls_error = std::current_exception();
+      }
+    });
+  else
+    least_squares();
+  auto join_least_squares = [&] {
+    if (ls_thread.joinable()) ls_thread.join();
+    if (ls_error) std::rethrow_exception(ls_error);
+  };
+
   std::unique_ptr<TikhonovSolver> solver;
   PinnedSystem sys;
   FourSensorCovariance::Parts parts;
@@ -574,12 +595,24 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
   double lambda = 0.0;
   double rejected_lambda = 0.0;  // the rule's λ when the collapse rule rejects the prior
   res.penalty = prior ? opts.penalty : Penalty::none;
+  double sigma2 = 0.0;
   if (prior) {
-    sys = assemble_pinned_system(cfg, m_um, true);
-    parts.L = penalty_operator(cfg, opts.penalty, sys);
-    Eigen::SparseMatrix<double> Pm = parts.L.transpose() * parts.L;
-    Pm.prune(0.0);
-    solver = std::make_unique<TikhonovSolver>(std::move(sys.A), sys.border, Pm);
+    try {
+      sys = assemble_pinned_system(cfg, m_um, true);
+      parts.L = penalty_operator(cfg, opts.penalty, sys);
+      Eigen::SparseMatrix<double> Pm = parts.L.transpose() * parts.L;
+      Pm.prune(0.0);
+      solver = std::make_unique<TikhonovSolver>(std::move(sys.A), sys.border, Pm);
+    } catch (...) {
+      if (ls_thread.joinable()) ls_thread.join();
+      throw;
+    }
+  }
+  join_least_squares();
+  res.sigma_um = sigma_um;
+  sigma2 = std::max(res.sigma_um * res.sigma_um, 1e-30);
+  const Eigen::VectorXd b = ls_sys.b;  // kept: ls_sys moves into the result after a collapse
+  if (prior) {
     const Eigen::VectorXd Atb = solver->A().transpose() * b;
     const double bb = b.squaredNorm();
     const int rank = sys.band_unknowns + 1;  // f̃ and β carry the prior
@@ -638,26 +671,48 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
       case LambdaRule::least_squares:
         break;
     }
-    if (solver->factorize(lambda) != SolverStatus::success)
+  }
+  // The least-squares separation's selected inverse is what its u needs after a collapse: with
+  // two threads it is formed beside the final factorisation and the edf of the prior (at
+  // N = 10⁶ both ~0.5 s; long scans are where collapses happen), and dropped if not used.
+  std::thread ls_selinv;
+  if (prior && opts.compute_uncertainty && opts.search.threads >= 2)
+    ls_selinv = std::thread([&] {
+      try {
+        ls->selected_inverse();
+      } catch (...) {
+        ls_error = std::current_exception();
+      }
+    });
+  try {
+    // The search's last factorisation on this thread may already be the chosen λ's (the same
+    // factor factorize() would make): at N = 10⁶ a factorisation saved is 0.2 s.
+    if (prior && !(solver->factorized() && solver->lambda() == lambda) &&
+        solver->factorize(lambda) != SolverStatus::success)
       throw std::runtime_error("factorisation failed at the chosen " + solver->failure().message());
-  }
-  if (prior) {
-    const SelectedInverse z = solver->selected_inverse();
-    // tr(M⁻¹AᵀA) summed directly, not n − λ²·tr(M⁻¹P): on long scans the difference loses
-    // edf to cancellation (tikhonov_solver.hpp), and the collapse rule below reads it.
-    res.edf = solver->trace_inverse_normal(z);
-    res.edf_f = res.edf - 2.0;  // η̃ is not penalised: 2 of them
-    // A collapse: the prior swallowed f (issue 15).  The λ at the top of the range, or f with
-    // (almost) no degrees of freedom left: S would carry f's amplitude with a small stated u.
-    const bool top_edge = res.lambda_at_edge && lambda > solver->sigma_max_bound();
-    if ((opts.rule == LambdaRule::reml || opts.rule == LambdaRule::gcv ||
-         opts.rule == LambdaRule::lcurve) &&
-        (top_edge || res.edf_f < opts.collapse_edf)) {
-      res.lambda_fallback = LambdaFallback::collapse_least_squares;
-      res.penalty = Penalty::none;
-      rejected_lambda = lambda;
+    if (prior) {
+      const SelectedInverse& z = solver->selected_inverse();
+      // tr(M⁻¹AᵀA) summed directly, not n − λ²·tr(M⁻¹P): on long scans the difference loses
+      // edf to cancellation (tikhonov_solver.hpp), and the collapse rule below reads it.
+      res.edf = solver->trace_inverse_normal(z);
+      res.edf_f = res.edf - 2.0;  // η̃ is not penalised: 2 of them
+      // A collapse: the prior swallowed f (issue 15).  The λ at the top of the range, or f with
+      // (almost) no degrees of freedom left: S would carry f's amplitude with a small stated u.
+      const bool top_edge = res.lambda_at_edge && lambda > solver->sigma_max_bound();
+      if ((opts.rule == LambdaRule::reml || opts.rule == LambdaRule::gcv ||
+           opts.rule == LambdaRule::lcurve) &&
+          (top_edge || res.edf_f < opts.collapse_edf)) {
+        res.lambda_fallback = LambdaFallback::collapse_least_squares;
+        res.penalty = Penalty::none;
+        rejected_lambda = lambda;
+      }
     }
+  } catch (...) {
+    if (ls_selinv.joinable()) ls_selinv.join();
+    throw;
   }
+  if (ls_selinv.joinable()) ls_selinv.join();
+  if (ls_error) std::rethrow_exception(ls_error);
   const bool use_ls = res.penalty == Penalty::none;
   if (use_ls) {
     solver = std::move(ls);
@@ -736,7 +791,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
   if (opts.compute_uncertainty) {
     // Per point from the selected inverse Z of the factor: u² = σ̂²(‖w‖² + tᵀZt) with t = h − a_h·g
     // the gauge-fixed coefficients of the quantity (at most 4 f-unknowns and η̃: inside the band).
-    const SelectedInverse z = solver->selected_inverse();
+    const SelectedInverse& z = solver->selected_inverse();
     Eigen::VectorXd g_red = Eigen::VectorXd::Zero(parts.n_all);
     for (int i = 0; i < N; ++i) {
       const int col = parts.f_index[static_cast<std::size_t>(i)];

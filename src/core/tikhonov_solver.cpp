@@ -704,6 +704,10 @@ Eigen::VectorXd TikhonovSolver::solve(const Eigen::VectorXd& b) {
   return solve_normal(A_->transpose() * b);
 }
 
+bool TikhonovSolver::factorized() const {
+  return impl_->factor_ok;
+}
+
 bool TikhonovSolver::has_penalty() const {
   return !normal_->pen_x.empty();
 }
@@ -768,7 +772,7 @@ double SelectedInverse::operator()(Eigen::Index i, Eigen::Index j) const {
 // (2, 3, 10): QQᵀ has a zero entry, and u_S at the first positions needs it).  The border
 // adds the low-rank term of the block inverse: with Y = B⁻¹C and the Schur block S,
 // M⁻¹ = [B⁻¹ + Y S⁻¹Yᵀ, −Y S⁻¹; −S⁻¹Yᵀ, S⁻¹].
-SelectedInverse TikhonovSolver::selected_inverse() {
+const SelectedInverse& TikhonovSolver::selected_inverse() {
   if (!impl_->factor_ok)
     throw std::logic_error("TikhonovSolver::selected_inverse without a successful factorisation");
   if (impl_->selinv) return *impl_->selinv;

@@ -132,7 +132,9 @@ class TikhonovSolver {
   /// log det(AᵀA + λ²P) of the current factorisation (band pivots and the border's Schur block).
   double log_det() const;
   /// Selected entries of the inverse of the current factorisation (see SelectedInverse).
-  SelectedInverse selected_inverse();
+  /// Computed once per factorisation and kept (valid until the next factorisation): at N = 10⁶
+  /// it is 64 MB, so it is not copied out.
+  const SelectedInverse& selected_inverse();
   /// tr(M⁻¹·P) from a selected inverse of the current factorisation (P inside the band): what
   /// the effective degrees of freedom n − λ²·tr(M⁻¹P) need.  Without a penalty, tr(M⁻¹).
   double trace_inverse_penalty(const SelectedInverse& z) const;
@@ -144,7 +146,9 @@ class TikhonovSolver {
   /// takes their fourth differences).  AᵀA's entries are O(1): the same round-off costs λ² less.
   double trace_inverse_normal(const SelectedInverse& z) const;
   const Eigen::SparseMatrix<double>& A() const { return *A_; }
+  /// λ of the last factorisation, and whether it succeeded (its factor is the current one).
   double lambda() const { return lambda_; }
+  bool factorized() const;
   /// An upper bound of the largest singular value of A (sqrt of ‖AᵀA‖₁), for λ ranges.
   double sigma_max_bound() const { return sigma_max_bound_; }
   const TikhonovSolverStats& stats() const { return stats_; }
