@@ -206,7 +206,11 @@ std::string FourSensorResult::brief_report() const {
                     : "",
                 lambda_at_edge ? ", at the edge of the range" : "", edf_f, residual_norm,
                 solution_norm, sigma_um, redundancy_dof, solver_stats.factorizations, total_s);
-  return buf;
+  std::string out = buf;
+  if (!lambda_rejected.empty())
+    out += " (" + std::to_string(lambda_rejected.size()) +
+           " lambda rejected: factor not positive definite)";
+  return out;
 }
 
 namespace {
@@ -252,7 +256,7 @@ FourSensorResult separate(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_
     throw std::runtime_error(
         "the augmented matrix A is rank-deficient beyond the known null space (spacings s = (" +
         std::to_string(cfg.s2) + ", " + std::to_string(cfg.s3) + ", " + std::to_string(cfg.s4) +
-        ") with N = " + std::to_string(N) + ")");
+        ") with N = " + std::to_string(N) + "): " + solver.failure().message());
   {
     FourSensorOptions ls_opts = opts;
     ls_opts.iterated_refinements = 0;
@@ -313,8 +317,7 @@ FourSensorResult separate(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_
   }
   res.lambda = floor_lambda(res.lambda);
   if (solver.factorize(res.lambda) != SolverStatus::success)
-    throw std::runtime_error("factorisation failed at the chosen lambda = " +
-                             std::to_string(res.lambda));
+    throw std::runtime_error("factorisation failed at the chosen " + solver.failure().message());
   const Eigen::VectorXd X = pipe.solve_X(sys.b);
   res.residual_norm = (solver.A() * X - sys.b).norm();
   res.solution_norm = X.norm();

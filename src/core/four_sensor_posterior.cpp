@@ -383,6 +383,7 @@ namespace {
 struct Criterion {
   double value = std::numeric_limits<double>::infinity();
   bool ok = false;
+  std::string rejected;  ///< why λ could not be evaluated (the factor's failure), if so
 };
 
 // REML, σ held at σ̂ (issue 15: "σ fixed at the σ̂ of the redundant equations"):
@@ -395,7 +396,10 @@ Criterion reml_at(TikhonovSolver& s, const Eigen::VectorXd& Atb, double bb, doub
   // ‖b − Ax‖² + λ²xᵀPx = bᵀb − (Aᵀb)ᵀM⁻¹(Aᵀb) at x = M⁻¹Aᵀb: the forward substitution alone,
   // no back substitution and no x.
   double q = 0.0;
-  if (s.factorize_and_quadratic_form(lambda, Atb, q) != SolverStatus::success) return c;
+  if (s.factorize_and_quadratic_form(lambda, Atb, q) != SolverStatus::success) {
+    c.rejected = s.failure().message();
+    return c;
+  }
   const double l2 = lambda * lambda;
   c.value = std::max(0.0, bb - q) / sigma2 + s.log_det() - rank * std::log(l2);
   c.ok = std::isfinite(c.value);
@@ -407,7 +411,10 @@ Criterion gcv_at(TikhonovSolver& s, const Eigen::VectorXd& b, const Eigen::Vecto
                  double lambda) {
   Criterion c;
   Eigen::VectorXd x;
-  if (s.factorize_and_solve(lambda, Atb, x) != SolverStatus::success) return c;
+  if (s.factorize_and_solve(lambda, Atb, x) != SolverStatus::success) {
+    c.rejected = s.failure().message();
+    return c;
+  }
   const double rss = (s.A() * x - b).squaredNorm();
   const double edf = s.trace_inverse_normal(s.selected_inverse());
   const auto n = static_cast<double>(b.size());
@@ -422,6 +429,7 @@ struct SearchOutcome {
   bool at_edge = false;
   int worker_factorizations = 0;  ///< done by the worker threads (not in the solver's stats)
   std::vector<double> grid_lambda, grid_criterion;  ///< the grid's finite points
+  std::vector<std::string> rejected;                ///< λ that could not be evaluated, and why
 };
 
 // Grid in log λ (on `threads` threads, each with its own factor), then a refinement around the
@@ -459,18 +467,25 @@ SearchOutcome minimise_over_lambda(TikhonovSolver& solver, const LambdaSearchOpt
       th.join();
     if (err) std::rethrow_exception(err);
   };
-  // A failed factorisation or a non-finite criterion (round-off at the top of the range: negative
-  // pivots make log det NaN) counts as +∞: NaN compares false both ways and would stall the
-  // minimum at the first grid point.
-  auto eval = [&](TikhonovSolver& s, double log_lambda) {
-    const Criterion c = crit(s, std::pow(10.0, log_lambda));
+  // A refused factorisation (on long scans AᵀA + λ²P is singular to working precision at some λ:
+  // the factor reports the pivot it lost, FactorFailure) or a non-finite criterion counts as +∞
+  // and is recorded: NaN compares false both ways and would stall the minimum at the first grid
+  // point.
+  // Why a λ was rejected goes into `why` (one slot per evaluation: the threads write apart).
+  auto eval = [&](TikhonovSolver& s, double log_lambda, std::string& why) {
+    Criterion c = crit(s, std::pow(10.0, log_lambda));
+    if (!c.rejected.empty()) why = std::move(c.rejected);
     return c.ok ? c.value : std::numeric_limits<double>::infinity();
   };
+  std::vector<std::string> why(grid.size());
   in_parallel(threads, [&](int t, TikhonovSolver& s) {
     for (int i = t; i < count; i += threads)
-      val[static_cast<std::size_t>(i)] = eval(s, grid[static_cast<std::size_t>(i)]);
+      val[static_cast<std::size_t>(i)] =
+          eval(s, grid[static_cast<std::size_t>(i)], why[static_cast<std::size_t>(i)]);
   });
   SearchOutcome out;
+  for (auto& w : why)
+    if (!w.empty()) out.rejected.push_back(std::move(w));
   for (std::size_t q = 0; q < grid.size(); ++q)
     if (std::isfinite(val[q])) {
       out.grid_lambda.push_back(std::pow(10.0, grid[q]));
@@ -489,14 +504,17 @@ SearchOutcome minimise_over_lambda(TikhonovSolver& solver, const LambdaSearchOpt
     const double at[2] = {best_l - h, best_l + h};
     double v[2] = {std::numeric_limits<double>::infinity(),
                    std::numeric_limits<double>::infinity()};
+    std::string w[2];
     auto job = [&](int t, TikhonovSolver& s) {
       for (int i = t; i < 2; i += std::min(threads, 2))
         if (at[i] >= lo - 1e-12 && at[i] <= hi + 1e-12)  // inside the range only
-          v[i] = eval(s, at[i]);
+          v[i] = eval(s, at[i], w[i]);
     };
     in_parallel(std::min(threads, 2), job);
-    for (int i = 0; i < 2; ++i)
+    for (int i = 0; i < 2; ++i) {
       if (v[i] < best_v) best_v = v[i], best_l = at[i];
+      if (!w[i].empty()) out.rejected.push_back(std::move(w[i]));
+    }
   }
   for (const auto& w : workers)
     out.worker_factorizations += w->stats().factorizations;
@@ -529,26 +547,47 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
   res.estimator = Estimator::posterior;
   res.gauge = CurvatureGauge::reference_without_curvature;
 
-  // σ̂ from the redundancy: the unregularised fit leaves 2P rows explained by N − 1 unknowns.
-  PinnedSystem ls_sys = assemble_pinned_system(cfg, m_um, false);
-  const Eigen::VectorXd b = ls_sys.b;
-  auto ls = std::make_unique<TikhonovSolver>(std::move(ls_sys.A), ls_sys.border);
-  if (ls->factorize(0.0) != SolverStatus::success)
-    throw std::runtime_error(
-        "the four-sensor system is rank-deficient beyond the gauge (spacings s = (" +
-        std::to_string(cfg.s2) + ", " + std::to_string(cfg.s3) + ", " + std::to_string(cfg.s4) +
-        ") with N = " + std::to_string(N) + ")");
-  const Eigen::VectorXd x_ls = ls->solve(b);
   res.redundancy_dof = 2 * P - (N - 1);
   if (res.redundancy_dof < 1)
     throw std::invalid_argument("N = " + std::to_string(N) +
                                 " leaves no redundant readings to estimate the noise from");
-  res.sigma_um = known_sigma_um > 0.0
-                     ? known_sigma_um
-                     : std::sqrt((ls->A() * x_ls - b).squaredNorm() / res.redundancy_dof);
-  const double sigma2 = std::max(res.sigma_um * res.sigma_um, 1e-30);
-
   const bool prior = opts.penalty != Penalty::none && opts.rule != LambdaRule::least_squares;
+  // σ̂ from the redundancy: the unregularised fit leaves 2P rows explained by N − 1 unknowns.
+  // With a prior and two threads it runs beside the prior's assembly (they share nothing but
+  // the readings): at N = 10⁶ each is ~1 s.
+  std::unique_ptr<TikhonovSolver> ls;
+  PinnedSystem ls_sys;
+  double sigma_um = 0.0;
+  auto least_squares = [&] {
+    ls_sys = assemble_pinned_system(cfg, m_um, false);
+    ls = std::make_unique<TikhonovSolver>(std::move(ls_sys.A), ls_sys.border);
+    if (ls->factorize(0.0) != SolverStatus::success)
+      throw std::runtime_error(
+          "the four-sensor system is rank-deficient beyond the gauge (spacings s = (" +
+          std::to_string(cfg.s2) + ", " + std::to_string(cfg.s3) + ", " + std::to_string(cfg.s4) +
+          ") with N = " + std::to_string(N) + "): " + ls->failure().message());
+    const Eigen::VectorXd x_ls = ls->solve(ls_sys.b);
+    sigma_um = known_sigma_um > 0.0
+                   ? known_sigma_um
+                   : std::sqrt((ls->A() * x_ls - ls_sys.b).squaredNorm() / res.redundancy_dof);
+  };
+  std::exception_ptr ls_error;
+  std::thread ls_thread;
+  if (prior && opts.search.threads >= 2)
+    ls_thread = std::thread([&] {
+      try {
+        least_squares();
+      } catch (...) {
+        ls_error = std::current_exception();
+      }
+    });
+  else
+    least_squares();
+  auto join_least_squares = [&] {
+    if (ls_thread.joinable()) ls_thread.join();
+    if (ls_error) std::rethrow_exception(ls_error);
+  };
+
   std::unique_ptr<TikhonovSolver> solver;
   PinnedSystem sys;
   FourSensorCovariance::Parts parts;
@@ -556,12 +595,24 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
   double lambda = 0.0;
   double rejected_lambda = 0.0;  // the rule's λ when the collapse rule rejects the prior
   res.penalty = prior ? opts.penalty : Penalty::none;
+  double sigma2 = 0.0;
   if (prior) {
-    sys = assemble_pinned_system(cfg, m_um, true);
-    parts.L = penalty_operator(cfg, opts.penalty, sys);
-    Eigen::SparseMatrix<double> Pm = parts.L.transpose() * parts.L;
-    Pm.prune(0.0);
-    solver = std::make_unique<TikhonovSolver>(std::move(sys.A), sys.border, Pm);
+    try {
+      sys = assemble_pinned_system(cfg, m_um, true);
+      parts.L = penalty_operator(cfg, opts.penalty, sys);
+      Eigen::SparseMatrix<double> Pm = parts.L.transpose() * parts.L;
+      Pm.prune(0.0);
+      solver = std::make_unique<TikhonovSolver>(std::move(sys.A), sys.border, Pm);
+    } catch (...) {
+      if (ls_thread.joinable()) ls_thread.join();
+      throw;
+    }
+  }
+  join_least_squares();
+  res.sigma_um = sigma_um;
+  sigma2 = std::max(res.sigma_um * res.sigma_um, 1e-30);
+  const Eigen::VectorXd b = ls_sys.b;  // kept: ls_sys moves into the result after a collapse
+  if (prior) {
     const Eigen::VectorXd Atb = solver->A().transpose() * b;
     const double bb = b.squaredNorm();
     const int rank = sys.band_unknowns + 1;  // f̃ and β carry the prior
@@ -575,6 +626,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         extra_factorizations = o.worker_factorizations;
         res.lambda_grid = o.grid_lambda;
         res.lambda_criterion = o.grid_criterion;
+        res.lambda_rejected = o.rejected;
         break;
       }
       case LambdaRule::gcv: {
@@ -586,6 +638,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         extra_factorizations = o.worker_factorizations;
         res.lambda_grid = o.grid_lambda;
         res.lambda_criterion = o.grid_criterion;
+        res.lambda_rejected = o.rejected;
         break;
       }
       case LambdaRule::lcurve: {
@@ -618,27 +671,48 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
       case LambdaRule::least_squares:
         break;
     }
-    if (solver->factorize(lambda) != SolverStatus::success)
-      throw std::runtime_error("factorisation failed at the chosen lambda = " +
-                               std::to_string(lambda));
   }
-  if (prior) {
-    const SelectedInverse z = solver->selected_inverse();
-    // tr(M⁻¹AᵀA) summed directly, not n − λ²·tr(M⁻¹P): on long scans the difference loses
-    // edf to cancellation (tikhonov_solver.hpp), and the collapse rule below reads it.
-    res.edf = solver->trace_inverse_normal(z);
-    res.edf_f = res.edf - 2.0;  // η̃ is not penalised: 2 of them
-    // A collapse: the prior swallowed f (issue 15).  The λ at the top of the range, or f with
-    // (almost) no degrees of freedom left: S would carry f's amplitude with a small stated u.
-    const bool top_edge = res.lambda_at_edge && lambda > solver->sigma_max_bound();
-    if ((opts.rule == LambdaRule::reml || opts.rule == LambdaRule::gcv ||
-         opts.rule == LambdaRule::lcurve) &&
-        (top_edge || res.edf_f < opts.collapse_edf)) {
-      res.lambda_fallback = LambdaFallback::collapse_least_squares;
-      res.penalty = Penalty::none;
-      rejected_lambda = lambda;
+  // The least-squares separation's selected inverse is what its u needs after a collapse: with
+  // two threads it is formed beside the final factorisation and the edf of the prior (at
+  // N = 10⁶ both ~0.5 s; long scans are where collapses happen), and dropped if not used.
+  std::thread ls_selinv;
+  if (prior && opts.compute_uncertainty && opts.search.threads >= 2)
+    ls_selinv = std::thread([&] {
+      try {
+        ls->selected_inverse();
+      } catch (...) {
+        ls_error = std::current_exception();
+      }
+    });
+  try {
+    // The search's last factorisation on this thread may already be the chosen λ's (the same
+    // factor factorize() would make): at N = 10⁶ a factorisation saved is 0.2 s.
+    if (prior && !(solver->factorized() && solver->lambda() == lambda) &&
+        solver->factorize(lambda) != SolverStatus::success)
+      throw std::runtime_error("factorisation failed at the chosen " + solver->failure().message());
+    if (prior) {
+      const SelectedInverse& z = solver->selected_inverse();
+      // tr(M⁻¹AᵀA) summed directly, not n − λ²·tr(M⁻¹P): on long scans the difference loses
+      // edf to cancellation (tikhonov_solver.hpp), and the collapse rule below reads it.
+      res.edf = solver->trace_inverse_normal(z);
+      res.edf_f = res.edf - 2.0;  // η̃ is not penalised: 2 of them
+      // A collapse: the prior swallowed f (issue 15).  The λ at the top of the range, or f with
+      // (almost) no degrees of freedom left: S would carry f's amplitude with a small stated u.
+      const bool top_edge = res.lambda_at_edge && lambda > solver->sigma_max_bound();
+      if ((opts.rule == LambdaRule::reml || opts.rule == LambdaRule::gcv ||
+           opts.rule == LambdaRule::lcurve) &&
+          (top_edge || res.edf_f < opts.collapse_edf)) {
+        res.lambda_fallback = LambdaFallback::collapse_least_squares;
+        res.penalty = Penalty::none;
+        rejected_lambda = lambda;
+      }
     }
+  } catch (...) {
+    if (ls_selinv.joinable()) ls_selinv.join();
+    throw;
   }
+  if (ls_selinv.joinable()) ls_selinv.join();
+  if (ls_error) std::rethrow_exception(ls_error);
   const bool use_ls = res.penalty == Penalty::none;
   if (use_ls) {
     solver = std::move(ls);
@@ -717,7 +791,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
   if (opts.compute_uncertainty) {
     // Per point from the selected inverse Z of the factor: u² = σ̂²(‖w‖² + tᵀZt) with t = h − a_h·g
     // the gauge-fixed coefficients of the quantity (at most 4 f-unknowns and η̃: inside the band).
-    const SelectedInverse z = solver->selected_inverse();
+    const SelectedInverse& z = solver->selected_inverse();
     Eigen::VectorXd g_red = Eigen::VectorXd::Zero(parts.n_all);
     for (int i = 0; i < N; ++i) {
       const int col = parts.f_index[static_cast<std::size_t>(i)];
@@ -792,6 +866,14 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
                   "the level of u_S up to %.3g um",
                   to_string(opts.penalty), res.edf_f, rejected_lambda, umax);
     res.determination_note += note;
+  }
+  if (!res.lambda_rejected.empty()) {
+    // The search went on without these λ; say so, with the first reason (issue 15).
+    std::snprintf(note, sizeof note,
+                  "; %zu lambda value(s) of the search rejected because the factor of "
+                  "A'A + lambda^2 P lost precision (first: ",
+                  res.lambda_rejected.size());
+    res.determination_note += note + res.lambda_rejected.front() + ")";
   }
   res.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return res;

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <new>
 #include <optional>
@@ -51,6 +52,19 @@ const char* to_string(SolverStatus s) {
       return "not factorized";
   }
   return "unknown";
+}
+
+std::string FactorFailure::message() const {
+  char buf[400];
+  std::snprintf(buf, sizeof buf,
+                "lambda = %.4g rejected: factor not positive definite at pivot %lld of %lld%s "
+                "(D = %.3g, diagonal %.3g)%s",
+                lambda, static_cast<long long>(pivot), static_cast<long long>(unknowns),
+                in_border ? " (the border's Schur complement)" : "", pivot_value, diagonal,
+                stopped_by_cholmod ? ": CHOLMOD stopped at a zero pivot (singular)"
+                                   : ": the round-off of the factorisation exceeds the matrix's "
+                                     "smallest eigenvalue at this lambda (its digits are lost)");
+  return buf;
 }
 
 // The upper triangle of AᵀA (stype = 1: CHOLMOD's up-looking simplicial factorisation reads it
@@ -488,14 +502,41 @@ SolverStatus TikhonovSolver::factorize_impl(double lambda, const Eigen::VectorXd
   // cholmod_factorize_p returns TRUE even when a pivot failed: check status and L->minor too.
   impl_->factor_ok =
       ok && impl_->cm.status == CHOLMOD_OK && impl_->L->minor == impl_->L->n && !impl_->L->is_ll;
+  const auto m = static_cast<Eigen::Index>(impl_->L->n);
+  // The matrix's diagonal entry j of the band (upper storage: the last entry of column j).
+  auto band_diagonal = [&](Eigen::Index j) {
+    const cholmod_sparse& B = general_form ? impl_->work : normal_->band;
+    const int q = static_cast<const int*>(B.p)[j + 1] - 1;
+    return static_cast<const double*>(B.x)[q] + beta[0];
+  };
+  failure_ = FactorFailure{};
+  failure_.lambda = lambda;
+  failure_.unknowns = m + border_;
+  if (!impl_->factor_ok && impl_->L->minor < impl_->L->n) {
+    const auto j = static_cast<Eigen::Index>(impl_->L->minor);
+    failure_.pivot = j;
+    failure_.diagonal = band_diagonal(j);
+    failure_.stopped_by_cholmod = true;
+  }
   bool solved = false;
   if (impl_->factor_ok) {
-    const auto m = static_cast<Eigen::Index>(impl_->L->n);
     const auto* Lp = static_cast<const int*>(impl_->L->p);
     const auto* Lx = static_cast<const double*>(impl_->L->x);
     impl_->d.resize(m);
     for (Eigen::Index j = 0; j < m; ++j)
       impl_->d(j) = Lx[Lp[j]];  // D_j on L's diagonal
+    // CHOLMOD's LDLᵀ stops only at an exactly zero pivot and takes a negative one silently: the
+    // matrix is then indefinite to working precision (log det NaN, a meaningless solution).
+    for (Eigen::Index j = 0; j < m; ++j)
+      if (!(impl_->d(j) > 0.0 && std::isfinite(impl_->d(j)))) {
+        impl_->factor_ok = false;
+        failure_.pivot = j;
+        failure_.pivot_value = impl_->d(j);
+        failure_.diagonal = band_diagonal(j);
+        break;
+      }
+  }
+  if (impl_->factor_ok) {
     if (border_ > 0) {
       // Block LDLᵀ of [B C; Cᵀ D] with C = U·Vᵀ: W = L⁻¹U, Schur complement
       // S = D + λ²I − V·(WᵀD_B⁻¹W)·Vᵀ.  With a right-hand side, its forward substitution rides
@@ -542,6 +583,25 @@ SolverStatus TikhonovSolver::factorize_impl(double lambda, const Eigen::VectorXd
       S.noalias() -= normal_->V * acc * normal_->V.transpose();
       impl_->S.compute(S);
       impl_->factor_ok = impl_->S.info() == Eigen::Success;
+      // With a penalty the whole matrix is positive definite in exact arithmetic (the posterior
+      // precision), so a border pivot <= 0 is lost precision like a band one.  Without one, a
+      // slightly negative Schur pivot at λ = 0 is the weak gauge row's bow direction (see Impl::S)
+      // and is tolerated.
+      if (impl_->factor_ok && general_form) {
+        const Eigen::VectorXd sd = impl_->S.vectorD();
+        for (Eigen::Index c = 0; c < sd.size(); ++c)
+          if (!(sd(c) > 0.0 && std::isfinite(sd(c)))) {
+            impl_->factor_ok = false;
+            failure_.pivot = m + c;
+            failure_.pivot_value = sd(c);
+            failure_.diagonal = S(c, c);
+            failure_.in_border = true;
+            break;
+          }
+      } else if (!impl_->factor_ok) {
+        failure_.pivot = m;
+        failure_.in_border = true;
+      }
       if (fuse && impl_->factor_ok) {
         const auto t1 = std::chrono::steady_clock::now();
         const Eigen::Map<const Eigen::VectorXd> zf(static_cast<const double*>(impl_->Xk->x) + r * m,
@@ -644,6 +704,10 @@ Eigen::VectorXd TikhonovSolver::solve(const Eigen::VectorXd& b) {
   return solve_normal(A_->transpose() * b);
 }
 
+bool TikhonovSolver::factorized() const {
+  return impl_->factor_ok;
+}
+
 bool TikhonovSolver::has_penalty() const {
   return !normal_->pen_x.empty();
 }
@@ -708,7 +772,7 @@ double SelectedInverse::operator()(Eigen::Index i, Eigen::Index j) const {
 // (2, 3, 10): QQᵀ has a zero entry, and u_S at the first positions needs it).  The border
 // adds the low-rank term of the block inverse: with Y = B⁻¹C and the Schur block S,
 // M⁻¹ = [B⁻¹ + Y S⁻¹Yᵀ, −Y S⁻¹; −S⁻¹Yᵀ, S⁻¹].
-SelectedInverse TikhonovSolver::selected_inverse() {
+const SelectedInverse& TikhonovSolver::selected_inverse() {
   if (!impl_->factor_ok)
     throw std::logic_error("TikhonovSolver::selected_inverse without a successful factorisation");
   if (impl_->selinv) return *impl_->selinv;

@@ -244,10 +244,17 @@ TEST_CASE("edf_f falls monotonically with lambda on a long scan", "[four_sensor]
   // Each step falls, up to round-off of 10⁻³ in edf (the rule compares edf_f with 1; near the
   // top of the range edf_f is ~10⁻³ and its last digits are round-off).  The difference
   // n − λ²·tr(M⁻¹P), printed beside it, comes out negative by up to 5·10⁵ there.
+  // A λ whose factor loses its positive pivots to round-off is refused (issue 15: at N = 2·10⁵
+  // λ = 3.16·10⁴ here); its edf was computed from a broken factor before.  The others must fall.
   double last = std::numeric_limits<double>::infinity();
+  int accepted = 0;
   for (double log_lambda = 1.0; log_lambda <= 5.0 + 1e-9; log_lambda += 0.5) {
     const double lambda = std::pow(10.0, log_lambda);
-    REQUIRE(solver.factorize(lambda) == SolverStatus::success);
+    if (solver.factorize(lambda) != SolverStatus::success) {
+      std::printf("%s\n", solver.failure().message().c_str());
+      continue;
+    }
+    ++accepted;
     const SelectedInverse z = solver.selected_inverse();
     const double edf = solver.trace_inverse_normal(z);
     const double edf_difference = n - lambda * lambda * solver.trace_inverse_penalty(z);
@@ -258,4 +265,5 @@ TEST_CASE("edf_f falls monotonically with lambda on a long scan", "[four_sensor]
     CHECK(edf < last + 1e-3);
     last = edf;
   }
+  CHECK(accepted >= 7);  // of 9
 }

@@ -153,6 +153,10 @@ struct FourSensorResult {
   LCurveResult lcurve;  ///< the whole curve (filled for rule lcurve)
   /// Rules reml and gcv: the λ of the search grid and the rule's criterion there.
   std::vector<double> lambda_grid, lambda_criterion;
+  /// Rules reml and gcv: each λ the search could not evaluate and why, in the order tried
+  /// ("lambda = 5.62 rejected: factor not positive definite at pivot …", FactorFailure::message):
+  /// on long scans AᵀA + λ²P is singular to working precision at some λ.
+  std::vector<std::string> lambda_rejected;
   /// Rule lcurve found no corner (lcurve.has_corner false): what was done instead.
   LambdaFallback lambda_fallback = LambdaFallback::none;
   double residual_norm = 0;  ///< ‖A·X_λ − b‖

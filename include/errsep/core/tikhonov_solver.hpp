@@ -27,11 +27,31 @@ namespace errsep::core {
 
 enum class SolverStatus {
   success,
-  not_positive_definite,  ///< CHOLMOD reported a zero/negative pivot (rank-deficient A at λ = 0)
+  /// A pivot of the LDLᵀ factor came out zero, negative or not finite (TikhonovSolver::failure()
+  /// says where and at which λ): the matrix is singular or indefinite to working precision.
+  /// AᵀA + λ²P is positive semi-definite by construction, so for a penalty that is too this means
+  /// the round-off of the factorisation exceeded its smallest eigenvalue (the digits are lost),
+  /// or A is rank-deficient at λ = 0.  CHOLMOD's LDLᵀ stops only at an exactly zero pivot; a
+  /// negative one it takes silently (log det NaN, a wrong solution), so every pivot is checked.
+  not_positive_definite,
   analysis_failed,
   not_factorized,
 };
 const char* to_string(SolverStatus s);
+
+/// Where and why the last factorisation failed (SolverStatus::not_positive_definite).
+struct FactorFailure {
+  double lambda = 0.0;
+  Eigen::Index pivot = -1;    ///< 0-based, over all unknowns (the border's pivots come last)
+  Eigen::Index unknowns = 0;  ///< n, for the message
+  double pivot_value = 0.0;   ///< D at that pivot (0, negative or not finite)
+  double diagonal = 0.0;      ///< the matrix's own diagonal entry there: the round-off's scale
+  bool in_border = false;     ///< a pivot of the border's Schur complement
+  bool stopped_by_cholmod = false;  ///< CHOLMOD stopped at it (an exactly zero pivot)
+  /// "lambda = 5.62 rejected: factor not positive definite at pivot 51234 of 99997 (D = -3.1e-09,
+  /// diagonal 401): ..." — what a λ search and a result's diagnostics carry.
+  std::string message() const;
+};
 
 /// Entries of M⁻¹ (M = AᵀA + λ²P, or + λ²I) inside the band of the factor, and its border blocks:
 /// what the posterior covariance of local quantities needs (Takahashi's selected inversion).
@@ -112,7 +132,9 @@ class TikhonovSolver {
   /// log det(AᵀA + λ²P) of the current factorisation (band pivots and the border's Schur block).
   double log_det() const;
   /// Selected entries of the inverse of the current factorisation (see SelectedInverse).
-  SelectedInverse selected_inverse();
+  /// Computed once per factorisation and kept (valid until the next factorisation): at N = 10⁶
+  /// it is 64 MB, so it is not copied out.
+  const SelectedInverse& selected_inverse();
   /// tr(M⁻¹·P) from a selected inverse of the current factorisation (P inside the band): what
   /// the effective degrees of freedom n − λ²·tr(M⁻¹P) need.  Without a penalty, tr(M⁻¹).
   double trace_inverse_penalty(const SelectedInverse& z) const;
@@ -124,10 +146,14 @@ class TikhonovSolver {
   /// takes their fourth differences).  AᵀA's entries are O(1): the same round-off costs λ² less.
   double trace_inverse_normal(const SelectedInverse& z) const;
   const Eigen::SparseMatrix<double>& A() const { return *A_; }
+  /// λ of the last factorisation, and whether it succeeded (its factor is the current one).
   double lambda() const { return lambda_; }
+  bool factorized() const;
   /// An upper bound of the largest singular value of A (sqrt of ‖AᵀA‖₁), for λ ranges.
   double sigma_max_bound() const { return sigma_max_bound_; }
   const TikhonovSolverStats& stats() const { return stats_; }
+  /// After a factorisation that returned not_positive_definite: where it failed.
+  const FactorFailure& failure() const { return failure_; }
 
  private:
   struct Normal;  // AᵀA in CHOLMOD form, shared by workers
@@ -149,6 +175,7 @@ class TikhonovSolver {
   double lambda_ = -1.0;
   double sigma_max_bound_ = 0.0;
   TikhonovSolverStats stats_;
+  FactorFailure failure_;
 };
 
 }  // namespace errsep::core
