@@ -38,6 +38,8 @@ int main(int argc, char** argv) {
       ->delimiter(',');
   app.add_option("--size", size, "scale of the effects' drawn sizes")->capture_default_str();
   app.add_flag("--runs", per_run, "print every run");
+  bool verdicts = false;
+  app.add_flag("--verdicts", verdicts, "with --runs: also the refine's verdict of every effect");
   errsep::core::RefineOptions refine;
   app.add_option("--max-error-ratio", refine.decision.max_error_ratio,
                  "apply a correction when the expected squared error with it is at most this "
@@ -74,14 +76,17 @@ int main(int argc, char** argv) {
         if (per_run)
           for (const auto& r : cell.runs) {
             char buf[600];
-            std::snprintf(
-                buf, sizeof buf,
-                "    seed %3llu S %.3f -> %.3f (clean %.3f, u %.3f) g %.1f -> %.1f | %s | "
-                "%s",
-                static_cast<unsigned long long>(r.seed), r.S_before_um, r.S_after_um, r.S_clean_um,
-                r.u_S_after_um, r.gamma_before_urad, r.gamma_after_urad, r.model.c_str(),
-                r.description.c_str());
+            std::snprintf(buf, sizeof buf,
+                          "    seed %3llu S %.3f -> %.3f (clean %.3f, u %.3f) g %.1f -> %.1f (u "
+                          "%.1f)%s | %s | %s",
+                          static_cast<unsigned long long>(r.seed), r.S_before_um, r.S_after_um,
+                          r.S_clean_um, r.u_S_after_um, r.gamma_before_urad, r.gamma_after_urad,
+                          r.u_gamma_after_urad, r.worse_beyond_u() ? " WORSE BEYOND u" : "",
+                          r.model.c_str(), r.description.c_str());
             std::cout << buf << "\n";
+            if (verdicts && !r.verdicts.empty()) std::cout << "      " << r.verdicts << "\n";
+            if (verdicts && !r.identifiability.empty())
+              std::cout << "      " << r.identifiability << "\n";
           }
       }
     std::printf("total %.1f s\n",

@@ -9,6 +9,12 @@
 
 namespace errsep::core {
 
+StepDecisionOptions refine_step_decision() {
+  StepDecisionOptions o;
+  o.bias_z = 2.0;
+  return o;
+}
+
 bool RefineOptions::is_valid(std::string* why) const {
   auto fail = [&](const std::string& m) {
     if (why) *why = m;
@@ -667,6 +673,30 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
         d.reason = "not determined well enough about zero, where the fit is linear: " + d0.reason;
       }
     }
+    // The part of the effect this plan cannot determine (see `carried` above): when it reaches
+    // S beyond a tenth of u_S the effect is not identifiable from this plan, and its correction
+    // is not applied whatever the decision on the determined part says: the estimate along the
+    // undetermined directions is a convention (none), not a measurement, so the corrected S
+    // would carry an error the data cannot bound (thermal drift on one configuration, single
+    // plan: S 0.64 -> 2.16 um with u_S 0.95 when applied).  Same rule as sequence_refine.hpp.
+    const Eigen::MatrixXd W = block_determined_directions(cur.last.determined, c0, k);
+    const Eigen::Index k0 = k - W.cols();
+    double und = 0.0, s2_und = 0.0;
+    Eigen::MatrixXd Z;
+    if (k0 > 0) {
+      Z = Eigen::MatrixXd::Identity(k, k);
+      if (W.cols() > 0) {
+        Eigen::HouseholderQR<Eigen::MatrixXd> wq(W);
+        Z = Eigen::MatrixXd(wq.householderQ()).rightCols(k0);
+      }
+      s2_und = pe.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(1, W.cols()));
+      und = std::sqrt(s2_und * (D_S.middleCols(c0, k) * Z).squaredNorm() / P);
+    }
+    const bool unidentifiable = k0 > 0 && und > 0.1 * d.quantity("S")->rms_u_base;
+    if (d.apply && unidentifiable) {
+      d.apply = false;
+      d.reason = "not identifiable from this plan, so not applied (" + d.reason + ")";
+    }
     if (d.apply) {
       carried.block(c0, c0, k, k) = Ce;
       applied.effects.push_back(M.effects[e]);
@@ -674,24 +704,12 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
     } else {
       carried.block(c0, c0, k, k) = pe * pe.transpose();
     }
-    const Eigen::MatrixXd W = block_determined_directions(cur.last.determined, c0, k);
-    const Eigen::Index k0 = k - W.cols();
-    double und = 0.0;
-    if (k0 > 0) {
-      Eigen::MatrixXd Z = Eigen::MatrixXd::Identity(k, k);
-      if (W.cols() > 0) {
-        Eigen::HouseholderQR<Eigen::MatrixXd> wq(W);
-        Z = Eigen::MatrixXd(wq.householderQ()).rightCols(k0);
-      }
-      const double s2 = pe.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(1, W.cols()));
-      carried.block(c0, c0, k, k) += s2 * Z * Z.transpose();
-      und = std::sqrt(s2 * (D_S.middleCols(c0, k) * Z).squaredNorm() / P);
-    }
+    if (k0 > 0) carried.block(c0, c0, k, k) += s2_und * Z * Z.transpose();
     rep.undetermined.push_back(static_cast<int>(k0));
     rep.undetermined_S_um.push_back(und);
     std::string v =
         describe_decision(M.effects[e]->name(), M.effects[e]->parameter_names(), pe, cur.u[e], d);
-    if (k0 > 0 && und > 0.1 * d.quantity("S")->rms_u_base) {
+    if (unidentifiable) {
       char buf[300];
       std::snprintf(buf, sizeof buf,
                     "; not identifiable from this plan: %d of %d parameter combinations are not "
@@ -804,6 +822,93 @@ EffectFit fit_effects(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
   out.sigma_um = std::sqrt(s.s2);
   out.iterations = s.iterations;
   out.m_corrected_um = s.m_c;
+  return out;
+}
+
+std::string EffectIdentifiability::brief() const {
+  char buf[400];
+  std::snprintf(buf, sizeof buf,
+                "%s: %s from this plan (%d of %d combinations determined, the rest could move S "
+                "by %.3g um; predicted S error %.3g -> %.3g um, gamma %.3g -> %.3g urad with the "
+                "correction)",
+                effect.c_str(), identifiable ? "identifiable" : "NOT identifiable", determined,
+                parameters, undetermined_S_um, predicted_S_before_um, predicted_S_after_um,
+                predicted_gamma_before_urad, predicted_gamma_after_urad);
+  return buf;
+}
+
+EffectIdentifiability effect_identifiability(const FourSensorConfig& cfg,
+                                             const Eigen::MatrixXd& m_um,
+                                             const Eigen::MatrixXd& t_s_in,
+                                             const ModelEffect& effect, const RefineOptions& opts) {
+  std::string why;
+  if (!cfg.is_valid(&why)) throw std::invalid_argument("invalid configuration: " + why);
+  if (!opts.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
+  const int P = cfg.positions();
+  if (m_um.rows() != P || m_um.cols() != 4 || !m_um.allFinite())
+    throw std::invalid_argument("readings must be a finite P x 4 = " + std::to_string(P) +
+                                " x 4 matrix");
+  const Eigen::MatrixXd t_s =
+      t_s_in.size() == 0 ? scan_order_times_s(cfg, opts.speed_mm_per_s) : t_s_in;
+  EffectIdentifiability out;
+  out.effect = effect.name();
+  out.description = effect.description();
+  out.parameters = effect.parameter_count();
+  const ShiftedBase sb(cfg);
+  EffectContext raw;
+  raw.cfg = cfg;
+  raw.m_um = m_um;
+  raw.t_s = t_s;
+  Model M;
+  const Solved base = solve_model(sb, M, raw, opts);
+  std::vector<std::unique_ptr<ModelEffect>> one;
+  one.push_back(effect.clone());
+  const std::vector<Scored> scored = score_candidates(cfg, base, one, M, opts, {});
+  if (scored.empty() || !scored.front().variant) return out;  // no direction the data see
+  out.description = scored.front().variant->description();
+  M.effects.push_back(scored.front().variant);
+  M.p.push_back(scored.front().p0);
+  const Solved cur = solve_model(sb, M, base.ctx, opts);
+  const FourSensorResult before = separate_four_sensor(cfg, m_um, opts.solve);
+  const Reported rep = report_model(cfg, m_um, M, cur, before, opts, sb, base.ctx);
+  out.determined = out.parameters - rep.undetermined.front();
+  out.undetermined_S_um = rep.undetermined_S_um.front();
+  const StepDecision& d = rep.decisions.front();
+  const QuantityEffect* S = d.quantity("S");
+  const QuantityEffect* g = d.quantity("gamma");
+  // The separation's own error of the shape (S without its constant, line and bow, γ without
+  // its constant and line: what a step can change, the sensitivities have the gauge removed
+  // too): the pointwise u includes the gauge directions' uncertainty, which no step touches.
+  out.u_S_um = S->rms_u_base;
+  out.u_gamma_urad = g->rms_u_base;
+  if (before.covariance) {
+    std::vector<int> all(static_cast<std::size_t>(P));
+    for (int n = 0; n < P; ++n)
+      all[static_cast<std::size_t>(n)] = n;
+    const Eigen::MatrixXd VS = before.covariance->covariance_S(all);
+    const Eigen::MatrixXd VSs = remove_polynomial(remove_polynomial(VS, 2).transpose(), 2);
+    out.u_S_um = std::sqrt(std::max(0.0, VSs.trace()) / P);
+    const Eigen::MatrixXd Bg = remove_polynomial(Eigen::MatrixXd::Identity(P, P), 1);
+    double vg = 0.0;
+    for (int n = 0; n < P; ++n)
+      vg += before.covariance->variance({}, Bg.col(n), {});
+    out.u_gamma_urad = 1e6 * std::sqrt(std::max(0.0, vg) / P);
+  }
+  // The raw separation's σ̂ contains the effect's misfit (PE1 at σ = 0.05 µm: 0.10 µm): the noise
+  // the answer has once the effect is modelled is the σ̂ of the fit with it.
+  if (before.sigma_um > 0 && cur.s2 > 0) {
+    const double scale = std::min(1.0, std::sqrt(cur.s2) / before.sigma_um);
+    out.u_S_um *= scale;
+    out.u_gamma_urad *= scale;
+  }
+  auto hyp = [](double a, double b) { return std::sqrt(a * a + b * b); };
+  out.predicted_S_before_um = hyp(out.u_S_um, S->rms_bias);
+  out.predicted_S_after_um = hyp(hyp(out.u_S_um, S->rms_added_u), out.undetermined_S_um);
+  out.predicted_gamma_before_urad = hyp(out.u_gamma_urad, g->rms_bias);
+  out.predicted_gamma_after_urad = hyp(out.u_gamma_urad, g->rms_added_u);
+  out.from_plan = out.undetermined_S_um <= 0.1 * out.u_S_um;
+  out.identifiable = out.from_plan && out.predicted_S_after_um <= 0.5 * out.predicted_S_before_um &&
+                     out.predicted_gamma_after_urad <= 0.5 * out.predicted_gamma_before_urad;
   return out;
 }
 
