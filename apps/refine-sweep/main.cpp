@@ -69,9 +69,16 @@ int main(int argc, char** argv) {
     if (!refine.is_valid(&why)) throw std::invalid_argument(why);
     std::cout << errsep::core::sweep_header() << "\n";
     const auto t0 = std::chrono::steady_clock::now();
+    std::vector<std::string> breakdown;
+    long points = 0, covered = 0, halved = 0, identifiable = 0;
     for (const auto e : list)
       for (const double s : sigmas) {
         const auto cell = errsep::core::run_sweep_cell(e, s, seeds, seed0, refine, base);
+        breakdown.push_back(errsep::core::coverage_breakdown(cell));
+        halved += cell.halved_identifiable_runs();
+        identifiable += cell.identifiable_runs();
+        for (const auto& r : cell.runs)
+          points += r.points, covered += r.covered;
         std::cout << errsep::core::sweep_row(cell) << std::endl;
         if (per_run)
           for (const auto& r : cell.runs) {
@@ -89,6 +96,13 @@ int main(int argc, char** argv) {
               std::cout << "      " << r.identifiability << "\n";
           }
       }
+    for (const auto& b : breakdown)
+      std::cout << b << "\n";
+    std::printf(
+        "pooled over every cell: %ld of %ld points within 2 u_S (%.3f); halved in %ld of "
+        "the %ld runs where the effect is identifiable from the plan\n",
+        covered, points, points ? static_cast<double>(covered) / points : 0.0, halved,
+        identifiable);
     std::printf("total %.1f s\n",
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     return 0;

@@ -584,6 +584,7 @@ struct Reported {
   FourSensorResult sep;
   Eigen::MatrixXd m_c;  // the readings `sep` separates
   std::vector<StepDecision> decisions;
+  std::vector<StepDecision> at_zero;  // the same decisions linearised about zero (linear_at_zero)
   std::vector<bool> applied;
   std::vector<int> undetermined;
   std::vector<double> undetermined_S_um;
@@ -663,11 +664,11 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
     const Eigen::VectorXd pe = p.segment(c0, k);
     const Eigen::MatrixXd Ce = C.block(c0, c0, k, k);
     StepDecision d = decide_step(pe, Ce, q, opts.decision);
+    // The same decision with the uncertainty of the linearisation about zero: a correction is
+    // applied only when both say so (see covariance_at_zero).
+    StepDecision d0 =
+        decide_step(lin0.p.segment(c0, k), lin0.covariance.block(c0, c0, k, k), q, opts.decision);
     if (d.apply) {
-      // The same decision with the uncertainty of the linearisation about zero: a correction is
-      // applied only when both say so (see covariance_at_zero).
-      const StepDecision d0 =
-          decide_step(lin0.p.segment(c0, k), lin0.covariance.block(c0, c0, k, k), q, opts.decision);
       if (!d0.apply) {
         d.apply = false;
         d.reason = "not determined well enough about zero, where the fit is linear: " + d0.reason;
@@ -721,6 +722,7 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
     rep.verdicts.push_back(std::move(v));
     rep.applied.push_back(d.apply);
     rep.decisions.push_back(std::move(d));
+    rep.at_zero.push_back(std::move(d0));
     c0 += k;
   }
   // The separation of the readings corrected for the applied effects (a fresh one even when
@@ -873,14 +875,12 @@ EffectIdentifiability effect_identifiability(const FourSensorConfig& cfg,
   const Reported rep = report_model(cfg, m_um, M, cur, before, opts, sb, base.ctx);
   out.determined = out.parameters - rep.undetermined.front();
   out.undetermined_S_um = rep.undetermined_S_um.front();
-  const StepDecision& d = rep.decisions.front();
-  const QuantityEffect* S = d.quantity("S");
-  const QuantityEffect* g = d.quantity("gamma");
   // The separation's own error of the shape (S without its constant, line and bow, γ without
   // its constant and line: what a step can change, the sensitivities have the gauge removed
   // too): the pointwise u includes the gauge directions' uncertainty, which no step touches.
-  out.u_S_um = S->rms_u_base;
-  out.u_gamma_urad = g->rms_u_base;
+  const StepDecision& d = rep.decisions.front();
+  out.u_S_um = d.quantity("S")->rms_u_base;
+  out.u_gamma_urad = d.quantity("gamma")->rms_u_base;
   if (before.covariance) {
     std::vector<int> all(static_cast<std::size_t>(P));
     for (int n = 0; n < P; ++n)
@@ -901,14 +901,34 @@ EffectIdentifiability effect_identifiability(const FourSensorConfig& cfg,
     out.u_S_um *= scale;
     out.u_gamma_urad *= scale;
   }
+  // Predicted errors from one decision's figures: the bias at its lower confidence bound (the
+  // same B − z·sd(B) the decision uses, shared out over the quantities in proportion), so that
+  // a fit chosen for its own size does not predict a gain it cannot deliver.
   auto hyp = [](double a, double b) { return std::sqrt(a * a + b * b); };
-  out.predicted_S_before_um = hyp(out.u_S_um, S->rms_bias);
-  out.predicted_S_after_um = hyp(hyp(out.u_S_um, S->rms_added_u), out.undetermined_S_um);
-  out.predicted_gamma_before_urad = hyp(out.u_gamma_urad, g->rms_bias);
-  out.predicted_gamma_after_urad = hyp(out.u_gamma_urad, g->rms_added_u);
+  struct Predicted {
+    double S_before, S_after, g_before, g_after;
+  };
+  auto predict = [&](const StepDecision& x) {
+    const double f = x.bias_sum > 0 ? std::max(0.0, x.bias_bound / x.bias_sum) : 0.0;
+    const QuantityEffect* S = x.quantity("S");
+    const QuantityEffect* g = x.quantity("gamma");
+    return Predicted{hyp(out.u_S_um, std::sqrt(f) * S->rms_bias),
+                     hyp(hyp(out.u_S_um, S->rms_added_u), out.undetermined_S_um),
+                     hyp(out.u_gamma_urad, std::sqrt(f) * g->rms_bias),
+                     hyp(out.u_gamma_urad, g->rms_added_u)};
+  };
+  auto halves = [](const Predicted& x) {
+    return x.S_after <= 0.5 * x.S_before && x.g_after <= 0.5 * x.g_before;
+  };
+  // The fitted point's linearisation and the one about zero (as the refine decides: both).
+  const Predicted a = predict(d), z = predict(rep.at_zero.front());
+  const Predicted& w = halves(a) && !halves(z) ? z : a;  // the one that says no, if one does
+  out.predicted_S_before_um = w.S_before;
+  out.predicted_S_after_um = w.S_after;
+  out.predicted_gamma_before_urad = w.g_before;
+  out.predicted_gamma_after_urad = w.g_after;
   out.from_plan = out.undetermined_S_um <= 0.1 * out.u_S_um;
-  out.identifiable = out.from_plan && out.predicted_S_after_um <= 0.5 * out.predicted_S_before_um &&
-                     out.predicted_gamma_after_urad <= 0.5 * out.predicted_gamma_before_urad;
+  out.identifiable = out.from_plan && halves(a) && halves(z);
   return out;
 }
 

@@ -125,6 +125,32 @@ double SweepCell::coverage_shape() const {
   return all ? static_cast<double>(in) / static_cast<double>(all) : 0.0;
 }
 
+double SweepCell::coverage_where(bool (*pred)(const SweepRun&), int* runs_counted) const {
+  long in = 0, all = 0;
+  int n = 0;
+  for (const auto& r : runs)
+    if (pred(r)) {
+      ++n;
+      in += r.covered;
+      all += r.points;
+    }
+  if (runs_counted) *runs_counted = n;
+  return all ? static_cast<double>(in) / static_cast<double>(all) : -1.0;
+}
+
+std::string coverage_breakdown(const SweepCell& c) {
+  int na = 0, nd = 0, nn = 0;
+  const double ca = c.coverage_where([](const SweepRun& r) { return r.applied; }, &na);
+  const double cd = c.coverage_where([](const SweepRun& r) { return r.added && !r.applied; }, &nd);
+  const double cn = c.coverage_where([](const SweepRun& r) { return !r.added; }, &nn);
+  char buf[300];
+  std::snprintf(buf, sizeof buf,
+                "%-12s %5.2f coverage within 2 u_S: %.3f; applied %.3f (%d runs), detected not "
+                "applied %.3f (%d), nothing added %.3f (%d)",
+                to_string(c.effect), c.sigma_um, c.coverage(), ca, na, cd, nd, cn, nn);
+  return buf;
+}
+
 SweepCell run_sweep_cell(UndeclaredEffect effect, double sigma_um, int seeds, std::uint64_t seed0,
                          const RefineOptions& refine, const UndeclaredCaseOptions& base) {
   SweepCell cell;

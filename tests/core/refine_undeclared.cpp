@@ -9,11 +9,15 @@
 //   - no step moves what one scan cannot see: the constant, line and bow of S after the loop are
 //     those of the raw readings' separation (to rounding);
 //   - the refined u_S covers 90-99 % of points within 2 u_S on clean data (over the effect cells it
-//     does not: see the last test case but one);
-//   - an effect detected but not applied is reported so, with its size, and widens u_S.
-// Known not to hold in the full table (errsep-refine-sweep, seeds 1-20, not the seeds here): the
-// error growing beyond u in 1-3 of 20 runs for pe1 and pe2 at sigma = 0.05/0.2 um and thermal at
-// 0.1/0.2 um (e.g. pe1 seed 9 at 0.2 um taken for a gain: S 0.87 -> 3.09 um).
+//     does not: printed per cell, see the last test case but one);
+//   - an effect detected but not applied is reported so, with its size, and widens u_S;
+//   - halving where the effect is identifiable from the plan used (effect_identifiability:
+//     computed from the design and sigma-hat, not from the truth): counted and printed, and
+//     asserted at >= 80 % over the runs where it holds (see that test case for the figures).
+// Known not to hold in the full table (errsep-refine-sweep, seeds 1-20, not the seeds here): a
+// thermal drift on one configuration taken for a knocked sensor by the gross-error search and
+// removed (seed 12 at 0.05 um: S 0.35 -> 1.89 um, u_S 0.46; core/gross_errors, not the effect
+// loop).
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdio>

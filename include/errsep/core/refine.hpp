@@ -231,10 +231,13 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
 ///   - undetermined_S_um: how far the parameter combinations this plan cannot determine could
 ///     move S after the gauge (each as large as the determined ones are on average: RefineStep);
 ///   - predicted errors (RMS over the points, S in µm and γ in µrad) of the answer without the
-///     correction, sqrt(u² + b²) with b² the bias estimate mean((D p̂)² − diag(D C Dᵀ)), and with
-///     it, sqrt(u² + diag(D C Dᵀ) + undetermined²), u the raw separation's standard uncertainty,
-///     D the sensitivities of S and γ (gauge removed) and C the fitted parameters' covariance
-///     (step_decision.hpp).
+///     correction, sqrt(u² + b²) with b² the bias estimate mean((D p̂)² − diag(D C Dᵀ)) taken at
+///     its lower confidence bound (RefineOptions::decision.bias_z: the fit that estimates b is
+///     the one that chose the effect), and with it, sqrt(u² + diag(D C Dᵀ) + undetermined²), u
+///     the raw separation's standard uncertainty of the shape with σ̂ of the fit with the
+///     effect, D the sensitivities of S and γ (gauge removed) and C the fitted parameters'
+///     covariance (step_decision.hpp); evaluated at the fitted parameters and, linearised, about
+///     zero (a non-linear effect weakly determined can fit far from its value), both must agree.
 /// u is the raw separation's error of the shape (its covariance without the gauge directions,
 /// which no step moves).
 /// The effect is identifiable from the plan when its undetermined part does not reach S (at most

@@ -64,6 +64,8 @@ struct SweepCell {
   int halved_identifiable_runs() const;
   double coverage() const;        ///< pointwise, pooled over the runs
   double coverage_shape() const;  ///< shape, pooled
+  /// Pointwise coverage pooled over the runs that satisfy `pred` (0 points: -1), and their number.
+  double coverage_where(bool (*pred)(const SweepRun&), int* runs_counted = nullptr) const;
 };
 
 /// `seeds` runs from seed0 on.
@@ -73,5 +75,9 @@ SweepCell run_sweep_cell(UndeclaredEffect effect, double sigma_um, int seeds, st
 /// The table's header and one row per cell (fixed-width text).
 std::string sweep_header();
 std::string sweep_row(const SweepCell& c);
+/// One line per cell: the coverage of u_S split by what the refine did with the effect
+/// (applied / detected, not applied / nothing added), each with its number of runs: where a cell
+/// undercovers, and why.
+std::string coverage_breakdown(const SweepCell& c);
 
 }  // namespace errsep::core
