@@ -184,6 +184,27 @@ EffectContext make_context(const FourSensorConfig& cfg, const Eigen::MatrixXd& m
   return ctx;
 }
 
+// The readings and their times checked (the scan order's times when none were recorded), as
+// the context of the raw readings: solve_model fits the rest.  Throws std::invalid_argument.
+EffectContext checked_raw_context(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
+                                  const Eigen::MatrixXd& t_s, const RefineOptions& opts) {
+  std::string why;
+  if (!cfg.is_valid(&why)) throw std::invalid_argument("invalid configuration: " + why);
+  if (!opts.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
+  const int P = cfg.positions();
+  if (m_um.rows() != P || m_um.cols() != 4)
+    throw std::invalid_argument("readings must be P x 4 = " + std::to_string(P) + " x 4, got " +
+                                std::to_string(m_um.rows()) + " x " + std::to_string(m_um.cols()));
+  if (!m_um.allFinite()) throw std::invalid_argument("readings contain non-finite values");
+  EffectContext raw;
+  raw.cfg = cfg;
+  raw.m_um = m_um;
+  raw.t_s = t_s.size() == 0 ? scan_order_times_s(cfg, opts.speed_mm_per_s) : t_s;
+  if (raw.t_s.rows() != P || raw.t_s.cols() != 4 || !raw.t_s.allFinite())
+    throw std::invalid_argument("reading times must be a finite P x 4 matrix like the readings");
+  return raw;
+}
+
 struct Model {
   std::vector<std::shared_ptr<const ModelEffect>> effects;
   std::vector<Eigen::VectorXd> p;
@@ -659,6 +680,7 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
   // on average): the data say nothing about it, and a result that ignored it would claim more
   // than the scan can show.
   Eigen::MatrixXd carried = Eigen::MatrixXd::Zero(K, K);
+  Eigen::MatrixXd undetermined_part = Eigen::MatrixXd::Zero(K, K);  // the s²·ZZᵀ blocks of it
   Model applied;
   Eigen::Index c0 = 0;
   for (std::size_t e = 0; e < M.effects.size(); ++e) {
@@ -710,7 +732,10 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
     } else {
       carried.block(c0, c0, k, k) = pe * pe.transpose();
     }
-    if (k0 > 0) carried.block(c0, c0, k, k) += s2_und * Z * Z.transpose();
+    if (k0 > 0) {
+      carried.block(c0, c0, k, k) += s2_und * Z * Z.transpose();
+      undetermined_part.block(c0, c0, k, k) = s2_und * Z * Z.transpose();
+    }
     rep.undetermined.push_back(static_cast<int>(k0));
     rep.undetermined_S_um.push_back(und);
     std::string v =
@@ -738,13 +763,14 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
   after.gamma_rad = before.gamma_rad + remove_polynomial(after.gamma_rad - before.gamma_rad, 1);
   // What the effects did to the gauge directions of the raw separation stays in the result
   // (the step keeps them): its size is estimated by the fitted one, conservatively by its
-  // variance on top (E[p̂p̂ᵀ] = ppᵀ + C).  Without it the pointwise u_S did not cover where an
-  // effect was applied and halved the shape error (periodic error at σ = 0.05 µm: 0.45 of the
-  // points within 2 u_S, the shape 0.96): the effect had moved the raw separation's bow.
+  // variance on top (E[p̂p̂ᵀ] = ppᵀ + C), and the undetermined part as above.  Without it the
+  // pointwise u_S did not cover where an effect was applied and halved the shape error (periodic
+  // error at σ = 0.05 µm: 0.45 of the points within 2 u_S, the shape 0.96): the effect had moved
+  // the raw separation's bow.
   Eigen::MatrixXd G(2 * K, 2 * K);
   G.setZero();
   G.topLeftCorner(K, K) = carried;
-  G.bottomRightCorner(K, K) = p * p.transpose() + C;
+  G.bottomRightCorner(K, K) = p * p.transpose() + C + undetermined_part;
   Eigen::MatrixXd GS(P, 2 * K), Gg(P, 2 * K), Gf = Eigen::MatrixXd::Zero(N, 2 * K);
   GS << D_S, D_S_gauge;
   Gg << D_g, D_g_gauge;
@@ -805,21 +831,10 @@ EffectFit fit_effects(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
                       const Eigen::MatrixXd& t_s_in,
                       const std::vector<std::shared_ptr<const ModelEffect>>& effects,
                       const std::vector<Eigen::VectorXd>& start, const RefineOptions& opts) {
-  std::string why;
-  if (!cfg.is_valid(&why)) throw std::invalid_argument("invalid configuration: " + why);
-  if (!opts.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
-  const int P = cfg.positions();
-  if (m_um.rows() != P || m_um.cols() != 4)
-    throw std::invalid_argument("readings must be P x 4 = " + std::to_string(P) + " x 4");
-  const Eigen::MatrixXd t_s =
-      t_s_in.size() == 0 ? scan_order_times_s(cfg, opts.speed_mm_per_s) : t_s_in;
+  const EffectContext raw = checked_raw_context(cfg, m_um, t_s_in, opts);
   if (!start.empty() && start.size() != effects.size())
     throw std::invalid_argument("fit_effects: one start vector per effect");
   const ShiftedBase sb(cfg);
-  EffectContext raw;
-  raw.cfg = cfg;
-  raw.m_um = m_um;
-  raw.t_s = t_s;
   Model M;
   for (std::size_t j = 0; j < effects.size(); ++j) {
     M.effects.push_back(effects[j]);
@@ -861,24 +876,13 @@ EffectIdentifiability effect_identifiability(const FourSensorConfig& cfg,
                                              const Eigen::MatrixXd& m_um,
                                              const Eigen::MatrixXd& t_s_in,
                                              const ModelEffect& effect, const RefineOptions& opts) {
-  std::string why;
-  if (!cfg.is_valid(&why)) throw std::invalid_argument("invalid configuration: " + why);
-  if (!opts.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
+  const EffectContext raw = checked_raw_context(cfg, m_um, t_s_in, opts);
   const int P = cfg.positions();
-  if (m_um.rows() != P || m_um.cols() != 4 || !m_um.allFinite())
-    throw std::invalid_argument("readings must be a finite P x 4 = " + std::to_string(P) +
-                                " x 4 matrix");
-  const Eigen::MatrixXd t_s =
-      t_s_in.size() == 0 ? scan_order_times_s(cfg, opts.speed_mm_per_s) : t_s_in;
   EffectIdentifiability out;
   out.effect = effect.name();
   out.description = effect.description();
   out.parameters = effect.parameter_count();
   const ShiftedBase sb(cfg);
-  EffectContext raw;
-  raw.cfg = cfg;
-  raw.m_um = m_um;
-  raw.t_s = t_s;
   Model M;
   const Solved base = solve_model(sb, M, raw, opts);
   std::vector<std::unique_ptr<ModelEffect>> one;
@@ -954,18 +958,9 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
                                 const Eigen::MatrixXd& t_s_in, const RefineOptions& opts,
                                 const RefineTruth* truth,
                                 std::vector<std::unique_ptr<ModelEffect>> library) {
-  std::string why;
-  if (!cfg.is_valid(&why)) throw std::invalid_argument("invalid configuration: " + why);
-  if (!opts.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
+  const EffectContext raw = checked_raw_context(cfg, m_um, t_s_in, opts);
   const int P = cfg.positions();
-  if (m_um.rows() != P || m_um.cols() != 4)
-    throw std::invalid_argument("readings must be P x 4 = " + std::to_string(P) + " x 4, got " +
-                                std::to_string(m_um.rows()) + " x " + std::to_string(m_um.cols()));
-  if (!m_um.allFinite()) throw std::invalid_argument("readings contain non-finite values");
-  const Eigen::MatrixXd t_s =
-      t_s_in.size() == 0 ? scan_order_times_s(cfg, opts.speed_mm_per_s) : t_s_in;
-  if (t_s.rows() != P || t_s.cols() != 4 || !t_s.allFinite())
-    throw std::invalid_argument("reading times must be a finite P x 4 matrix like the readings");
+  const Eigen::MatrixXd t_s = raw.t_s;
   if (library.empty()) library = default_effect_library();
 
   RefineResult res;
@@ -975,10 +970,6 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
   res.alpha_residual = opts.residual.alpha;
 
   const ShiftedBase sb(cfg);
-  EffectContext raw;  // the readings and times; solve_model fits the rest
-  raw.cfg = cfg;
-  raw.m_um = m_um;
-  raw.t_s = t_s;
   Model M;
   Solved cur = solve_model(sb, M, raw, opts);
   const EffectContext base_ctx = cur.ctx;  // the base model fitted to the raw readings
