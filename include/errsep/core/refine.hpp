@@ -191,8 +191,10 @@ struct RefineResult {
   /// the gauge of `before` (constant, line and bow of S, constant and line of γ are those of the
   /// raw readings' separation: a step never moves what the data cannot see), and u_S, u_γ, u_f
   /// (and the covariance) carrying the applied parameters' covariance, the fitted size of the
-  /// effects left out, and the part of each effect this plan cannot determine.  `before` when no
-  /// effect was added.
+  /// effects left out, the part of each effect this plan cannot determine, and what every effect
+  /// did to the gauge directions of `before` (kept, so their error stays).  An effect this plan
+  /// cannot identify (its undetermined part moves S by more than 0.1 u_S) is never applied.
+  /// `before` when no effect was added.
   FourSensorResult after;
   Eigen::MatrixXd m_corrected_um;  ///< the readings `after` separates (applied effects only)
   Eigen::MatrixXd t_s;             ///< reading times used
