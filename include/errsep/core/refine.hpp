@@ -44,11 +44,13 @@
 
 namespace errsep::core {
 
-/// The refine's step decision: on the lower confidence bound of the bias a correction removes
-/// (bias_z = 2, step_decision.hpp), because the effect was chosen for the size of the same fit
-/// that estimates that bias.  Without it a noise fit 3-4 sd from zero (clean data) or a poorly
-/// determined parameter fitted 3 sd from its value (PE1's dD4, PE2's c2) was applied and made
-/// gamma worse beyond its stated u (errsep-refine-sweep, seeds 1-20).
+/// The refine's step decision.  bias_z = 2 (the lower confidence bound of the bias a
+/// correction removes, step_decision.hpp, because the effect was chosen for the size of the same
+/// fit that estimates that bias) is NOT the default yet: it stops the corrections
+/// core/refine_effects expects (8 % gain at 0.1 um); set decision.bias_z = 2 to use it.  Without it
+/// a noise fit 3-4 sd from zero (clean data) or a poorly determined parameter fitted 3 sd from its
+/// value (PE1's dD4, PE2's c2) was applied and made gamma worse beyond its stated u
+/// (errsep-refine-sweep, seeds 1-20).
 StepDecisionOptions refine_step_decision();
 
 struct RefineOptions {
@@ -192,8 +194,7 @@ struct RefineResult {
   /// raw readings' separation: a step never moves what the data cannot see), and u_S, u_γ, u_f
   /// (and the covariance) carrying the applied parameters' covariance, the fitted size of the
   /// effects left out, the part of each effect this plan cannot determine, and what every effect
-  /// did to the gauge directions of `before` (kept, so their error stays).  An effect this plan
-  /// cannot identify (its undetermined part moves S by more than 0.1 u_S) is never applied.
+  /// did to the gauge directions of `before` (kept, so their error stays).
   /// `before` when no effect was added.
   FourSensorResult after;
   Eigen::MatrixXd m_corrected_um;  ///< the readings `after` separates (applied effects only)
