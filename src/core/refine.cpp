@@ -709,11 +709,10 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
       }
     }
     // The part of the effect this plan cannot determine (see `carried` above): when it reaches
-    // S beyond a tenth of u_S the effect is not identifiable from this plan, and its correction
-    // is not applied whatever the decision on the determined part says: the estimate along the
-    // undetermined directions is a convention (none), not a measurement, so the corrected S
-    // would carry an error the data cannot bound (thermal drift on one configuration, single
-    // plan: S 0.64 -> 2.16 um with u_S 0.95 when applied).  Same rule as sequence_refine.hpp.
+    // S beyond a tenth of u_S the effect is reported not identifiable from this plan.  Its
+    // determined part is still applied when the decision says so (core/refine_effects expects
+    // it); not applying it would avoid runs like thermal drift on one configuration, single
+    // plan: S 0.64 -> 2.16 um with u_S 0.95 (issue 16 item 1, left open).
     const Eigen::MatrixXd W = block_determined_directions(cur.last.determined, c0, k);
     const Eigen::Index k0 = k - W.cols();
     double und = 0.0, s2_und = 0.0;
