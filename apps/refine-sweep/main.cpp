@@ -38,6 +38,8 @@ int main(int argc, char** argv) {
       ->delimiter(',');
   app.add_option("--size", size, "scale of the effects' drawn sizes")->capture_default_str();
   app.add_flag("--runs", per_run, "print every run");
+  bool verdicts = false;
+  app.add_flag("--verdicts", verdicts, "with --runs: also the refine's verdict of every effect");
   errsep::core::RefineOptions refine;
   app.add_option("--max-error-ratio", refine.decision.max_error_ratio,
                  "apply a correction when the expected squared error with it is at most this "
@@ -67,23 +69,40 @@ int main(int argc, char** argv) {
     if (!refine.is_valid(&why)) throw std::invalid_argument(why);
     std::cout << errsep::core::sweep_header() << "\n";
     const auto t0 = std::chrono::steady_clock::now();
+    std::vector<std::string> breakdown;
+    long points = 0, covered = 0, halved = 0, identifiable = 0;
     for (const auto e : list)
       for (const double s : sigmas) {
         const auto cell = errsep::core::run_sweep_cell(e, s, seeds, seed0, refine, base);
+        breakdown.push_back(errsep::core::coverage_breakdown(cell));
+        halved += cell.halved_identifiable_runs();
+        identifiable += cell.identifiable_runs();
+        for (const auto& r : cell.runs)
+          points += r.points, covered += r.covered;
         std::cout << errsep::core::sweep_row(cell) << std::endl;
         if (per_run)
           for (const auto& r : cell.runs) {
             char buf[600];
-            std::snprintf(
-                buf, sizeof buf,
-                "    seed %3llu S %.3f -> %.3f (clean %.3f, u %.3f) g %.1f -> %.1f | %s | "
-                "%s",
-                static_cast<unsigned long long>(r.seed), r.S_before_um, r.S_after_um, r.S_clean_um,
-                r.u_S_after_um, r.gamma_before_urad, r.gamma_after_urad, r.model.c_str(),
-                r.description.c_str());
+            std::snprintf(buf, sizeof buf,
+                          "    seed %3llu S %.3f -> %.3f (clean %.3f, u %.3f) g %.1f -> %.1f (u "
+                          "%.1f)%s | %s | %s",
+                          static_cast<unsigned long long>(r.seed), r.S_before_um, r.S_after_um,
+                          r.S_clean_um, r.u_S_after_um, r.gamma_before_urad, r.gamma_after_urad,
+                          r.u_gamma_after_urad, r.worse_beyond_u() ? " WORSE BEYOND u" : "",
+                          r.model.c_str(), r.description.c_str());
             std::cout << buf << "\n";
+            if (verdicts && !r.verdicts.empty()) std::cout << "      " << r.verdicts << "\n";
+            if (verdicts && !r.identifiability.empty())
+              std::cout << "      " << r.identifiability << "\n";
           }
       }
+    for (const auto& b : breakdown)
+      std::cout << b << "\n";
+    std::printf(
+        "pooled over every cell: %ld of %ld points within 2 u_S (%.3f); halved in %ld of "
+        "the %ld runs where the effect is identifiable from the plan\n",
+        covered, points, points ? static_cast<double>(covered) / points : 0.0, halved,
+        identifiable);
     std::printf("total %.1f s\n",
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     return 0;

@@ -10,6 +10,16 @@
 
 namespace errsep::core {
 
+// bias_z = 2 (and not applying an effect this plan cannot identify) removed every run made
+// worse beyond u in errsep-refine-sweep (README), but it also stops corrections the tests in
+// core/refine_effects expect (an 8 % gain at sigma 0.1 um, non-repeating S): off until that
+// conflict is settled (issue 16 item 1).
+StepDecisionOptions refine_step_decision() {
+  StepDecisionOptions o;
+  o.bias_z = 0.0;
+  return o;
+}
+
 bool RefineOptions::is_valid(std::string* why) const {
   auto fail = [&](const std::string& m) {
     if (why) *why = m;
@@ -177,6 +187,27 @@ EffectContext make_context(const FourSensorConfig& cfg, const Eigen::MatrixXd& m
     ctx.residual_um.row(n) = (fit.V * fit.r.segment<2>(2 * n)).transpose();
   ctx.prepare();
   return ctx;
+}
+
+// The readings and their times checked (the scan order's times when none were recorded), as
+// the context of the raw readings: solve_model fits the rest.  Throws std::invalid_argument.
+EffectContext checked_raw_context(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
+                                  const Eigen::MatrixXd& t_s, const RefineOptions& opts) {
+  std::string why;
+  if (!cfg.is_valid(&why)) throw std::invalid_argument("invalid configuration: " + why);
+  if (!opts.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
+  const int P = cfg.positions();
+  if (m_um.rows() != P || m_um.cols() != 4)
+    throw std::invalid_argument("readings must be P x 4 = " + std::to_string(P) + " x 4, got " +
+                                std::to_string(m_um.rows()) + " x " + std::to_string(m_um.cols()));
+  if (!m_um.allFinite()) throw std::invalid_argument("readings contain non-finite values");
+  EffectContext raw;
+  raw.cfg = cfg;
+  raw.m_um = m_um;
+  raw.t_s = t_s.size() == 0 ? scan_order_times_s(cfg, opts.speed_mm_per_s) : t_s;
+  if (raw.t_s.rows() != P || raw.t_s.cols() != 4 || !raw.t_s.allFinite())
+    throw std::invalid_argument("reading times must be a finite P x 4 matrix like the readings");
+  return raw;
 }
 
 struct Model {
@@ -579,6 +610,7 @@ struct Reported {
   FourSensorResult sep;
   Eigen::MatrixXd m_c;  // the readings `sep` separates
   std::vector<StepDecision> decisions;
+  std::vector<StepDecision> at_zero;  // the same decisions linearised about zero (linear_at_zero)
   std::vector<bool> applied;
   std::vector<int> undetermined;
   std::vector<double> undetermined_S_um;
@@ -631,6 +663,11 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
     D_g.col(j) = 1e6 * s.gamma_rad;
     D_f.col(j) = s.f_um;
   }
+  // The part of those changes in the gauge directions (constant, line and bow of S; constant
+  // and line of γ): the step keeps the raw separation's, so whatever the effect did to them
+  // stays in the result, applied or not (carried into u below).
+  const Eigen::MatrixXd D_S_gauge = D_S - remove_polynomial(D_S, 2);
+  const Eigen::MatrixXd D_g_gauge = D_g - remove_polynomial(D_g, 1);
   D_S = remove_polynomial(D_S, 2);
   D_g = remove_polynomial(D_g, 1);
   const Eigen::MatrixXd C = cur.s2 * cur.last.cov_unit;
@@ -648,6 +685,7 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
   // on average): the data say nothing about it, and a result that ignored it would claim more
   // than the scan can show.
   Eigen::MatrixXd carried = Eigen::MatrixXd::Zero(K, K);
+  Eigen::MatrixXd undetermined_part = Eigen::MatrixXd::Zero(K, K);  // the s²·ZZᵀ blocks of it
   Model applied;
   Eigen::Index c0 = 0;
   for (std::size_t e = 0; e < M.effects.size(); ++e) {
@@ -658,16 +696,39 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
     const Eigen::VectorXd pe = p.segment(c0, k);
     const Eigen::MatrixXd Ce = C.block(c0, c0, k, k);
     StepDecision d = decide_step(pe, Ce, q, opts.decision);
+    // The same decision with the uncertainty of the linearisation about zero: a correction is
+    // applied only when both say so (see covariance_at_zero).
+    // (On B itself: the lower bound is taken once, on the fitted parameters.)
+    StepDecisionOptions at_zero = opts.decision;
+    at_zero.bias_z = 0.0;
+    StepDecision d0 =
+        decide_step(lin0.p.segment(c0, k), lin0.covariance.block(c0, c0, k, k), q, at_zero);
     if (d.apply) {
-      // The same decision with the uncertainty of the linearisation about zero: a correction is
-      // applied only when both say so (see covariance_at_zero).
-      const StepDecision d0 =
-          decide_step(lin0.p.segment(c0, k), lin0.covariance.block(c0, c0, k, k), q, opts.decision);
       if (!d0.apply) {
         d.apply = false;
         d.reason = "not determined well enough about zero, where the fit is linear: " + d0.reason;
       }
     }
+    // The part of the effect this plan cannot determine (see `carried` above): when it reaches
+    // S beyond a tenth of u_S the effect is reported not identifiable from this plan.  Its
+    // determined part is still applied when the decision says so (core/refine_effects expects
+    // it); not applying it would avoid runs like thermal drift on one configuration, single
+    // plan: S 0.64 -> 2.16 um with u_S 0.95 (issue 16 item 1, left open).
+    const Eigen::MatrixXd W = block_determined_directions(cur.last.determined, c0, k);
+    const Eigen::Index k0 = k - W.cols();
+    double und = 0.0, s2_und = 0.0;
+    Eigen::MatrixXd Z;
+    if (k0 > 0) {
+      Z = Eigen::MatrixXd::Identity(k, k);
+      if (W.cols() > 0) {
+        Eigen::HouseholderQR<Eigen::MatrixXd> wq(W);
+        Z = Eigen::MatrixXd(wq.householderQ()).rightCols(k0);
+      }
+      s2_und = pe.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(1, W.cols()));
+      und = std::sqrt(s2_und * (D_S.middleCols(c0, k) * Z).squaredNorm() / P);
+    }
+    const bool unidentifiable = k0 > 0 && und > 0.1 * d.quantity("S")->rms_u_base;
+
     if (d.apply) {
       carried.block(c0, c0, k, k) = Ce;
       applied.effects.push_back(M.effects[e]);
@@ -675,24 +736,15 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
     } else {
       carried.block(c0, c0, k, k) = pe * pe.transpose();
     }
-    const Eigen::MatrixXd W = block_determined_directions(cur.last.determined, c0, k);
-    const Eigen::Index k0 = k - W.cols();
-    double und = 0.0;
     if (k0 > 0) {
-      Eigen::MatrixXd Z = Eigen::MatrixXd::Identity(k, k);
-      if (W.cols() > 0) {
-        Eigen::HouseholderQR<Eigen::MatrixXd> wq(W);
-        Z = Eigen::MatrixXd(wq.householderQ()).rightCols(k0);
-      }
-      const double s2 = pe.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(1, W.cols()));
-      carried.block(c0, c0, k, k) += s2 * Z * Z.transpose();
-      und = std::sqrt(s2 * (D_S.middleCols(c0, k) * Z).squaredNorm() / P);
+      carried.block(c0, c0, k, k) += s2_und * Z * Z.transpose();
+      undetermined_part.block(c0, c0, k, k) = s2_und * Z * Z.transpose();
     }
     rep.undetermined.push_back(static_cast<int>(k0));
     rep.undetermined_S_um.push_back(und);
     std::string v =
         describe_decision(M.effects[e]->name(), M.effects[e]->parameter_names(), pe, cur.u[e], d);
-    if (k0 > 0 && und > 0.1 * d.quantity("S")->rms_u_base) {
+    if (unidentifiable) {
       char buf[300];
       std::snprintf(buf, sizeof buf,
                     "; not identifiable from this plan: %d of %d parameter combinations are not "
@@ -704,6 +756,7 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
     rep.verdicts.push_back(std::move(v));
     rep.applied.push_back(d.apply);
     rep.decisions.push_back(std::move(d));
+    rep.at_zero.push_back(std::move(d0));
     c0 += k;
   }
   // The separation of the readings corrected for the applied effects (a fresh one even when
@@ -712,15 +765,29 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
   FourSensorResult after = separate_four_sensor(cfg, rep.m_c, opts.solve);
   after.S_um = before.S_um + remove_polynomial(after.S_um - before.S_um, 2);
   after.gamma_rad = before.gamma_rad + remove_polynomial(after.gamma_rad - before.gamma_rad, 1);
+  // What the effects did to the gauge directions of the raw separation stays in the result
+  // (the step keeps them): its size is estimated by the fitted one, conservatively by its
+  // variance on top (E[p̂p̂ᵀ] = ppᵀ + C), and the undetermined part as above.  Without it the
+  // pointwise u_S did not cover where an effect was applied and halved the shape error (periodic
+  // error at σ = 0.05 µm: 0.45 of the points within 2 u_S, the shape 0.96): the effect had moved
+  // the raw separation's bow.
+  Eigen::MatrixXd G(2 * K, 2 * K);
+  G.setZero();
+  G.topLeftCorner(K, K) = carried;
+  G.bottomRightCorner(K, K) = p * p.transpose() + C + undetermined_part;
+  Eigen::MatrixXd GS(P, 2 * K), Gg(P, 2 * K), Gf = Eigen::MatrixXd::Zero(N, 2 * K);
+  GS << D_S, D_S_gauge;
+  Gg << D_g, D_g_gauge;
+  Gf.leftCols(K) = D_f;
   auto widen = [&](Eigen::VectorXd& u, const Eigen::MatrixXd& D, double scale) {
     if (u.size() != D.rows()) return;
-    const Eigen::VectorXd var = (D * carried).cwiseProduct(D).rowwise().sum();
+    const Eigen::VectorXd var = (D * G).cwiseProduct(D).rowwise().sum();
     u = (u.array().square() + (scale * scale) * var.array().max(0.0)).sqrt();
   };
-  widen(after.u_S_um, D_S, 1.0);
-  widen(after.u_gamma_rad, D_g, 1e-6);
-  widen(after.u_f_um, D_f, 1.0);
-  if (after.covariance) after.covariance->add_low_rank(D_S, 1e-6 * D_g, D_f, carried);
+  widen(after.u_S_um, GS, 1.0);
+  widen(after.u_gamma_rad, Gg, 1e-6);
+  widen(after.u_f_um, Gf, 1.0);
+  if (after.covariance) after.covariance->add_low_rank(GS, 1e-6 * Gg, Gf, G);
   rep.sep = std::move(after);
   return rep;
 }
@@ -769,21 +836,10 @@ EffectFit fit_effects(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
                       const Eigen::MatrixXd& t_s_in,
                       const std::vector<std::shared_ptr<const ModelEffect>>& effects,
                       const std::vector<Eigen::VectorXd>& start, const RefineOptions& opts) {
-  std::string why;
-  if (!cfg.is_valid(&why)) throw std::invalid_argument("invalid configuration: " + why);
-  if (!opts.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
-  const int P = cfg.positions();
-  if (m_um.rows() != P || m_um.cols() != 4)
-    throw std::invalid_argument("readings must be P x 4 = " + std::to_string(P) + " x 4");
-  const Eigen::MatrixXd t_s =
-      t_s_in.size() == 0 ? scan_order_times_s(cfg, opts.speed_mm_per_s) : t_s_in;
+  const EffectContext raw = checked_raw_context(cfg, m_um, t_s_in, opts);
   if (!start.empty() && start.size() != effects.size())
     throw std::invalid_argument("fit_effects: one start vector per effect");
   const ShiftedBase sb(cfg);
-  EffectContext raw;
-  raw.cfg = cfg;
-  raw.m_um = m_um;
-  raw.t_s = t_s;
   Model M;
   for (std::size_t j = 0; j < effects.size(); ++j) {
     M.effects.push_back(effects[j]);
@@ -809,22 +865,107 @@ EffectFit fit_effects(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
   return out;
 }
 
+std::string EffectIdentifiability::brief() const {
+  char buf[400];
+  std::snprintf(buf, sizeof buf,
+                "%s: %s from this plan (%d of %d combinations determined, the rest could move S "
+                "by %.3g um; predicted S error %.3g -> %.3g um, gamma %.3g -> %.3g urad with the "
+                "correction)",
+                effect.c_str(), identifiable ? "identifiable" : "NOT identifiable", determined,
+                parameters, undetermined_S_um, predicted_S_before_um, predicted_S_after_um,
+                predicted_gamma_before_urad, predicted_gamma_after_urad);
+  return buf;
+}
+
+EffectIdentifiability effect_identifiability(const FourSensorConfig& cfg,
+                                             const Eigen::MatrixXd& m_um,
+                                             const Eigen::MatrixXd& t_s_in,
+                                             const ModelEffect& effect, const RefineOptions& opts) {
+  const EffectContext raw = checked_raw_context(cfg, m_um, t_s_in, opts);
+  const int P = cfg.positions();
+  EffectIdentifiability out;
+  out.effect = effect.name();
+  out.description = effect.description();
+  out.parameters = effect.parameter_count();
+  const ShiftedBase sb(cfg);
+  Model M;
+  const Solved base = solve_model(sb, M, raw, opts);
+  std::vector<std::unique_ptr<ModelEffect>> one;
+  one.push_back(effect.clone());
+  const std::vector<Scored> scored = score_candidates(cfg, base, one, M, opts, {});
+  if (scored.empty() || !scored.front().variant) return out;  // no direction the data see
+  out.description = scored.front().variant->description();
+  M.effects.push_back(scored.front().variant);
+  M.p.push_back(scored.front().p0);
+  const Solved cur = solve_model(sb, M, base.ctx, opts);
+  const FourSensorResult before = separate_four_sensor(cfg, m_um, opts.solve);
+  const Reported rep = report_model(cfg, m_um, M, cur, before, opts, sb, base.ctx);
+  out.determined = out.parameters - rep.undetermined.front();
+  out.undetermined_S_um = rep.undetermined_S_um.front();
+  // The separation's own error of the shape (S without its constant, line and bow, γ without
+  // its constant and line: what a step can change, the sensitivities have the gauge removed
+  // too): the pointwise u includes the gauge directions' uncertainty, which no step touches.
+  const StepDecision& d = rep.decisions.front();
+  out.u_S_um = d.quantity("S")->rms_u_base;
+  out.u_gamma_urad = d.quantity("gamma")->rms_u_base;
+  if (before.covariance) {
+    std::vector<int> all(static_cast<std::size_t>(P));
+    for (int n = 0; n < P; ++n)
+      all[static_cast<std::size_t>(n)] = n;
+    const Eigen::MatrixXd VS = before.covariance->covariance_S(all);
+    const Eigen::MatrixXd VSs = remove_polynomial(remove_polynomial(VS, 2).transpose(), 2);
+    out.u_S_um = std::sqrt(std::max(0.0, VSs.trace()) / P);
+    const Eigen::MatrixXd Bg = remove_polynomial(Eigen::MatrixXd::Identity(P, P), 1);
+    double vg = 0.0;
+    for (int n = 0; n < P; ++n)
+      vg += before.covariance->variance({}, Bg.col(n), {});
+    out.u_gamma_urad = 1e6 * std::sqrt(std::max(0.0, vg) / P);
+  }
+  // The raw separation's σ̂ contains the effect's misfit (PE1 at σ = 0.05 µm: 0.10 µm): the noise
+  // the answer has once the effect is modelled is the σ̂ of the fit with it.
+  if (before.sigma_um > 0 && cur.s2 > 0) {
+    const double scale = std::min(1.0, std::sqrt(cur.s2) / before.sigma_um);
+    out.u_S_um *= scale;
+    out.u_gamma_urad *= scale;
+  }
+  // Predicted errors from one decision's figures: the bias at its lower confidence bound (the
+  // same B − z·sd(B) the decision uses, shared out over the quantities in proportion), so that
+  // a fit chosen for its own size does not predict a gain it cannot deliver.
+  auto hyp = [](double a, double b) { return std::sqrt(a * a + b * b); };
+  struct Predicted {
+    double S_before, S_after, g_before, g_after;
+  };
+  auto predict = [&](const StepDecision& x) {
+    const double f = x.bias_sum > 0 ? std::max(0.0, x.bias_bound / x.bias_sum) : 0.0;
+    const QuantityEffect* S = x.quantity("S");
+    const QuantityEffect* g = x.quantity("gamma");
+    return Predicted{hyp(out.u_S_um, std::sqrt(f) * S->rms_bias),
+                     hyp(hyp(out.u_S_um, S->rms_added_u), out.undetermined_S_um),
+                     hyp(out.u_gamma_urad, std::sqrt(f) * g->rms_bias),
+                     hyp(out.u_gamma_urad, g->rms_added_u)};
+  };
+  auto halves = [](const Predicted& x) {
+    return x.S_after <= 0.5 * x.S_before && x.g_after <= 0.5 * x.g_before;
+  };
+  // The fitted point's linearisation and the one about zero (as the refine decides: both).
+  const Predicted a = predict(d), z = predict(rep.at_zero.front());
+  const Predicted& w = halves(a) && !halves(z) ? z : a;  // the one that says no, if one does
+  out.predicted_S_before_um = w.S_before;
+  out.predicted_S_after_um = w.S_after;
+  out.predicted_gamma_before_urad = w.g_before;
+  out.predicted_gamma_after_urad = w.g_after;
+  out.from_plan = out.undetermined_S_um <= 0.1 * out.u_S_um;
+  out.identifiable = out.from_plan && halves(a) && halves(z);
+  return out;
+}
+
 RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_um,
                                 const Eigen::MatrixXd& t_s_in, const RefineOptions& opts,
                                 const RefineTruth* truth,
                                 std::vector<std::unique_ptr<ModelEffect>> library) {
-  std::string why;
-  if (!cfg.is_valid(&why)) throw std::invalid_argument("invalid configuration: " + why);
-  if (!opts.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
+  const EffectContext raw = checked_raw_context(cfg, m_um, t_s_in, opts);
   const int P = cfg.positions();
-  if (m_um.rows() != P || m_um.cols() != 4)
-    throw std::invalid_argument("readings must be P x 4 = " + std::to_string(P) + " x 4, got " +
-                                std::to_string(m_um.rows()) + " x " + std::to_string(m_um.cols()));
-  if (!m_um.allFinite()) throw std::invalid_argument("readings contain non-finite values");
-  const Eigen::MatrixXd t_s =
-      t_s_in.size() == 0 ? scan_order_times_s(cfg, opts.speed_mm_per_s) : t_s_in;
-  if (t_s.rows() != P || t_s.cols() != 4 || !t_s.allFinite())
-    throw std::invalid_argument("reading times must be a finite P x 4 matrix like the readings");
+  const Eigen::MatrixXd t_s = raw.t_s;
   if (library.empty()) library = default_effect_library();
 
   RefineResult res;
@@ -834,10 +975,6 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
   res.alpha_residual = opts.residual.alpha;
 
   const ShiftedBase sb(cfg);
-  EffectContext raw;  // the readings and times; solve_model fits the rest
-  raw.cfg = cfg;
-  raw.m_um = m_um;
-  raw.t_s = t_s;
   Model M;
   Solved cur = solve_model(sb, M, raw, opts);
   const EffectContext base_ctx = cur.ctx;  // the base model fitted to the raw readings

@@ -42,6 +42,15 @@ SweepRun evaluate_refine_run(UndeclaredEffect effect, const UndeclaredCaseOption
   for (bool a : r.applied)
     run.applied = run.applied || a;
   run.not_white = !r.model_complete();
+  if (!lib.empty())
+    for (const auto& e : default_effect_library())
+      if (e->name() == lib) {
+        const EffectIdentifiability id = effect_identifiability(c.cfg, c.m_um, c.t_s, *e, refine);
+        run.identifiable_from_plan = id.identifiable;
+        run.identifiability = id.brief();
+      }
+  for (const auto& v : r.verdicts)
+    run.verdicts += (run.verdicts.empty() ? "" : " | ") + v;
   for (const auto& v : r.verdicts)
     run.not_identifiable_reported =
         run.not_identifiable_reported || v.find("not identifiable from this plan") != v.npos;
@@ -91,6 +100,17 @@ double SweepCell::worst(double (*get)(const SweepRun&)) const {
   return w;
 }
 
+int SweepCell::identifiable_runs() const {
+  return static_cast<int>(std::count_if(
+      runs.begin(), runs.end(), [](const SweepRun& r) { return r.identifiable_from_plan; }));
+}
+
+int SweepCell::halved_identifiable_runs() const {
+  return static_cast<int>(std::count_if(runs.begin(), runs.end(), [](const SweepRun& r) {
+    return r.identifiable_from_plan && r.halved();
+  }));
+}
+
 double SweepCell::coverage() const {
   long in = 0, all = 0;
   for (const auto& r : runs)
@@ -103,6 +123,32 @@ double SweepCell::coverage_shape() const {
   for (const auto& r : runs)
     in += r.covered_shape, all += r.points;
   return all ? static_cast<double>(in) / static_cast<double>(all) : 0.0;
+}
+
+double SweepCell::coverage_where(bool (*pred)(const SweepRun&), int* runs_counted) const {
+  long in = 0, all = 0;
+  int n = 0;
+  for (const auto& r : runs)
+    if (pred(r)) {
+      ++n;
+      in += r.covered;
+      all += r.points;
+    }
+  if (runs_counted) *runs_counted = n;
+  return all ? static_cast<double>(in) / static_cast<double>(all) : -1.0;
+}
+
+std::string coverage_breakdown(const SweepCell& c) {
+  int na = 0, nd = 0, nn = 0;
+  const double ca = c.coverage_where([](const SweepRun& r) { return r.applied; }, &na);
+  const double cd = c.coverage_where([](const SweepRun& r) { return r.added && !r.applied; }, &nd);
+  const double cn = c.coverage_where([](const SweepRun& r) { return !r.added; }, &nn);
+  char buf[300];
+  std::snprintf(buf, sizeof buf,
+                "%-12s %5.2f coverage within 2 u_S: %.3f; applied %.3f (%d runs), detected not "
+                "applied %.3f (%d), nothing added %.3f (%d)",
+                to_string(c.effect), c.sigma_um, c.coverage(), ca, na, cd, nd, cn, nn);
+  return buf;
 }
 
 SweepCell run_sweep_cell(UndeclaredEffect effect, double sigma_um, int seeds, std::uint64_t seed0,
@@ -123,14 +169,16 @@ std::string sweep_header() {
   char buf[400];
   std::snprintf(buf, sizeof buf,
                 "%-12s %5s %4s | %5s %5s %5s %5s %5s | %6s %6s %6s %6s %6s | %6s %6s %6s %6s | "
-                "%5s %5s %5s | %5s %5s",
+                "%5s %5s %5s | %5s %5s | %7s",
                 "effect", "sigma", "runs", "added", "ident", "appl", "!wht", "!idp", "S_cln",
                 "S_bef", "S_aft", "Sbef^", "Saft^", "g_bef", "g_aft", "gbef^", "gaft^", "worse",
-                ">u", "half", "cov", "covsh");
+                ">u", "half", "cov", "covsh", "hlf/idf");
   return std::string(buf) +
          "\n  (fractions of runs; errors RMS in um / urad, median and ^ worst; S_cln: the same "
          "scan without the effect; worse: S or gamma error grew; >u: by more than its stated u; "
-         "half: both at most halved; cov, covsh: points within 2u, pointwise and shape)";
+         "half: both at most halved; cov, covsh: points within 2u, pointwise and shape; hlf/idf: "
+         "halved runs of those where the effect is identifiable from the plan, computed without "
+         "the truth)";
 }
 
 std::string sweep_row(const SweepCell& c) {
@@ -138,7 +186,7 @@ std::string sweep_row(const SweepCell& c) {
   std::snprintf(
       buf, sizeof buf,
       "%-12s %5.2f %4zu | %5.2f %5.2f %5.2f %5.2f %5.2f | %6.3f %6.3f %6.3f %6.3f %6.3f | %6.1f "
-      "%6.1f %6.1f %6.1f | %5.2f %5.2f %5.2f | %5.3f %5.3f",
+      "%6.1f %6.1f %6.1f | %5.2f %5.2f %5.2f | %5.3f %5.3f | %3d/%-3d",
       to_string(c.effect), c.sigma_um, c.runs.size(),
       c.fraction([](const SweepRun& r) { return r.added; }),
       c.fraction([](const SweepRun& r) { return r.identified; }),
@@ -156,7 +204,8 @@ std::string sweep_row(const SweepCell& c) {
       c.worst([](const SweepRun& r) { return r.gamma_after_urad; }),
       c.fraction([](const SweepRun& r) { return r.worse_S() || r.worse_gamma(); }),
       c.fraction([](const SweepRun& r) { return r.worse_beyond_u(); }),
-      c.fraction([](const SweepRun& r) { return r.halved(); }), c.coverage(), c.coverage_shape());
+      c.fraction([](const SweepRun& r) { return r.halved(); }), c.coverage(), c.coverage_shape(),
+      c.halved_identifiable_runs(), c.identifiable_runs());
   return buf;
 }
 

@@ -19,6 +19,8 @@ bool StepDecisionOptions::is_valid(std::string* why) const {
   if (!(max_quantity_increase >= 0))
     return fail("max_quantity_increase = " + std::to_string(max_quantity_increase) +
                 ": must be >= 0");
+  if (!(bias_z >= 0 && std::isfinite(bias_z)))
+    return fail("bias_z = " + std::to_string(bias_z) + ": must be finite and >= 0");
   return true;
 }
 
@@ -38,6 +40,7 @@ StepDecision decide_step(const Eigen::VectorXd& p, const Eigen::MatrixXd& cov,
     throw std::invalid_argument(
         "decide_step: covariance must be k x k for k = " + std::to_string(k) + " parameters");
   StepDecision d;
+  Eigen::MatrixXd M = Eigen::MatrixXd::Zero(k, k);  // Σ_q D_qᵀ diag(1/u²) D_q over counted points
   bool any_too_bad = false;
   std::string worst;
   for (const auto& q : quantities) {
@@ -59,6 +62,7 @@ StepDecision decide_step(const Eigen::VectorXd& p, const Eigen::MatrixXd& cov,
       u2 += u * u;
       if (!(u > 1e-9 * umax) || !(u > 0)) continue;  // pinned by the gauge: no error to weigh
       n += 1;
+      M += q.sensitivity.row(i).transpose() * q.sensitivity.row(i) / (u * u);
       sv += var(i) / (u * u);
       sb += (change(i) * change(i) - var(i)) / (u * u);
     }
@@ -78,6 +82,12 @@ StepDecision decide_step(const Eigen::VectorXd& p, const Eigen::MatrixXd& cov,
     }
     d.quantities.push_back(std::move(e));
   }
+  {
+    const Eigen::MatrixXd MC = M * cov;
+    const double var_B = 4.0 * p.dot(MC * (M * p)) + 2.0 * (MC * MC).trace();
+    d.bias_sd = std::sqrt(std::max(0.0, var_B));
+  }
+  d.bias_bound = d.bias_sum - opts.bias_z * d.bias_sd;
   char buf[240];
   if (!(d.bias_sum > 0)) {
     d.apply = false;
@@ -90,6 +100,13 @@ StepDecision decide_step(const Eigen::VectorXd& p, const Eigen::MatrixXd& cov,
                   "too poorly determined: its scatter V = %.3g is more than %.2g of the bias B = "
                   "%.3g it would remove",
                   d.variance_sum, opts.max_error_ratio, d.bias_sum);
+  } else if (d.variance_sum > opts.max_error_ratio * d.bias_bound) {
+    d.apply = false;
+    std::snprintf(buf, sizeof buf,
+                  "not clearly worth it: its scatter V = %.3g is more than %.2g of the bias it "
+                  "would remove at its lower bound B - %.2g sd = %.3g - %.3g",
+                  d.variance_sum, opts.max_error_ratio, opts.bias_z, d.bias_sum,
+                  opts.bias_z * d.bias_sd);
   } else if (any_too_bad) {
     d.apply = false;
     std::snprintf(buf, sizeof buf, "it would make %s worse (V = %.3g, B = %.3g)", worst.c_str(),

@@ -9,11 +9,15 @@
 //   - no step moves what one scan cannot see: the constant, line and bow of S after the loop are
 //     those of the raw readings' separation (to rounding);
 //   - the refined u_S covers 90-99 % of points within 2 u_S on clean data (over the effect cells it
-//     does not: see the last test case but one);
-//   - an effect detected but not applied is reported so, with its size, and widens u_S.
-// Known not to hold in the full table (errsep-refine-sweep, seeds 1-20, not the seeds here): the
-// error growing beyond u in 1-3 of 20 runs for pe1 and pe2 at sigma = 0.05/0.2 um and thermal at
-// 0.1/0.2 um (e.g. pe1 seed 9 at 0.2 um taken for a gain: S 0.87 -> 3.09 um).
+//     does not: printed per cell, see the last test case but one);
+//   - an effect detected but not applied is reported so, with its size, and widens u_S;
+//   - halving where the effect is identifiable from the plan used (effect_identifiability:
+//     computed from the design and sigma-hat, not from the truth): counted and printed, and
+//     asserted at >= 80 % over the runs where it holds (see that test case for the figures).
+// Known not to hold in the full table (errsep-refine-sweep, seeds 1-20, not the seeds here): a
+// thermal drift on one configuration taken for a knocked sensor by the gross-error search and
+// removed (seed 12 at 0.05 um: S 0.35 -> 1.89 um, u_S 0.46; core/gross_errors, not the effect
+// loop).
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdio>
@@ -57,7 +61,7 @@ Pool& coverage_pool() {
 }
 
 void print_cell(const SweepCell& c) {
-  std::printf("%s\n", sweep_row(c).c_str());
+  std::printf("%s\n  %s\n", sweep_row(c).c_str(), coverage_breakdown(c).c_str());
   for (const auto& r : c.runs)
     std::printf(
         "    seed %3llu S %.3f -> %.3f (clean %.3f, u %.3f) g %.2f -> %.2f (u %.2f) "
@@ -65,6 +69,10 @@ void print_cell(const SweepCell& c) {
         static_cast<unsigned long long>(r.seed), r.S_before_um, r.S_after_um, r.S_clean_um,
         r.u_S_after_um, r.gamma_before_urad, r.gamma_after_urad, r.u_gamma_after_urad,
         r.gauge_change_um, r.model.c_str(), r.description.c_str());
+  for (const auto& r : c.runs)
+    if (!r.identifiability.empty())
+      std::printf("    seed %3llu %s\n", static_cast<unsigned long long>(r.seed),
+                  r.identifiability.c_str());
 }
 
 // The gauge: a step never moves the constant, line and bow of S.  Rounding only: S is some µm,
@@ -96,8 +104,17 @@ TEST_CASE("undeclared effects: clean data adds nothing in at least 95 % of runs"
   CHECK(added * 20 <= runs);
 }
 
+// And, over the same runs, halving where the effect is identifiable from the plan used
+// (effect_identifiability: the predicted error with the correction at most half the one without,
+// from the design, the fit's sigma-hat and the fitted size at its lower confidence bound, never
+// from the truth).  errsep-refine-sweep, seeds 1-20 at sigma 0.05/0.1/0.2: halved in 22 of the 23
+// runs where it holds (pe1 5/5, gain 1/1, pe2 1/1, periodic 15/16); it holds in few runs at
+// these sizes: a positioning or gain error that doubles the clean error is mostly too poorly
+// determined by one scan to be halved, and drift, thermal drift and a non-repeating traverse are
+// not identifiable from the single plan at all (their undetermined combinations move S).
 TEST_CASE("undeclared effects: a library effect never makes S or gamma worse beyond its u") {
   const RefineOptions o = test_options();
+  int identifiable = 0, halved = 0;
   std::printf("%s\n", sweep_header().c_str());
   for (const auto e : all_undeclared_effects()) {
     if (library_effect_name(e).empty()) continue;  // none, and the effects the library lacks
@@ -111,9 +128,17 @@ TEST_CASE("undeclared effects: a library effect never makes S or gamma worse bey
                           << " -> " << r.model);
         CHECK(r.S_after_um <= r.S_before_um + r.u_S_after_um);
         CHECK(r.gamma_after_urad <= r.gamma_before_urad + r.u_gamma_after_urad);
+        if (r.identifiable_from_plan) {
+          ++identifiable;
+          if (r.halved()) ++halved;
+        }
       }
     }
   }
+  std::printf("identifiable from the plan in %d runs; S and gamma error halved in %d of them\n",
+              identifiable, halved);
+  REQUIRE(identifiable >= 1);  // the sizes drawn here include cases a step can halve
+  CHECK(halved * 5 >= identifiable * 4);
 }
 
 TEST_CASE("undeclared effects not in the library: the gauge stays, nothing applied blindly") {
@@ -127,13 +152,14 @@ TEST_CASE("undeclared effects not in the library: the gauge stays, nothing appli
   }
 }
 
-// Coverage of the refined u_S.  Asserted on clean data only: over the effect cells of this file
-// it does NOT hold (4091 of 6448 points within 2 u_S, 0.634, when this was written; the
-// full table of errsep-refine-sweep has 0.23-0.96 per cell): the effects one scan cannot
-// identify (drift, thermal, a non-repeating traverse, a bump) leave errors of 1-5 um that the
-// residual does not show, so nothing widens u for them, and the applied positioning effects
-// (pe1, periodic) understate the correction's own error at sigma = 0.05 um.  Printed, not
-// asserted, until the plans with redundancy (issue 16, item 2) exist.
+// Coverage of the refined u_S.  Asserted on clean data only: over the effect cells it does NOT
+// hold (errsep-refine-sweep, seeds 1-20, prints it per cell, split by what the refine did).  The
+// cells that undercover are those whose effect one scan cannot identify: drift (0.36-0.79),
+// thermal drift (0.30-0.82), a non-repeating traverse and a bump; there the effect is mostly
+// detected and not applied, and u_S is widened by the fitted size of its determined part plus
+// the undetermined combinations each as large as the determined ones on average, which
+// understates an effect whose size lies mostly in what the scan cannot see (a drift common to
+// the configurations).  A plan with redundancy (sequence_refine.hpp) is the remedy, not u.
 TEST_CASE("undeclared effects: on clean data the refined u_S covers 90-99 % within 2 u_S") {
   const RefineOptions o = test_options();
   Pool clean;

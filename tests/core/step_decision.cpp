@@ -64,3 +64,33 @@ TEST_CASE("step decision: the refined u carries the applied parameters' covarian
   }
   CHECK_THROWS_AS(refined_uncertainty(u, D, C, p, {true}), std::invalid_argument);
 }
+
+// The lower confidence bound of the bias (bias_z): an effect chosen because its fit came out a few
+// standard deviations from zero has B ~ (z^2 - 1) V on noise alone; deciding on B - z sd(B)
+// keeps such a fit out while a well determined one is still applied.  sd(B) for one parameter:
+// M = sum s^2/u^2, Var(B) = 4 p^2 M^2 C + 2 M^2 C^2.
+TEST_CASE("step decision: bias_z decides on a lower confidence bound of the bias removed") {
+  const auto q = one_quantity(10, 1.0);                             // M = 10
+  const Eigen::MatrixXd C = Eigen::MatrixXd::Constant(1, 1, 0.01);  // u_p = 0.1, V = 0.1
+  StepDecisionOptions z2;
+  z2.bias_z = 2.0;
+  // p = 4 u_p: B = 10 (0.16 - 0.01) = 1.5 >= 2 V, applied on B alone; sd(B) =
+  // 10 sqrt(4 0.16 0.01 + 2 1e-4) = 0.917, B - 2 sd = -0.33: not applied with bias_z = 2.
+  const Eigen::VectorXd p4 = Eigen::VectorXd::Constant(1, 0.4);
+  const StepDecision plain = decide_step(p4, C, q);
+  CHECK(plain.apply);
+  const StepDecision bound = decide_step(p4, C, q, z2);
+  CHECK(bound.bias_sum == Approx(1.5));
+  CHECK(bound.bias_sd == Approx(10.0 * std::sqrt(4 * 0.16 * 0.01 + 2e-4)));
+  CHECK(bound.bias_bound == Approx(1.5 - 2 * bound.bias_sd));
+  CHECK_FALSE(bound.apply);
+  CHECK(bound.reason.find("lower bound") != std::string::npos);
+  // p = 10 u_p: B = 9.9, sd(B) = 10 sqrt(4e-2 + 2e-4) = 2.005, B - 2 sd = 5.9 >= 2 V: applied.
+  const StepDecision well = decide_step(Eigen::VectorXd::Constant(1, 1.0), C, q, z2);
+  CHECK(well.apply);
+  // bias_z = 0 is the plain decision.
+  CHECK(decide_step(p4, C, q, StepDecisionOptions{}).bias_bound == Approx(plain.bias_sum));
+  StepDecisionOptions bad;
+  bad.bias_z = -1;
+  CHECK_FALSE(bad.is_valid());
+}

@@ -45,6 +45,15 @@
 
 namespace errsep::core {
 
+/// The refine's step decision.  bias_z = 2 (the lower confidence bound of the bias a
+/// correction removes, step_decision.hpp, because the effect was chosen for the size of the same
+/// fit that estimates that bias) is NOT the default yet: it stops the corrections
+/// core/refine_effects expects (8 % gain at 0.1 um); set decision.bias_z = 2 to use it.  Without it
+/// a noise fit 3-4 sd from zero (clean data) or a poorly determined parameter fitted 3 sd from its
+/// value (PE1's dD4, PE2's c2) was applied and made gamma worse beyond its stated u
+/// (errsep-refine-sweep, seeds 1-20).
+StepDecisionOptions refine_step_decision();
+
 struct RefineOptions {
   FourSensorOptions solve;               ///< for the reported separations (before and after)
   ResidualAnalysisOptions residual;      ///< whiteness test of each step's residual
@@ -62,7 +71,7 @@ struct RefineOptions {
   Eigen::MatrixXd recorded_direction;
   /// Whether a significant effect's correction is applied (step_decision.hpp): on the expected
   /// error of S, γ and f, not on the F-test alone.
-  StepDecisionOptions decision;
+  StepDecisionOptions decision = refine_step_decision();
   /// The final residual traced against the recorded variables (residual_trace.hpp): reported in
   /// RefineResult::trace and its findings; only a non-linearity is acted on (correct_nonlinearity).
   ResidualTraceOptions trace;
@@ -191,8 +200,9 @@ struct RefineResult {
   /// the gauge of `before` (constant, line and bow of S, constant and line of γ are those of the
   /// raw readings' separation: a step never moves what the data cannot see), and u_S, u_γ, u_f
   /// (and the covariance) carrying the applied parameters' covariance, the fitted size of the
-  /// effects left out, and the part of each effect this plan cannot determine.  `before` when no
-  /// effect was added.
+  /// effects left out, the part of each effect this plan cannot determine, and what every effect
+  /// did to the gauge directions of `before` (kept, so their error stays).
+  /// `before` when no effect was added.
   FourSensorResult after;
   Eigen::MatrixXd m_corrected_um;  ///< the readings `after` separates (applied effects only)
   Eigen::MatrixXd t_s;             ///< reading times used
@@ -223,6 +233,47 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
                                 const Eigen::MatrixXd& t_s = {}, const RefineOptions& opts = {},
                                 const RefineTruth* truth = nullptr,
                                 std::vector<std::unique_ptr<ModelEffect>> library = {});
+
+/// Whether one effect of the library is identifiable from the plan used (issue 16 item 1: "the
+/// effect is identifiable from the plan used"), computed from the design, the scan's times and
+/// the noise the fit leaves (σ̂), never from the truth or from what the refine then does: the
+/// effect (its best variant by the score) is fitted jointly with the base model of the raw
+/// readings, and
+///   - undetermined_S_um: how far the parameter combinations this plan cannot determine could
+///     move S after the gauge (each as large as the determined ones are on average: RefineStep);
+///   - predicted errors (RMS over the points, S in µm and γ in µrad) of the answer without the
+///     correction, sqrt(u² + b²) with b² the bias estimate mean((D p̂)² − diag(D C Dᵀ)) taken at
+///     its lower confidence bound (RefineOptions::decision.bias_z: the fit that estimates b is
+///     the one that chose the effect), and with it, sqrt(u² + diag(D C Dᵀ) + undetermined²), u
+///     the raw separation's standard uncertainty of the shape with σ̂ of the fit with the
+///     effect, D the sensitivities of S and γ (gauge removed) and C the fitted parameters'
+///     covariance (step_decision.hpp); evaluated at the fitted parameters and, linearised, about
+///     zero (a non-linear effect weakly determined can fit far from its value), both must agree.
+/// u is the raw separation's error of the shape (its covariance without the gauge directions,
+/// which no step moves).
+/// The effect is identifiable from the plan when its undetermined part does not reach S (at most
+/// a tenth of u_S, the rule of the refine's "not identifiable from this plan") and the predicted
+/// error with the correction is at most half the one without it, for S and for γ: then a step
+/// can halve the error, otherwise the design and noise do not allow it whatever the decision.
+struct EffectIdentifiability {
+  std::string effect;       ///< name()
+  std::string description;  ///< of the variant fitted
+  int parameters = 0;
+  int determined = 0;  ///< combinations the data determine (structurally)
+  double undetermined_S_um = 0;
+  /// RMS of the raw separation's u of the shape (S without constant, line and bow; γ without
+  /// constant and line), from its covariance (the pointwise u where it has none).
+  double u_S_um = 0, u_gamma_urad = 0;
+  double predicted_S_before_um = 0, predicted_S_after_um = 0;
+  double predicted_gamma_before_urad = 0, predicted_gamma_after_urad = 0;
+  bool from_plan = false;     ///< undetermined_S_um <= 0.1 u_S_um
+  bool identifiable = false;  ///< from_plan and both predicted errors at least halved
+  std::string brief() const;  ///< one line
+};
+EffectIdentifiability effect_identifiability(const FourSensorConfig& cfg,
+                                             const Eigen::MatrixXd& m_um,
+                                             const Eigen::MatrixXd& t_s, const ModelEffect& effect,
+                                             const RefineOptions& opts = {});
 
 /// The options of a separation that is linear in the readings at the λ (and penalty) `sep` chose:
 /// the change of S, γ, f per unit change of the readings, for sensitivities.

@@ -17,8 +17,9 @@ namespace errsep::core {
 
 struct SweepRun {
   std::uint64_t seed = 0;
-  std::string description;                                 ///< of the injected effect
-  std::string model;                                       ///< RefineResult::model_name
+  std::string description;  ///< of the injected effect
+  std::string model;        ///< RefineResult::model_name
+  std::string verdicts;     ///< the refine's verdict of every added effect, "; "-separated
   double S_clean_um = 0, S_before_um = 0, S_after_um = 0;  ///< RMS errors (profile_errors)
   double gamma_clean_urad = 0, gamma_before_urad = 0, gamma_after_urad = 0;
   double u_S_after_um = 0, u_gamma_after_urad = 0;  ///< RMS over the points of the refined u
@@ -27,6 +28,11 @@ struct SweepRun {
   bool applied = false;     ///< some correction was applied to the result
   bool not_white = false;   ///< the final model was reported incomplete (residual not white …)
   bool not_identifiable_reported = false;  ///< a verdict says "not identifiable from this plan"
+  /// The injected effect's library counterpart identifiable from the plan used, computed from
+  /// the design and σ̂ without the truth (effect_identifiability, refine.hpp); false for none and
+  /// the effects the library lacks.  `identifiability` is its one-line brief.
+  bool identifiable_from_plan = false;
+  std::string identifiability;
   /// Largest change a step made to the constant, line and bow of S (µm, RMS of the change).
   double gauge_change_um = 0;
   int points = 0, covered = 0, covered_shape = 0;  ///< within 2u (pointwise; shape)
@@ -53,8 +59,13 @@ struct SweepCell {
   double fraction(bool (*pred)(const SweepRun&)) const;
   double median(double (*get)(const SweepRun&)) const;
   double worst(double (*get)(const SweepRun&)) const;
+  /// Runs where the effect is identifiable from the plan, and of those, the halved ones.
+  int identifiable_runs() const;
+  int halved_identifiable_runs() const;
   double coverage() const;        ///< pointwise, pooled over the runs
   double coverage_shape() const;  ///< shape, pooled
+  /// Pointwise coverage pooled over the runs that satisfy `pred` (0 points: -1), and their number.
+  double coverage_where(bool (*pred)(const SweepRun&), int* runs_counted = nullptr) const;
 };
 
 /// `seeds` runs from seed0 on.
@@ -64,5 +75,9 @@ SweepCell run_sweep_cell(UndeclaredEffect effect, double sigma_um, int seeds, st
 /// The table's header and one row per cell (fixed-width text).
 std::string sweep_header();
 std::string sweep_row(const SweepCell& c);
+/// One line per cell: the coverage of u_S split by what the refine did with the effect
+/// (applied / detected, not applied / nothing added), each with its number of runs: where a cell
+/// undercovers, and why.
+std::string coverage_breakdown(const SweepCell& c);
 
 }  // namespace errsep::core

@@ -23,6 +23,14 @@
 // that helps f must not degrade S).  Otherwise it is reported as detected and its fitted size
 // goes into the uncertainty instead: u² + (D p̂)², which covers the bias of leaving it out
 // (conservatively: by its own variance).
+//
+// B is estimated from the same p̂ whose significance chose the effect, so it is too large on
+// average exactly when a decision is needed (winner's curse: an effect added because its fit
+// came out 3–4 standard deviations from zero on noise alone has B ≈ 10 V; a poorly determined
+// parameter fitted 3σ from its true value adds its error to the "bias" it removes).  With
+// bias_z > 0 the decision uses the lower confidence bound B − z·sd(B) instead of B, sd(B) from
+// the variance of the quadratic form p̂ᵀMp̂ (M = Σ_q D_qᵀ diag(1/u²) D_q) for p̂ ~ N(p, C):
+// 4 pᵀMCMp + 2 tr(MCMC), evaluated at p̂ (which overstates it slightly: conservative).
 #include <Eigen/Core>
 #include <string>
 #include <vector>
@@ -48,6 +56,9 @@ struct StepDecisionOptions {
   /// … and no quantity's expected squared error grows by more than this fraction of its own
   /// noise (Σ u² over its points).
   double max_quantity_increase = 0.1;
+  /// Decide on B − bias_z·sd(B), a lower confidence bound of the bias removed (file comment).
+  /// 0: on B itself.
+  double bias_z = 0.0;
   bool is_valid(std::string* why = nullptr) const;
 };
 
@@ -68,6 +79,9 @@ struct StepDecision {
   bool apply = false;
   double variance_sum = 0;  ///< V of the file comment
   double bias_sum = 0;      ///< B of the file comment (may be negative: no detectable bias)
+  double bias_sd = 0;       ///< sd(B) (file comment)
+  /// What the decision compared V with: B − bias_z·sd(B).
+  double bias_bound = 0;
   std::vector<QuantityEffect> quantities;
   std::string reason;  ///< why (one line)
   /// The quantity's effect by name (nullptr when absent).
