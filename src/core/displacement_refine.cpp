@@ -1,4 +1,5 @@
 #include "errsep/core/displacement_refine.hpp"
+#include "errsep/core/golden_section.hpp"
 
 #include "displacement_effect_selection.hpp"
 
@@ -375,26 +376,8 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
         if (q == &e) q = &trial;
       return detail::least_squares(columns(fx), y).rss;
     };
-    const double g = 0.5 * (std::sqrt(5.0) - 1.0);
-    double a = std::log(lo), b = std::log(hi);
-    double c = b - g * (b - a), d = a + g * (b - a);
-    double fc = rss_at(c), fd = rss_at(d);
-    for (int it = 0; it < 14; ++it) {
-      if (fc < fd) {
-        b = d;
-        d = c;
-        fd = fc;
-        c = b - g * (b - a);
-        fc = rss_at(c);
-      } else {
-        a = c;
-        c = d;
-        fc = fd;
-        d = a + g * (b - a);
-        fd = rss_at(d);
-      }
-    }
-    e.tau_s = std::exp(0.5 * (a + b));
+    // 14 golden-section steps: the bracket shrinks to 0.3 % of its width (τ to ~1e-3 relative).
+    e.tau_s = std::exp(golden_section_minimum(rss_at, std::log(lo), std::log(hi), 0.0, 14));
     e.name = thermal_name(e.tau_s);
     complete_effect(e, zero, lib.order, separation, o.identifiable_tolerance);
     // τ is estimated too, and the amplitudes trade with it (a long τ's slope is what no scan

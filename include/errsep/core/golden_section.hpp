@@ -2,7 +2,8 @@
 // Golden-section search for the minimum of a function of one variable on [lo, hi] (unimodal
 // there): each step keeps the part of the bracket that holds the smaller of its two interior
 // values and evaluates the function once.  Used for a time constant fitted by least squares
-// (sequence_refine.cpp: a thermal drift's τ on log τ).  Pure computation, no allocation.
+// (sequence_refine.cpp and displacement_refine.cpp: a thermal drift's τ on log τ).  Pure
+// computation, no allocation.
 #include <cmath>
 
 namespace errsep::core {
