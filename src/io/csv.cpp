@@ -2,6 +2,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <iomanip>
 #include <limits>
@@ -186,6 +187,12 @@ CsvTable parse_csv(const std::string& text, const std::filesystem::path& name,
                    const CsvReadOptions& opts) {
   std::istringstream in(text);
   return read_stream(in, name, opts);
+}
+
+std::string format_number(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.10g", v);
+  return buf;
 }
 
 std::string format_csv(const CsvTable& table, int significant_digits, NonFiniteCell non_finite) {

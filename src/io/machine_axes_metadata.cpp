@@ -1,4 +1,5 @@
 #include "errsep/io/machine_axes_metadata.hpp"
+#include "errsep/io/csv.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -22,11 +23,9 @@ int sign_of(const std::string& key, const std::string& v) {
 }  // namespace
 
 Metadata machine_axes_metadata(const core::MachineAxes& a) {
-  char buf[48];
-  std::snprintf(buf, sizeof buf, "%.10g", a.slide_start_mm);
   return {{"axis", std::string(1, a.input_axis)},
           {"straightness_direction", std::string(1, a.output_axis)},
-          {"slide_start_mm", buf},
+          {"slide_start_mm", format_number(a.slide_start_mm)},
           {"scan_direction", a.scan_direction > 0 ? "+1" : "-1"},
           {"reading_sign", a.reading_sign > 0 ? "+1" : "-1"}};
 }

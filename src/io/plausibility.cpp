@@ -1,16 +1,11 @@
 #include "errsep/io/plausibility.hpp"
+#include "errsep/io/csv.hpp"
 
 #include <cmath>
 #include <cstdio>
 
 namespace errsep::io {
 namespace {
-
-std::string num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.10g", v);
-  return buf;
-}
 
 std::size_t line_of(const CsvTable& t, std::size_t row) {
   return row < t.row_line.size() ? t.row_line[row] : 0;
@@ -44,14 +39,16 @@ ReadingRange reading_range(const CsvTable& t, const std::string& sensor,
   ReadingRange r{*t.meta_number(lo, file), *t.meta_number(hi, file), true};
   if (!(r.min_um < r.max_um))
     throw CsvError(file, 0,
-                   "metadata range of sensor " + sensor + ": " + lo + " = " + num(r.min_um) +
-                       " is not below " + hi + " = " + num(r.max_um));
+                   "metadata range of sensor " + sensor + ": " + lo + " = " +
+                       format_number(r.min_um) + " is not below " + hi + " = " +
+                       format_number(r.max_um));
   return r;
 }
 
 std::vector<std::pair<std::string, std::string>> range_metadata(const std::string& sensor,
                                                                 double min_um, double max_um) {
-  return {{range_min_key(sensor), num(min_um)}, {range_max_key(sensor), num(max_um)}};
+  return {{range_min_key(sensor), format_number(min_um)},
+          {range_max_key(sensor), format_number(max_um)}};
 }
 
 void check_readings(const CsvTable& t, const std::string& column, const ReadingRange& range,
@@ -62,17 +59,18 @@ void check_readings(const CsvTable& t, const std::string& column, const ReadingR
     if (std::isnan(v) && allow_nan) continue;
     if (!std::isfinite(v))
       throw CsvError(file, line_of(t, r),
-                     "column '" + column + "': " + num(v) + " is not a finite reading" +
+                     "column '" + column + "': " + format_number(v) + " is not a finite reading" +
                          (std::isnan(v) ? " (nan: not measured, in a scan marked complete)" : ""));
     if (v < range.min_um || v > range.max_um)
-      throw CsvError(file, line_of(t, r),
-                     "column '" + column + "': " + num(v) + " um is outside " +
-                         (range.recorded ? "the sensor's range " + num(range.min_um) + " to " +
-                                               num(range.max_um) + " um recorded in the file"
-                                         : "+-" + num(kMaxPlausibleReadingUm) +
-                                               " um, beyond any displacement sensor (the file "
-                                               "records no range for this sensor)") +
-                         ": a reading no sensor can give");
+      throw CsvError(
+          file, line_of(t, r),
+          "column '" + column + "': " + format_number(v) + " um is outside " +
+              (range.recorded ? "the sensor's range " + format_number(range.min_um) + " to " +
+                                    format_number(range.max_um) + " um recorded in the file"
+                              : "+-" + format_number(kMaxPlausibleReadingUm) +
+                                    " um, beyond any displacement sensor (the file "
+                                    "records no range for this sensor)") +
+              ": a reading no sensor can give");
   }
 }
 
@@ -86,11 +84,12 @@ void check_increasing(const CsvTable& t, const std::string& column, bool strictl
     const double v = t.rows[r][c];
     if (std::isnan(v) && allow_nan) continue;
     if (!std::isfinite(v))
-      throw CsvError(file, line_of(t, r), "column '" + column + "': " + num(v) + " is not finite");
+      throw CsvError(file, line_of(t, r),
+                     "column '" + column + "': " + format_number(v) + " is not finite");
     if (have_prev && (strictly ? !(v > prev) : v < prev))
       throw CsvError(
           file, line_of(t, r),
-          "column '" + column + "': " + num(v) + " after " + num(prev) +
+          "column '" + column + "': " + format_number(v) + " after " + format_number(prev) +
               (prev_line ? " (line " + std::to_string(prev_line) + ")" : "") +
               (strictly ? ": positions must increase from row to row" : ": time goes backwards"));
     have_prev = true;

@@ -17,6 +17,7 @@
 
 #include "errsep/io/atomic_file.hpp"
 #include "errsep/io/child_process.hpp"
+#include "errsep/io/csv.hpp"
 
 namespace errsep::io {
 namespace {
@@ -44,12 +45,6 @@ std::string enh(const std::string& s) {
     out += c;
   }
   return q(out);
-}
-
-std::string num(double v) {
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.10g", v);
-  return buf;
 }
 
 void check_name(const std::string& name) {
@@ -163,8 +158,8 @@ PlotFiles render_line_plot(const LinePlot& p, const std::filesystem::path& dir,
                                   "': x, y (and band) must have the same length");
     data << "# " << s.title << "\n";
     for (std::size_t i = 0; i < s.x.size(); ++i)
-      data << num(s.x[i]) << " " << num(s.y[i]) << " " << num(s.band.empty() ? 0.0 : s.band[i])
-           << "\n";
+      data << format_number(s.x[i]) << " " << format_number(s.y[i]) << " "
+           << format_number(s.band.empty() ? 0.0 : s.band[i]) << "\n";
     data << "\n\n";  // next gnuplot data set (index)
   }
   static const char* colours[] = {"#1f77b4", "#d62728", "#2ca02c", "#9467bd",
@@ -177,8 +172,8 @@ PlotFiles render_line_plot(const LinePlot& p, const std::filesystem::path& dir,
   b << (p.log_y ? "set logscale y\n" : "unset logscale y\n");
   b << "unset label\n";
   if (p.marker) {
-    b << "set label 1 " << enh(p.marker_label) << " at " << num(p.marker->first) << ","
-      << num(p.marker->second) << " point pt 7 ps 1.5 lc rgb '#d62728' offset 1,1\n";
+    b << "set label 1 " << enh(p.marker_label) << " at " << format_number(p.marker->first) << ","
+      << format_number(p.marker->second) << " point pt 7 ps 1.5 lc rgb '#d62728' offset 1,1\n";
   }
   b << "plot ";
   bool first = true;
@@ -217,12 +212,12 @@ PlotFiles render_heat_map(const HeatMap& m, const std::filesystem::path& dir,
   for (const auto& [y, r] : rows)
     if (r.size() != nx)
       throw std::invalid_argument(
-          "heat map '" + m.name + "': not a rectangular grid (row y = " + num(y) + " has " +
-          std::to_string(r.size()) + " nodes, expected " + std::to_string(nx) + ")");
+          "heat map '" + m.name + "': not a rectangular grid (row y = " + format_number(y) +
+          " has " + std::to_string(r.size()) + " nodes, expected " + std::to_string(nx) + ")");
   std::ostringstream data;
   for (const auto& [y, r] : rows) {
     for (const auto& [x, z] : r)
-      data << num(x) << " " << num(y) << " " << num(z) << "\n";
+      data << format_number(x) << " " << format_number(y) << " " << format_number(z) << "\n";
     data << "\n";
   }
   std::ostringstream b;

@@ -69,6 +69,10 @@ enum class NonFiniteCell {
 std::string format_csv(const CsvTable& table, int significant_digits = 10,
                        NonFiniteCell non_finite = NonFiniteCell::text);
 
+/// A number as errsep writes it in metadata, labels and config text: "%.10g" (the CSV cells'
+/// default precision), so a value read back from any of them is the same to 10 digits.
+std::string format_number(double v);
+
 /// Writes atomically (see write_file_atomic).  Throws std::runtime_error on I/O failure.
 void write_csv(const std::filesystem::path& file, const CsvTable& table,
                int significant_digits = 10);

@@ -1,4 +1,5 @@
 #include "errsep/io/cnc/cnc_parameters.hpp"
+#include "errsep/io/csv.hpp"
 
 #include <algorithm>
 #include <cctype>
@@ -19,12 +20,6 @@ bool parse_double(const std::string& s, double* v) {
     return false;
   }
   return used != 0 && used == s.size() && std::isfinite(*v);
-}
-
-std::string g(double v) {
-  char buf[48];
-  std::snprintf(buf, sizeof buf, "%.10g", v);
-  return buf;
 }
 
 }  // namespace
@@ -73,7 +68,9 @@ double ParameterReader::number(const std::string& key, double dflt, double lo, d
   const std::string& s = it->second;
   double v = 0;
   if (!parse_double(s, &v)) fail(key, "'" + s + "' is not a number");
-  if (v < lo || v > hi) fail(key, g(v) + " is out of range " + g(lo) + ".." + g(hi));
+  if (v < lo || v > hi)
+    fail(key,
+         format_number(v) + " is out of range " + format_number(lo) + ".." + format_number(hi));
   return v;
 }
 

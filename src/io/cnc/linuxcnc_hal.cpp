@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "errsep/io/cnc/cnc_parameters.hpp"
+#include "errsep/io/csv.hpp"
 #include "errsep/version.hpp"
 
 namespace errsep::io {
@@ -19,12 +20,6 @@ std::string lower_text(std::string s) {
   std::transform(s.begin(), s.end(), s.begin(),
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   return s;
-}
-
-std::string g(double v) {
-  char buf[48];
-  std::snprintf(buf, sizeof buf, "%.10g", v);
-  return buf;
 }
 
 constexpr std::size_t kCurvePoints = 16;  // lincurve.comp: personality at most 16
@@ -121,11 +116,11 @@ class LinuxCncHal final : public CompensationWriter {
     if (k > 1)
       o << "# lincurve holds 16 points: " << k << " curves share their end points and are "
         << "added, less the joint values\n# (each holds its end values outside its own range).\n";
-    o << "# y-val and the sums are counts of axis." << l << ".eoffset-scale = " << g(s.scale_mm)
-      << " mm.\n";
+    o << "# y-val and the sums are counts of axis." << l
+      << ".eoffset-scale = " << format_number(s.scale_mm) << " mm.\n";
     o << "# The INI needs [AXIS_" << L
       << "]OFFSET_AV_RATIO > 0 (share of velocity/acceleration reserved for external offsets).\n";
-    o << "# Largest slope of the table: " << g(max_slope) << " mm/mm; axis " << L
+    o << "# Largest slope of the table: " << format_number(max_slope) << " mm/mm; axis " << L
       << " must follow (slope) x (velocity of the moving axis).\n";
     o << "# If your HAL already loads lincurve, sum2, mux2, and2 or conv_float_s32, merge the "
          "names= lists; if\n# "
@@ -164,7 +159,7 @@ class LinuxCncHal final : public CompensationWriter {
     for (std::size_t i = 1; i < k; ++i)
       o << "setp " << c << "-sum" << i << ".offset " << counts(-table.comp_um[first(i)]) << "\n";
     o << "setp " << c << "-err.gain0 1\n";
-    o << "setp " << c << "-err.gain1 " << g(-1.0 / s.scale_mm) << "\n";
+    o << "setp " << c << "-err.gain1 " << format_number(-1.0 / s.scale_mm) << "\n";
     o << "setp " << c << "-gate-err.in0 0\n";
     o << "setp " << c << "-gate-acc.in0 0\n";
     o << "setp " << c << "-s32.clamp 1\n";
@@ -191,7 +186,7 @@ class LinuxCncHal final : public CompensationWriter {
       << "-s32.in\n";
     o << "net " << c << "-held " << c << "-gate-acc.out => " << c << "-acc.in0\n";
     o << "net " << c << "-counts " << c << "-s32.out => axis." << l << ".eoffset-counts\n";
-    o << "setp axis." << l << ".eoffset-scale " << g(s.scale_mm) << "\n";
+    o << "setp axis." << l << ".eoffset-scale " << format_number(s.scale_mm) << "\n";
     o << "setp axis." << l << ".eoffset-enable 1\n";
     return {{axes.symbol() + "_linuxcnc.hal", o.str()}};
   }
