@@ -97,30 +97,54 @@ void Runner::move(Stage& stage, double pos_mm, const std::string& where) {
   check_abort();
   const std::string what =
       "stage '" + stage.name() + "': move to " + fmt(pos_mm) + " mm (" + where + ")";
-  IoStatus st = stage.move_to(pos_mm);
-  if (st != IoStatus::ok)
-    throw ScanStop{ScanRunOutcome::failed, what + ": command failed: " + to_string(st)};
-  // Wait in slices so Ctrl-C is honoured within ~100 ms even during a long move.
+  // A link that drops (IoStatus::disconnected) is reconnected by the bus supervisor
+  // (drivers/modbus_bus.hpp) within its back-off; a loaded PC can miss enough answers to make it
+  // drop one.  The drive keeps its commanded target meanwhile, so the move waits for the link
+  // within its own deadline and commands the target again (an absolute position: the same
+  // command twice moves nowhere else) in case the first was lost with the link.  Each such wait
+  // is counted (ScanCounts::stage_link_losses); a link that stays down fails the scan at the
+  // deadline, naming it.
+  bool command_pending = true;
+  IoStatus last = IoStatus::ok;
   const auto deadline =
       std::chrono::steady_clock::now() + std::chrono::milliseconds(opts_.move_timeout_ms);
   for (;;) {
     check_abort();
-    st = stage.wait_in_position(std::chrono::milliseconds(100));
-    heartbeat();
-    if (st == IoStatus::ok) return;
-    if (st == IoStatus::fault) {
-      unsigned code = 0;
-      const IoStatus fs = stage.fault_code(code);
-      std::ostringstream os;
-      os << what << ": drive fault";
-      if (fs == IoStatus::ok) os << " (fault code 0x" << std::hex << code << ")";
-      throw ScanStop{ScanRunOutcome::failed, os.str()};
+    if (command_pending) {
+      last = stage.move_to(pos_mm);
+      if (last == IoStatus::ok) {
+        command_pending = false;
+      } else if (last != IoStatus::disconnected) {
+        throw ScanStop{ScanRunOutcome::failed, what + ": command failed: " + to_string(last)};
+      }
     }
-    if (st != IoStatus::timeout)
-      throw ScanStop{ScanRunOutcome::failed, what + ": waiting for in-position: " + to_string(st)};
+    if (!command_pending) {
+      // Wait in slices so Ctrl-C is honoured within ~100 ms even during a long move.
+      last = stage.wait_in_position(std::chrono::milliseconds(100));
+      heartbeat();
+      if (last == IoStatus::ok) return;
+      if (last == IoStatus::fault) {
+        unsigned code = 0;
+        const IoStatus fs = stage.fault_code(code);
+        std::ostringstream os;
+        os << what << ": drive fault";
+        if (fs == IoStatus::ok) os << " (fault code 0x" << std::hex << code << ")";
+        throw ScanStop{ScanRunOutcome::failed, os.str()};
+      }
+      if (last != IoStatus::timeout && last != IoStatus::disconnected)
+        throw ScanStop{ScanRunOutcome::failed,
+                       what + ": waiting for in-position: " + to_string(last)};
+      if (last == IoStatus::disconnected) command_pending = true;
+    }
+    if (last == IoStatus::disconnected) {
+      ++res_.counts.stage_link_losses;
+      heartbeat();
+      sleep_checking_abort(std::chrono::milliseconds(100));
+    }
     if (std::chrono::steady_clock::now() >= deadline)
-      throw ScanStop{ScanRunOutcome::failed, what + ": not in position after " +
-                                                 std::to_string(opts_.move_timeout_ms) + " ms"};
+      throw ScanStop{ScanRunOutcome::failed,
+                     what + ": not in position after " + std::to_string(opts_.move_timeout_ms) +
+                         " ms" + (last == IoStatus::disconnected ? " (link down)" : "")};
   }
 }
 
@@ -576,6 +600,8 @@ std::string ScanResult::brief_report() const {
      << counts.samples_averaged << " averaged), missed periods " << counts.missed_periods
      << ", overruns " << counts.overruns << ", read errors " << counts.read_errors << ", retries "
      << counts.point_retries;
+  if (counts.stage_link_losses > 0)
+    os << ", stage link down " << counts.stage_link_losses << "x (waited for reconnect)";
   for (std::size_t b = 0; b < samplers.size(); ++b)
     os << ", jitter p50/p99/max " << samplers[b].jitter.p50_us << "/" << samplers[b].jitter.p99_us
        << "/" << samplers[b].jitter.max_us << " us";

@@ -274,6 +274,88 @@ TEST_CASE("a stuck slide times out and is stopped") {
   CHECK(stuck.stops() >= 1);
 }
 
+// The slide behind a link that drops at its `on_move`-th command: the next `down_calls` calls
+// answer `disconnected` (as ModbusBus does until its supervisor has reconnected).  With
+// `lose_command` the command itself is lost with the link, so only a repeated command moves.
+class DroppingLinkStage final : public Stage {
+ public:
+  DroppingLinkStage(FakeStage& inner, std::uint64_t on_move, int down_calls, bool lose_command)
+      : inner_(inner), on_move_(on_move), down_calls_(down_calls), lose_command_(lose_command) {}
+  const std::string& name() const override { return inner_.name(); }
+  void configure() override { inner_.configure(); }
+  IoStatus move_to(double position_mm) override {
+    if (down()) return IoStatus::disconnected;
+    if (++moves_ == on_move_) {
+      down_left_ = down_calls_;
+      if (lose_command_) return IoStatus::disconnected;
+    }
+    return inner_.move_to(position_mm);
+  }
+  IoStatus position(double& position_mm) override {
+    return down() ? IoStatus::disconnected : inner_.position(position_mm);
+  }
+  IoStatus wait_in_position(std::chrono::milliseconds timeout) override {
+    return down() ? IoStatus::disconnected : inner_.wait_in_position(timeout);
+  }
+  IoStatus stop() noexcept override { return inner_.stop(); }
+  IoStatus fault_code(unsigned& code) override { return inner_.fault_code(code); }
+
+ private:
+  bool down() {
+    if (down_left_ <= 0) return false;
+    --down_left_;
+    return true;
+  }
+  FakeStage& inner_;
+  std::uint64_t on_move_, moves_ = 0;
+  int down_calls_, down_left_ = 0;
+  bool lose_command_;
+};
+
+TEST_CASE("a stage link that drops mid-move is waited for, the target commanded again, counted") {
+  for (const bool lose_command : {false, true}) {
+    DYNAMIC_SECTION((lose_command ? "command lost with the link" : "link lost while moving")) {
+      FakeMachine m;
+      DroppingLinkStage slide(m.slide, 6, 3, lose_command);
+      m.add_single();
+      auto dev = m.devices();
+      dev.slide = &slide;
+      const auto res = run_scan(dev, m.options());
+      INFO(res.brief_report());
+      REQUIRE(res.complete());
+      // Every call that found the link down: the lost command's own answer, then three.
+      const int losses = lose_command ? 4 : 3;
+      CHECK(res.counts.stage_link_losses == static_cast<std::uint64_t>(losses));
+      CHECK_THAT(res.brief_report(),
+                 Catch::Contains("stage link down " + std::to_string(losses) + "x"));
+      // Every average where the model says: the slide was where the runner thought it was.
+      REQUIRE(res.four_sensor);
+      const auto& raw = *res.four_sensor;
+      CHECK(raw.complete);
+      REQUIRE(raw.positions() == 9);
+      for (int c = 0; c < 4; ++c)
+        for (int n = 0; n < 9; ++n)
+          CHECK(raw.m_um[static_cast<std::size_t>(c)][static_cast<std::size_t>(n)] ==
+                Approx(m.expected_um(c, n)).margin(1e-9));
+    }
+  }
+}
+
+TEST_CASE("a stage link that stays down fails the scan at the move deadline, naming it") {
+  FakeMachine m;
+  DroppingLinkStage slide(m.slide, 3, 1 << 30, false);
+  m.add_single();
+  auto dev = m.devices();
+  dev.slide = &slide;
+  auto opts = m.options();
+  opts.move_timeout_ms = 400;
+  const auto res = run_scan(dev, opts);
+  CHECK(res.outcome == ScanRunOutcome::failed);
+  CHECK_THAT(res.stop_reason, Catch::Contains("stage 'slide'") &&
+                                  Catch::Contains("not in position after 400 ms (link down)"));
+  CHECK(res.counts.stage_link_losses >= 3);
+}
+
 TEST_CASE("hooks: every cell as it is measured, heartbeats while waiting, per-bus rates") {
   // The daemon keeps a scan's cells as they come (its checkpoints) and watches heartbeats; an
   // abort after 12 points must leave exactly the cells of the record, no more.
