@@ -12,10 +12,12 @@
 #include <chrono>
 #include <cmath>
 #include <csignal>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <set>
 #include <string>
+#include <vector>
 
 #include "errsep/io/csv.hpp"
 #include "errsep/io/staged_directory.hpp"
@@ -184,11 +186,27 @@ TEST_CASE(
   CHECK(account.meta("step1_effect") == std::optional<std::string>("drift of sensor 1"));
   const auto d = account.meta("step1_decision").value_or("");
   CHECK((d == "applied" || d == "detected, not applied"));
-  // The refined u is never below the separation's.
+  // The same drift of the reference sensor 2 is suspected and no two scans identify it: the
+  // account says what it adds to u(w), and the refined u(w) is wider than the separation's
+  // (RMS; at a point it can be below it where a correction was applied, because σ̂ of the
+  // repeat then no longer holds the drift).
+  bool sensor2 = false;
+  for (int i = 1; account.meta("note" + std::to_string(i)); ++i)
+    sensor2 =
+        sensor2 || account.meta("note" + std::to_string(i))->find("the same effect on sensor 2") !=
+                       std::string::npos;
+  CHECK(sensor2);
   const auto ub = io::read_csv(dir / "displacement.csv").column("u_w_um");
   const auto ur = io::read_csv(dir / "refine" / "displacement.csv").column("u_w_um");
   REQUIRE(ub.size() == ur.size());
-  for (std::size_t k = 0; k < ub.size(); ++k)
-    CHECK(ur[k] >= ub[k] * (1 - 1e-12));
+  auto rms = [](const std::vector<double>& v) {
+    double s = 0;
+    for (const double x : v)
+      s += x * x / static_cast<double>(v.size());
+    return std::sqrt(s);
+  };
+  std::printf("daemon, scan 2 backwards, 0.2 um/s drift: u(w) rms %.3g -> %.3g um refined\n",
+              rms(ub), rms(ur));
+  CHECK(rms(ur) > rms(ub));
   test::check_report_reads(dir);
 }

@@ -242,7 +242,7 @@ DriftRun add_drift_and_refine(const TempDir& dir, const std::string& name,
 
 TEST_CASE(
     "scan --scan2-order backward: a linear drift of the workpiece sensor is identified and its "
-    "error of w halved; with the paper's order it is named not identifiable from this plan") {
+    "error of w halved, and with the paper order named not identifiable from this plan") {
   TempDir dir;
   const auto fwd = record_scan(dir, "forward", "forward");
   const auto bwd = record_scan(dir, "backward", "backward");
