@@ -131,6 +131,21 @@ std::string where(const std::filesystem::path& file, std::size_t n) {
   return file.string() + ":" + std::to_string(errsep::test::data_line(file, n)) + ": ";
 }
 
+/// A complete four-point displacement scan with reading times, scan 2 in the paper's order.
+RawDisplacementScan four_point_displacement_scan() {
+  RawDisplacementScan s;
+  s.x_mm = {0, 5, 10, 15};
+  s.s1_scan1_um = {1, 2, 3, 4};
+  s.s2_scan1_um = {4, 5, 6, 7};
+  s.s1_scan2_um = {1.1, 2.1, 3.1, 4.1};
+  s.s2_scan2_um = {4.5, 5.5, 6.5, 7.5};
+  s.t_scan1_s = std::vector<double>{0, 1, 2, 3};
+  s.t_scan2_s = std::vector<double>{4, 5, 6, 7};
+  s.d_mm = 5.0;
+  s.complete = true;
+  return s;
+}
+
 }  // namespace
 
 TEST_CASE("impossible readings, positions and times are refused with file:line") {
@@ -207,16 +222,7 @@ TEST_CASE("impossible readings, positions and times are refused with file:line")
 TEST_CASE("impossible values of a displacement raw scan are refused with file:line") {
   TempDir dir;
   const auto file = dir / "d.csv";
-  RawDisplacementScan s;
-  s.x_mm = {0, 5, 10, 15};
-  s.s1_scan1_um = {1, 2, 3, 4};
-  s.s2_scan1_um = {4, 5, 6, 7};
-  s.s1_scan2_um = {1.1, 2.1, 3.1, 4.1};
-  s.s2_scan2_um = {4.5, 5.5, 6.5, 7.5};
-  s.t_scan1_s = std::vector<double>{0, 1, 2, 3};
-  s.t_scan2_s = std::vector<double>{4, 5, 6, 7};
-  s.d_mm = 5.0;
-  s.complete = true;
+  RawDisplacementScan s = four_point_displacement_scan();
   s.metadata = {{"range_min_s1_um", "-100"},
                 {"range_max_s1_um", "100"},
                 {"range_min_s2_um", "-100"},
@@ -306,16 +312,8 @@ TEST_CASE("a bad traverse line is refused with file and what is wrong") {
 TEST_CASE("a displacement scan's scan-2 order round-trips and its times are checked that way") {
   TempDir dir;
   const auto file = dir / "d.csv";
-  RawDisplacementScan s;
-  s.x_mm = {0, 5, 10, 15};
-  s.s1_scan1_um = {1, 2, 3, 4};
-  s.s2_scan1_um = {4, 5, 6, 7};
-  s.s1_scan2_um = {1.1, 2.1, 3.1, 4.1};
-  s.s2_scan2_um = {4.5, 5.5, 6.5, 7.5};
-  s.t_scan1_s = std::vector<double>{0, 1, 2, 3};
+  RawDisplacementScan s = four_point_displacement_scan();
   s.t_scan2_s = std::vector<double>{7, 6, 5, 4};  // scan 2 from the last point back
-  s.d_mm = 5.0;
-  s.complete = true;
   s.scan2_order = errsep::core::DisplacementScanOrder::backward;
   write_raw_displacement_csv(file, s);
   CHECK_THAT(errsep::test::read_file(file), Catch::Contains("# scan2_order: backward"));
