@@ -3,33 +3,19 @@
 #include <cmath>
 #include <limits>
 
-#include "errsep/io/displacement_refine_csv.hpp"
+#include "displacement_refine_account.hpp"
 
 namespace errsep::io {
 
 CsvTable displacement_refine_two_axis_csv(const core::DisplacementRefineResult& r,
                                           const std::string& plan) {
-  CsvTable t;
-  t.set_meta("format", kDisplacementRefineFormat);
-  t.set_meta("method", "two-axis displacement method (Haramiishi et al. 2024, Eqs. 10-19)");
+  CsvTable t = detail::displacement_refine_account(
+      "two-axis displacement method (Haramiishi et al. 2024, Eqs. 10-19)", r.applied_any(),
+      r.not_identifiable);
   t.set_meta("plan", plan);
-  t.set_meta("applied_any", r.applied_any() ? "true" : "false");
   t.set_meta("sigma_scale", std::to_string(r.sigma_scale));
-  for (std::size_t i = 0; i < r.not_identifiable.size(); ++i)
-    t.set_meta("note" + std::to_string(i + 1), r.not_identifiable[i]);
-  t.columns = {"step",
-               "parameter_index",
-               "value",
-               "u",
-               "F",
-               "p_value",
-               "applied",
-               "w_change_rms_um",
-               "w_error_without_rms_um",
-               "w_u_if_applied_rms_um",
-               "u_w_added_rms_um",
-               "m_w_change_rms_um",
-               "m_w_error_without_rms_um"};
+  t.columns.push_back("m_w_change_rms_um");
+  t.columns.push_back("m_w_error_without_rms_um");
   const double nan = std::numeric_limits<double>::quiet_NaN();
   for (std::size_t s = 0; s < r.steps.size(); ++s) {
     const auto& st = r.steps[s];
