@@ -161,6 +161,12 @@ int main(int argc, char** argv) {
   app.add_option("--devsim", devsim,
                  "device simulator executable for an embedded config (default: errsep-devsim "
                  "next to this program)");
+  std::string scan2_order;
+  app.add_option("--scan2-order", scan2_order,
+                 "displacement method: the order scan 2 reads its points in, forward (the paper) "
+                 "or backward (a linear drift of the workpiece sensor shows; default: [scan] "
+                 "scan2_order)")
+      ->check(CLI::IsMember({"forward", "backward"}));
   auto* no_sep = app.add_flag("--no-separate", no_separate, "record the raw scan only");
   app.add_flag("--refine", refine,
                "after the four-sensor separation, run the refine step (as errsep-refine) and write "
@@ -215,6 +221,8 @@ int main(int argc, char** argv) {
     io::MachineConfig cfg = io::load_machine_config(config_path);
     if (averages > 0) cfg.scan.averages = averages;
     if (settle_ms >= 0) cfg.scan.settle_ms = settle_ms;
+    if (!scan2_order.empty())
+      cfg.scan.scan2_order = core::displacement_scan_order_from_string(scan2_order);
     // [separation] of the config, the command line over it.
     if (!gauge.empty()) cfg.separation.gauge = *core::curvature_gauge_from_string(gauge);
     io::ScanMethod m = cfg.scan.method;

@@ -14,12 +14,14 @@
 #include <vector>
 
 #include "errsep/core/displacement_method.hpp"
+#include "errsep/core/displacement_refine.hpp"
 #include "errsep/core/displacement_residuals.hpp"
 #include "errsep/core/three_point_method.hpp"
 #include "errsep/core/two_axis_displacement.hpp"
 #include "errsep/core/two_axis_yaw.hpp"
 #include "errsep/io/displacement_csv.hpp"
 #include "errsep/io/displacement_refine_csv.hpp"
+#include "errsep/io/displacement_refine_two_axis_csv.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/staged_directory.hpp"
 #include "errsep/service/displacement_pipeline.hpp"
@@ -125,6 +127,28 @@ int main(int argc, char** argv) {
                 "times of a raw scan are used, else equal steps");
   auto* two =
       app.add_subcommand("two-axis", "x-y stage with roll/pitch correction, Eqs. (10)-(27)");
+  bool refine_two = false, y_fastest_scan2 = false;
+  std::string scan2_order = "forward";
+  errsep::core::TwoAxisScanOrder order;
+  two->add_flag("--refine", refine_two,
+                "close the loop on one run (core/displacement_refine.hpp): its account to "
+                "<out>.refine.csv, the refined w, m_w with their u to <out>.refined.csv; the "
+                "plan is what --scan2-order, --scan2-y-fastest, --sample-period-s and --pause-s "
+                "say (the file records no scan-2 times)");
+  two->add_option("--scan2-order", scan2_order,
+                  "with --refine: scan 2 ran the raster forward (the paper) or backward")
+      ->check(CLI::IsMember({"forward", "backward"}))
+      ->capture_default_str();
+  two->add_flag("--scan2-y-fastest", y_fastest_scan2,
+                "with --refine: scan 2's raster ran y fastest (scan 1's x fastest)");
+  two->add_option("--sample-period-s", order.sample_period_s,
+                  "with --refine: time per grid point (drift rates are per s of it)")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  two->add_option("--pause-s", order.pause_between_scans_s,
+                  "with --refine: time between scan 1's last and scan 2's first reading")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   auto* three = app.add_subcommand("three-point", "generalised three-point method");
   for (auto* sc : {one, two, three}) {
     sc->add_option("-i,--input", inputs,
@@ -322,6 +346,9 @@ int main(int argc, char** argv) {
         throw std::invalid_argument(input +
                                     ": --yaw needs the lateral pair columns sa_scan1_um, "
                                     "sa_scan2_um, sb_scan1_um, sb_scan2_um");
+      if (refine_two && (inputs.size() != 1 || yaw))
+        throw std::invalid_argument(
+            "--refine takes one run (-i once) without the lateral pair's yaw (--no-yaw)");
       auto res = errsep::core::separate_two_axis(scan, o);
       std::optional<errsep::core::TwoAxisYawResult> yres;
       if (yaw) {
@@ -383,6 +410,28 @@ int main(int argc, char** argv) {
       std::cout << resid.brief_report() << "\n";
       if (yres) std::cout << yres->brief_report() << "\n";
       std::cout << "wrote " << output << " and " << rpath << "\n";
+      if (refine_two) {
+        // The two-axis loop (issue 16 item 4) on the plan the options state.
+        order.reverse_scan2 = scan2_order == "backward";
+        order.y_fastest_scan2 = y_fastest_scan2;
+        if (!order.is_valid(&why)) throw std::invalid_argument("scan order: " + why);
+        errsep::core::DisplacementRefineOptions ro;
+        ro.alpha = ropt.whiteness.alpha;
+        const auto lib = errsep::core::make_displacement_effect_library(
+            scan.x_mm, scan.y_mm, scan.s0_2_um.size() > 0, order, o, ro);
+        const auto rr = errsep::core::refine_two_axis(scan, o, lib, ro);
+        const std::filesystem::path op(output);
+        const auto stem = (op.parent_path() / op.stem()).string();
+        auto steps = errsep::io::displacement_refine_two_axis_csv(rr, order.plan_name());
+        steps.set_meta("source", input);
+        auto refined = errsep::io::two_axis_result_csv(scan, rr.refined);
+        refined.set_meta("source", input);
+        refined.set_meta("refine", stem + ".refine.csv");
+        errsep::io::write_csv(stem + ".refine.csv", steps);
+        errsep::io::write_csv(stem + ".refined.csv", refined);
+        std::cout << rr.brief_report() << "wrote " << stem << ".refine.csv and " << stem
+                  << ".refined.csv\n";
+      }
     } else {
       const auto in = errsep::io::read_three_point_csv(inputs.front());
       errsep::core::ThreePointOptions o;

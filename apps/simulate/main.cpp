@@ -1,9 +1,14 @@
 // errsep-simulate: the simulation platform of Zhao 2019 section 3 as a command: simulate a
 // four-sensor scan of the paper's Example 1 (or 2), write it as a raw CSV, separate it, write the
-// results and print how far they are from the truth.
+// results and print how far they are from the truth.  --method displacement: a one-axis
+// displacement-method scan (Haramiishi 2024, section 2.3.1) written as errsep-scan writes it
+// (raw_displacement.csv), separated by the same pipeline (--refine: its loop), with the truth.
 #include <CLI/CLI.hpp>
+#include <cmath>
 #include <iostream>
+#include <sstream>
 
+#include "errsep/core/displacement_simulation.hpp"
 #include "errsep/core/four_sensor.hpp"
 #include "errsep/core/four_sensor_sequence_simulation.hpp"
 #include "errsep/core/four_sensor_simulation.hpp"
@@ -12,13 +17,128 @@
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/reference_csv.hpp"
 #include "errsep/io/staged_directory.hpp"
+#include "errsep/service/displacement_pipeline.hpp"
 #include "errsep/service/four_sensor_pipeline.hpp"
 #include "errsep/version.hpp"
+
+namespace {
+
+/// The undeclared effects of a simulated displacement scan, per sensor: [0] workpiece sensor 1,
+/// [1] reference sensor 2.
+struct DisplacementEffects {
+  std::vector<double> drift_um_per_s, thermal_um;
+  double thermal_tau_s = 40.0;
+};
+
+double rms_shape(const Eigen::VectorXd& e) {
+  return std::sqrt((e.array() - e.mean()).square().mean());
+}
+
+/// --method displacement: the scan of Haramiishi 2024 Fig. 5's inputs, as errsep-scan records it
+/// (io/raw_scan_csv.hpp), separated by service::DisplacementPipeline, the truth beside it.
+int simulate_displacement(const std::string& out_dir, double sigma, std::uint64_t seed,
+                          errsep::core::DisplacementScanOrder order, const DisplacementEffects& fx,
+                          bool refine) {
+  namespace core = errsep::core;
+  namespace io = errsep::io;
+  core::OneAxisSimOptions so;
+  so.workpiece_sensor.noise_sigma_um = sigma;
+  so.reference_sensor.noise_sigma_um = sigma;
+  so.seed = seed;
+  so.reverse_scan2 = order == core::DisplacementScanOrder::backward;
+  so.timing.pause_between_scans_s = 2.0;  // the reference piece is traversed between the scans
+  if (!fx.drift_um_per_s.empty()) {
+    so.workpiece_sensor.drift_um_per_s = fx.drift_um_per_s[0];
+    so.reference_sensor.drift_um_per_s = fx.drift_um_per_s[1];
+  }
+  if (!fx.thermal_um.empty()) {
+    so.workpiece_thermal_um = fx.thermal_um[0];
+    so.reference_thermal_um = fx.thermal_um[1];
+  }
+  so.thermal_tau_s = fx.thermal_tau_s;
+  const core::OneAxisSimData sim = core::simulate_one_axis(core::haramiishi2024_fig5_truth(), so);
+
+  auto vec = [](const Eigen::VectorXd& v) { return std::vector<double>(v.begin(), v.end()); };
+  io::RawDisplacementScan raw;
+  raw.complete = true;
+  raw.d_mm = so.displacement_mm;
+  raw.scan2_order = order;
+  raw.x_mm = vec(sim.x_mm);
+  raw.s1_scan1_um = vec(sim.s1_1_um);
+  raw.s2_scan1_um = vec(sim.s2_1_um);
+  raw.s1_scan2_um = vec(sim.s1_2_um);
+  raw.s2_scan2_um = vec(sim.s2_2_um);
+  raw.t_scan1_s = vec(sim.t1_s);
+  raw.t_scan2_s = vec(sim.t2_s);
+
+  io::StagedDirectory stage(
+      out_dir, {"simulate", std::string("errsep-simulate ") + errsep::kVersion, false, {}});
+  if (const std::string swept = io::describe_swept(stage.swept()); !swept.empty())
+    std::cout << swept << "\n";
+  const std::filesystem::path work = stage.dir();
+  auto num = [](double v) {
+    std::ostringstream os;
+    os.precision(10);
+    os << v;
+    return os.str();
+  };
+  raw.metadata = {{"source", "errsep-simulate displacement (Haramiishi 2024 Fig. 5 inputs)"},
+                  {"run_id", stage.run_id()},
+                  {"sigma_um", num(sigma)},
+                  {"seed", std::to_string(seed)},
+                  {"drift_um_per_s_sensor1", num(so.workpiece_sensor.drift_um_per_s)},
+                  {"drift_um_per_s_sensor2", num(so.reference_sensor.drift_um_per_s)},
+                  {"thermal_um_sensor1", num(so.workpiece_thermal_um)},
+                  {"thermal_um_sensor2", num(so.reference_thermal_um)},
+                  {"thermal_tau_s", num(so.thermal_tau_s)}};
+  const auto raw_csv = work / errsep::service::kDisplacementRawCsv;
+  io::write_raw_displacement_csv(raw_csv, raw);
+  io::CsvTable truth;
+  truth.set_meta("source", "errsep-simulate displacement (Haramiishi 2024 Fig. 5 inputs)");
+  truth.set_meta("run_id", stage.run_id());
+  truth.set_meta("units", "x in mm, profiles in um");
+  truth.add_column("x_mm", raw.x_mm);
+  truth.add_column("w_um", vec(sim.w_um));
+  truth.add_column("r_um", vec(sim.r_um));
+  truth.add_column("m_um", vec(sim.m_um));
+  io::write_csv(work / "truth.csv", truth);
+
+  errsep::service::DisplacementPipelineOptions po;
+  po.refine = refine;
+  const auto run = errsep::service::DisplacementPipeline(po).separate(
+      work, raw_csv,
+      (std::filesystem::path(out_dir) / errsep::service::kDisplacementRawCsv).string(),
+      stage.run_id());
+  stage.commit();
+  std::cout << run.brief_report() << "\n";
+  auto compare = [&](const char* what, const core::OneAxisJointResult& r) {
+    const Eigen::VectorXd e = r.estimate.w_um - sim.w_um;
+    std::cout << "truth comparison (" << what << "): w error " << rms_shape(e)
+              << " um rms (its constant removed, the gauge's)";
+    if (r.u_w_um.size() == e.size()) {
+      int inside = 0;
+      for (Eigen::Index k = 0; k < e.size(); ++k)
+        inside += std::abs(e(k) - e.mean()) <= 2 * r.u_w_um(k);
+      std::cout << ", " << inside << "/" << e.size() << " points within 2 u(w)";
+    }
+    std::cout << "\n";
+  };
+  if (run.separation) compare("separation", *run.separation);
+  if (run.refine) compare("refined", run.refine->refined);
+  std::cout << "written: " << out_dir << "/raw_displacement.csv, truth.csv";
+  for (const auto& f : run.files)
+    std::cout << ", " << f;
+  std::cout << "\n";
+  return 0;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{
       "errsep-simulate: simulated four-sensor scan (Zhao 2019 Example 1/2), separated; "
-      "writes DIR/raw.csv and the result files, prints errors against the truth."};
+      "writes DIR/raw.csv and the result files, prints errors against the truth.  --method "
+      "displacement: a one-axis displacement scan (Haramiishi 2024) as errsep-scan records it."};
   app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
   std::string out_dir = "out/simulate";
   double sigma = 0.1;
@@ -29,8 +149,24 @@ int main(int argc, char** argv) {
   std::string plan = "single";
   std::vector<double> drift_um_per_s, thermal_um;
   double thermal_tau_s = 40.0;
+  std::string method = "four_sensor", scan2_order = "forward";
+  bool refine = false;
   errsep::core::FourSensorConfig cfg;
   app.add_option("--out", out_dir, "output directory")->capture_default_str();
+  app.add_option("--method", method,
+                 "four_sensor (Zhao 2019) or displacement (Haramiishi 2024 one axis, Fig. 5's "
+                 "inputs: DIR/raw_displacement.csv as errsep-scan writes it, displacement.csv, "
+                 "displacement_residuals.csv, truth.csv)")
+      ->check(CLI::IsMember({"four_sensor", "displacement"}))
+      ->capture_default_str();
+  app.add_option("--scan2-order", scan2_order,
+                 "displacement: the order scan 2 reads its points in (forward, the paper, or "
+                 "backward: a linear drift of sensor 1 shows)")
+      ->check(CLI::IsMember({"forward", "backward"}))
+      ->capture_default_str();
+  app.add_flag("--refine", refine,
+               "displacement: close the loop (refine/displacement_refine.csv, "
+               "refine/displacement.csv), as errsep-scan --refine");
   app.add_option("--sigma-um", sigma, "sensor noise standard deviation, um")->capture_default_str();
   app.add_option("--seed", seed, "random seed")->capture_default_str();
   app.add_option("--example", example, "paper example: 1 (Eq. 23) or 2 (Eq. 24)")
@@ -54,12 +190,14 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--drift-um-per-s", drift_um_per_s,
                  "undeclared linear drift a_c * t of the sensor in configurations 1..4, um/s "
-                 "(four values; records the scan as a sequence)")
-      ->expected(4);
+                 "(four values; records the scan as a sequence); displacement: two values, "
+                 "workpiece sensor 1 and reference sensor 2")
+      ->expected(2, 4);
   app.add_option("--thermal-um", thermal_um,
                  "undeclared thermal drift A_c * (1 - exp(-t/tau)) in configurations 1..4, um "
-                 "(four values; records the scan as a sequence)")
-      ->expected(4);
+                 "(four values; records the scan as a sequence); displacement: two values, "
+                 "sensors 1 and 2")
+      ->expected(2, 4);
   app.add_option("--thermal-tau-s", thermal_tau_s, "time constant of --thermal-um, s")
       ->capture_default_str();
   app.add_option("--dx-mm", cfg.dx_mm, "sampling interval, mm")->capture_default_str();
@@ -70,6 +208,20 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   try {
+    const std::size_t effect_values = method == "displacement" ? 2 : 4;
+    for (const auto* v : {&drift_um_per_s, &thermal_um})
+      if (!v->empty() && v->size() != effect_values)
+        throw std::invalid_argument("--drift-um-per-s and --thermal-um take " +
+                                    std::to_string(effect_values) + " values with --method " +
+                                    method + " (" +
+                                    (effect_values == 2 ? "sensors 1, 2" : "configurations 1..4") +
+                                    "), got " + std::to_string(v->size()));
+    if (method == "displacement")
+      return simulate_displacement(out_dir, sigma, seed,
+                                   errsep::core::displacement_scan_order_from_string(scan2_order),
+                                   {drift_um_per_s, thermal_um, thermal_tau_s}, refine);
+    if (refine || scan2_order != "forward")
+      throw std::invalid_argument("--refine and --scan2-order are for --method displacement");
     std::string why;
     if (!cfg.is_valid(&why)) throw std::invalid_argument("configuration: " + why);
     const auto truth = example == 1 ? errsep::core::zhao2019_example1(cfg)

@@ -288,7 +288,9 @@ void Runner::four_sensor_fixed() {
 }
 
 // Haramiishi 2024 section 2.1: pass 1 with the reference piece at its origin (Eqs. 1-2), pass 2
-// with it displaced by d (Eq. 3).  Sensor 0 = workpiece (S1), sensor 1 = reference piece (S2).
+// with it displaced by d (Eq. 3), in the order ScanOptions::scan2_order asks (backward: from the
+// last point back, so that a linear drift of sensor 1 shows in its repeat; issue 16 item 4).
+// Sensor 0 = workpiece (S1), sensor 1 = reference piece (S2).  Cells are kept by position.
 void Runner::displacement() {
   auto& raw = *res_.displacement;
   const int K = opts_.displacement_points;
@@ -296,7 +298,9 @@ void Runner::displacement() {
     const std::string phase = "scan " + std::to_string(pass + 1) + "/2";
     move(*dev_.reference_stage, opts_.reference_origin_mm + (pass == 0 ? 0.0 : opts_.d_mm),
          phase + ", reference piece");
-    for (int k = 0; k < K; ++k) {
+    const bool backward = pass == 1 && opts_.scan2_order == core::DisplacementScanOrder::backward;
+    for (int i = 0; i < K; ++i) {
+      const int k = backward ? K - 1 - i : i;
       const double x = k * opts_.d_mm;
       const std::string where = phase + ", x = " + fmt(x) + " mm";
       move(*dev_.slide, opts_.slide_start_mm + opts_.axes.scan_direction * x, where);
@@ -351,6 +355,7 @@ ScanResult Runner::run() {
     const auto K = static_cast<std::size_t>(opts_.displacement_points);
     io::RawDisplacementScan raw;
     raw.d_mm = opts_.d_mm;
+    raw.scan2_order = opts_.scan2_order;
     for (std::size_t k = 0; k < K; ++k)
       raw.x_mm.push_back(static_cast<double>(k) * opts_.d_mm);
     for (auto* v : {&raw.s1_scan1_um, &raw.s2_scan1_um, &raw.s1_scan2_um, &raw.s2_scan2_um})
@@ -576,6 +581,7 @@ ScanOptions scan_options_from_config(const io::MachineConfig& cfg, ScanKind kind
   o.plan = sc.plan;
   o.d_mm = sc.d_mm;
   o.displacement_points = sc.displacement_points > 0 ? sc.displacement_points : sc.geometry.N;
+  o.scan2_order = sc.scan2_order;
   int timeout = 0;
   for (const auto& st : cfg.stages)
     timeout = std::max(timeout, st.move_timeout_ms);

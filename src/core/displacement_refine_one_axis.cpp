@@ -135,11 +135,16 @@ OneAxisRefineResult refine_one_axis(const Eigen::VectorXd& s1_1, const Eigen::Ve
             std::to_string(t1.size()) + ", " + std::to_string(t2.size()) + ", " +
             std::to_string(n) + ")");
     t1 = Eigen::VectorXd::LinSpaced(n, 0.0, static_cast<double>(n - 1));
-    t2 = t1.array() + static_cast<double>(n);
-    out.notes.push_back(
-        "reading times not recorded (or not finite): taken as equal steps, scan 2 after scan 1 "
-        "in its order");
+    const bool backward = o.scan2_order == DisplacementScanOrder::backward;
+    t2 = (backward ? t1.reverse().eval() : t1).array() + static_cast<double>(n);
+    out.notes.push_back(backward ? "reading times not recorded (or not finite): taken as equal "
+                                   "steps, scan 2 after scan 1, backwards"
+                                 : "reading times not recorded (or not finite): taken as equal "
+                                   "steps, scan 2 after scan 1 in its order");
   }
+  // The plan, as the times say it (what makes a linear drift identifiable, issue 16 item 4).
+  out.notes.push_back(t2(n - 1) < t2(0) ? "plan: scan 2 backwards (the last point read first)"
+                                        : "plan: scan 2 in the order of scan 1 (the paper's)");
   const double t0 = std::min(t1.minCoeff(), t2.minCoeff());
   t1.array() -= t0;
   t2.array() -= t0;

@@ -150,6 +150,7 @@ ScanEnd DeviceScanBackend::run_scan(acq::ScanContext& ctx) {
   if (kind == acq::ScanKind::displacement) {
     io::RawDisplacementScan layout;  // positions as acq::run_scan's: x_k = k·d
     layout.d_mm = opts.d_mm;
+    layout.scan2_order = opts.scan2_order;  // a checkpoint's times go the way scan 2 ran
     for (int k = 0; k < opts.displacement_points; ++k)
       layout.x_mm.push_back(k * opts.d_mm);
     layout.metadata = layout_metadata;

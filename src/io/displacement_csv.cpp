@@ -131,6 +131,7 @@ OneAxisInput read_one_axis_csv(const std::filesystem::path& file) {
     in.s2_2_um = to_vec(raw.s2_scan2_um);
     in.s1_2_um = to_vec(raw.s1_scan2_um);
     in.d_mm = raw.d_mm;
+    in.scan2_order = raw.scan2_order;
   } else {
     const CsvTable strict = read_csv(file, CsvReadOptions{false, 2});  // nan -> file:line
     check_reading_columns(strict, file);

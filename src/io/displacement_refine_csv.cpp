@@ -1,5 +1,7 @@
 #include "errsep/io/displacement_refine_csv.hpp"
 
+#include "displacement_refine_account.hpp"
+
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -18,23 +20,8 @@ std::string fmt(double v, const char* f = "%.3g") {
 }  // namespace
 
 CsvTable displacement_refine_csv(const core::OneAxisRefineResult& r) {
-  CsvTable t;
-  t.set_meta("format", kDisplacementRefineFormat);
-  t.set_meta("method", "one-axis displacement method (Haramiishi et al. 2024, Eqs. 1-9)");
-  t.set_meta("applied_any", r.applied_any() ? "true" : "false");
-  for (std::size_t i = 0; i < r.notes.size(); ++i)
-    t.set_meta("note" + std::to_string(i + 1), r.notes[i]);
-  t.columns = {"step",
-               "parameter_index",
-               "value",
-               "u",
-               "F",
-               "p_value",
-               "applied",
-               "w_change_rms_um",
-               "w_error_without_rms_um",
-               "w_u_if_applied_rms_um",
-               "u_w_added_rms_um"};
+  CsvTable t = detail::displacement_refine_account(
+      "one-axis displacement method (Haramiishi et al. 2024, Eqs. 1-9)", r.applied_any(), r.notes);
   const double nan = std::numeric_limits<double>::quiet_NaN();
   for (std::size_t s = 0; s < r.steps.size(); ++s) {
     const auto& st = r.steps[s];

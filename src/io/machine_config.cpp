@@ -380,6 +380,7 @@ void read_scan(const Reader& root, MachineConfig& c) {
           "plan",
           "d_mm",
           "displacement_points",
+          "scan2_order",
           "workpiece_sensor",
           "reference_sensor",
           "reference_stage",
@@ -425,6 +426,13 @@ void read_scan(const Reader& root, MachineConfig& c) {
           "configurations, one traverse each)");
   r.get("d_mm", s.d_mm);
   r.get_int("displacement_points", s.displacement_points, 0, 10000000);
+  std::string scan2_order = core::to_string(s.scan2_order);
+  r.get("scan2_order", scan2_order);
+  try {
+    s.scan2_order = core::displacement_scan_order_from_string(scan2_order);
+  } catch (const std::invalid_argument& e) {
+    r.fail("scan2_order", e.what());
+  }
   r.get("workpiece_sensor", s.workpiece_sensor);
   r.get("reference_sensor", s.reference_sensor);
   r.get("reference_stage", s.reference_stage);

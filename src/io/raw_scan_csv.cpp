@@ -33,6 +33,33 @@ void check_len(const std::vector<double>& v, std::size_t n, const std::string& c
                                 " values for " + std::to_string(n) + " positions");
 }
 
+/// Scan 2's reading times go the way it read the rows: forward, they do not decrease from row to
+/// row; backward (the last row read first), they do not increase.
+void check_time_order(const CsvTable& t, const std::string& column, bool backward,
+                      const std::filesystem::path& file, bool allow_nan) {
+  if (!backward) {
+    check_increasing(t, column, false, file, allow_nan);
+    return;
+  }
+  const std::size_t c = *t.find_column(column);
+  double next = 0;
+  bool have_next = false;
+  for (std::size_t r = t.rows.size(); r-- > 0;) {
+    const double v = t.rows[r][c];
+    if (std::isnan(v) && allow_nan) continue;
+    const std::size_t line = r < t.row_line.size() ? t.row_line[r] : 0;
+    if (!std::isfinite(v))
+      throw CsvError(file, line, "column '" + column + "': " + fmt(v) + " is not finite");
+    if (have_next && v < next)
+      throw CsvError(file, line,
+                     "column '" + column + "': " + fmt(v) + " before " + fmt(next) +
+                         " on the row below, but scan2_order is backward (the rows are read "
+                         "bottom up): time goes backwards");
+    have_next = true;
+    next = v;
+  }
+}
+
 /// Completeness rule of both formats (see the header).
 bool read_complete(const CsvTable& t, const std::filesystem::path& file) {
   const auto c = t.meta("complete");
@@ -244,6 +271,7 @@ CsvTable to_csv_table(const RawDisplacementScan& scan) {
   t.set_meta("complete", scan.complete ? "true" : "false");
   t.set_meta("units", "x in mm, s in um, t in s since scan start");
   t.set_meta("d_mm", fmt(scan.d_mm));
+  t.set_meta("scan2_order", core::to_string(scan.scan2_order));
   for (const auto& [k, v] : scan.metadata)
     t.set_meta(k, v);
   t.add_column("x_mm", scan.x_mm);
@@ -354,6 +382,13 @@ RawDisplacementScan read_raw_displacement_csv(const std::filesystem::path& file,
   require_complete(s.complete, t, file, opts);
   if (!t.meta("d_mm")) throw CsvError(file, 0, "metadata 'd_mm' (displacement d) missing");
   s.d_mm = *t.meta_number("d_mm", file);
+  if (const auto o = t.meta("scan2_order")) {
+    try {
+      s.scan2_order = core::displacement_scan_order_from_string(*o);
+    } catch (const std::invalid_argument& e) {
+      throw CsvError(file, 0, std::string("metadata 'scan2_order': ") + e.what());
+    }
+  }
   s.x_mm = t.column("x_mm", file);
   s.s1_scan1_um = t.column("s1_scan1_um", file);
   s.s2_scan1_um = t.column("s2_scan1_um", file);
@@ -361,7 +396,7 @@ RawDisplacementScan read_raw_displacement_csv(const std::filesystem::path& file,
   s.s2_scan2_um = t.column("s2_scan2_um", file);
   const bool times = t.find_column("t_scan1_s") && t.find_column("t_scan2_s");
   // Plausibility, as for the four-sensor scan: S1 reads the workpiece in both scans, S2 the
-  // reference piece; each scan reads the positions in order.
+  // reference piece; scan 1 reads the positions in order, scan 2 in its recorded order.
   check_increasing(t, "x_mm", true, file, false);
   for (const char* sensor : {"s1", "s2"})
     for (const char* scan : {"_scan1_um", "_scan2_um"})
@@ -369,11 +404,12 @@ RawDisplacementScan read_raw_displacement_csv(const std::filesystem::path& file,
                      !s.complete);
   if (times) {
     check_increasing(t, "t_scan1_s", false, file, !s.complete);
-    check_increasing(t, "t_scan2_s", false, file, !s.complete);
+    check_time_order(t, "t_scan2_s", s.scan2_order == core::DisplacementScanOrder::backward, file,
+                     !s.complete);
     s.t_scan1_s = t.column("t_scan1_s", file);
     s.t_scan2_s = t.column("t_scan2_s", file);
   }
-  s.metadata = other_meta(t, {"format", "complete", "units", "d_mm"});
+  s.metadata = other_meta(t, {"format", "complete", "units", "d_mm", "scan2_order"});
   return s;
 }
 

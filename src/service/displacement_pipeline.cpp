@@ -146,8 +146,10 @@ core::OneAxisRefineResult DisplacementPipeline::refine(const io::OneAxisInput& i
                                                        const Eigen::VectorXd& t1_s,
                                                        const Eigen::VectorXd& t2_s,
                                                        const std::string& input) const {
+  core::OneAxisRefineOptions ro = opts_.refine_options;
+  ro.scan2_order = in.scan2_order;  // the plan the scan ran, for times it did not record
   return core::refine_one_axis(in.s1_1_um, in.s2_1_um, in.s2_2_um, in.s1_2_um, t1_s, t2_s,
-                               separation_options(opts_, in, input), opts_.refine_options);
+                               separation_options(opts_, in, input), ro);
 }
 
 DisplacementPipelineResult DisplacementPipeline::separate(const fs::path& dir,

@@ -3,6 +3,7 @@
 // written, an existing result left alone).
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <sstream>
 
@@ -686,4 +687,96 @@ TEST_CASE("errsep-budget prints and writes the paper budget, and fails cleanly o
             &out) == 1);
   CHECK_THAT(out, Catch::Contains("bad.toml:2: temperature.change_K: expected a number"));
   CHECK_FALSE(std::filesystem::exists(dir / "c.csv"));
+}
+
+// Issue 16 item 4: the two-axis loop (core/displacement_refine.hpp) in the app.  A linear drift
+// of every sensor on a grid scanned with scan 2 y fastest and backwards (the plan the library
+// says identifies it) is taken and the refined w lies within 4 u of the truth; scanned in the
+// paper's order the account says the drift is not identifiable from this plan.
+TEST_CASE("two-axis --refine: a sensor drift is taken on the plan that identifies it") {
+  TempDir dir;
+  auto run_plan = [&](bool backward_y_fastest, const std::string& name, double drift = 1.0) {
+    core::TwoAxisSimOptions so;
+    so.nx = 15;
+    so.ny = 15;
+    so.eddy_sensor.noise_sigma_um = 0.1;
+    so.contact_sensor.noise_sigma_um = 0.18;
+    so.record_s0_scan2 = true;
+    so.seed = 21;
+    so.timing.sample_period_s = 1.0;
+    so.timing.pause_between_scans_s = 60.0;
+    so.reverse_scan2 = backward_y_fastest;
+    so.y_fastest_scan2 = backward_y_fastest;
+    // About 0.005 σ per s on each sensor: core/displacement_refine's drift cells (0.002 σ per s on
+    // 25 x 25) scaled to this shorter scan.
+    so.disturbance.drift_um_per_s = {0.0004, -0.0006, 0.0005, 0.00045, -0.00055};
+    for (auto& v : so.disturbance.drift_um_per_s)
+      v *= drift;
+    const auto sim = core::simulate_two_axis(test::random_two_axis_truth(21, 0.0), so);
+    write_two_axis(dir / (name + ".csv"), sim.scan);
+    std::string out;
+    const std::string plan = backward_y_fastest ? " --scan2-order backward --scan2-y-fastest" : "";
+    const int rc =
+        run("two-axis --refine --no-yaw --pause-s 60" + plan + " -i " +
+                (dir / (name + ".csv")).string() + " -o " + (dir / (name + "_w.csv")).string(),
+            &out);
+    INFO(out);
+    REQUIRE(rc == 0);
+    CHECK_THAT(out, Catch::Contains("displacement refine"));
+    return sim;
+  };
+  auto shape_error = [](const std::vector<double>& w, const Eigen::MatrixXd& truth) {
+    std::vector<double> e(w.size());
+    double mean = 0;
+    for (std::size_t k = 0; k < w.size(); ++k) {
+      e[k] = w[k] - truth(static_cast<Eigen::Index>(k) % truth.rows(),
+                          static_cast<Eigen::Index>(k) / truth.rows());
+      mean += e[k] / static_cast<double>(w.size());
+    }
+    for (auto& v : e)
+      v -= mean;
+    return e;
+  };
+  auto rms = [](const std::vector<double>& e) {
+    double s = 0;
+    for (const double v : e)
+      s += v * v / static_cast<double>(e.size());
+    return std::sqrt(s);
+  };
+
+  const auto sim = run_plan(true, "bw");
+  const auto t = io::read_csv(dir / "bw_w.refine.csv", {.allow_non_finite = true, .min_rows = 0});
+  CHECK(t.meta("plan").value_or("") != "");
+  bool drift_taken = false;
+  for (int s = 1; s <= std::stoi(t.meta("steps").value_or("0")); ++s)
+    drift_taken =
+        drift_taken ||
+        t.meta("step" + std::to_string(s) + "_effect").value_or("").rfind("drift", 0) == 0;
+  CHECK(drift_taken);
+  const auto before = shape_error(io::read_csv(dir / "bw_w.csv").column("w_um"), sim.w_um);
+  const auto refined = io::read_csv(dir / "bw_w.refined.csv");
+  const auto after = shape_error(refined.column("w_um"), sim.w_um);
+  const auto u = refined.column("u_w_um");
+  std::printf(
+      "two-axis, drift on every sensor, scan 2 y fastest backwards: w error %.3f -> %.3f um "
+      "rms (applied: %s)\n",
+      rms(before), rms(after), t.meta("applied_any").value_or("?").c_str());
+  CHECK(rms(after) <= 0.5 * rms(before));  // halved
+  // The same grid and noise without the drift, for scale (printed).
+  const auto clean_sim = run_plan(true, "clean", 0.0);
+  std::printf("  the same scan without the drift: w error %.3f um rms\n",
+              rms(shape_error(io::read_csv(dir / "clean_w.csv").column("w_um"), clean_sim.w_um)));
+  for (std::size_t k = 0; k < after.size(); ++k)
+    CHECK(std::abs(after[k]) <= 4 * u[k]);
+
+  (void)run_plan(false, "paper");
+  // Nothing may be taken there: the account may have no rows.
+  const auto tp =
+      io::read_csv(dir / "paper_w.refine.csv", {.allow_non_finite = true, .min_rows = 0});
+  bool said = false;
+  for (int i = 1; tp.meta("note" + std::to_string(i)); ++i) {
+    const auto n = *tp.meta("note" + std::to_string(i));
+    said = said || (n.find("drift") != std::string::npos && n.find("not") != std::string::npos);
+  }
+  CHECK(said);
 }

@@ -131,6 +131,21 @@ std::string where(const std::filesystem::path& file, std::size_t n) {
   return file.string() + ":" + std::to_string(errsep::test::data_line(file, n)) + ": ";
 }
 
+/// A complete four-point displacement scan with reading times, scan 2 in the paper's order.
+RawDisplacementScan four_point_displacement_scan() {
+  RawDisplacementScan s;
+  s.x_mm = {0, 5, 10, 15};
+  s.s1_scan1_um = {1, 2, 3, 4};
+  s.s2_scan1_um = {4, 5, 6, 7};
+  s.s1_scan2_um = {1.1, 2.1, 3.1, 4.1};
+  s.s2_scan2_um = {4.5, 5.5, 6.5, 7.5};
+  s.t_scan1_s = std::vector<double>{0, 1, 2, 3};
+  s.t_scan2_s = std::vector<double>{4, 5, 6, 7};
+  s.d_mm = 5.0;
+  s.complete = true;
+  return s;
+}
+
 }  // namespace
 
 TEST_CASE("impossible readings, positions and times are refused with file:line") {
@@ -207,16 +222,7 @@ TEST_CASE("impossible readings, positions and times are refused with file:line")
 TEST_CASE("impossible values of a displacement raw scan are refused with file:line") {
   TempDir dir;
   const auto file = dir / "d.csv";
-  RawDisplacementScan s;
-  s.x_mm = {0, 5, 10, 15};
-  s.s1_scan1_um = {1, 2, 3, 4};
-  s.s2_scan1_um = {4, 5, 6, 7};
-  s.s1_scan2_um = {1.1, 2.1, 3.1, 4.1};
-  s.s2_scan2_um = {4.5, 5.5, 6.5, 7.5};
-  s.t_scan1_s = std::vector<double>{0, 1, 2, 3};
-  s.t_scan2_s = std::vector<double>{4, 5, 6, 7};
-  s.d_mm = 5.0;
-  s.complete = true;
+  RawDisplacementScan s = four_point_displacement_scan();
   s.metadata = {{"range_min_s1_um", "-100"},
                 {"range_max_s1_um", "100"},
                 {"range_min_s2_um", "-100"},
@@ -299,4 +305,59 @@ TEST_CASE("a bad traverse line is refused with file and what is wrong") {
     CHECK(w.find("bad.csv") != std::string::npos);
     CHECK(w.find("traverse_3") != std::string::npos);
   }
+}
+
+// Issue 16 item 4: the order of scan 2 is recorded, round-trips, and its times are checked the
+// way it ran; a file without it is the paper's order.
+TEST_CASE("a displacement scan's scan-2 order round-trips and its times are checked that way") {
+  TempDir dir;
+  const auto file = dir / "d.csv";
+  RawDisplacementScan s = four_point_displacement_scan();
+  s.t_scan2_s = std::vector<double>{7, 6, 5, 4};  // scan 2 from the last point back
+  s.scan2_order = errsep::core::DisplacementScanOrder::backward;
+  write_raw_displacement_csv(file, s);
+  CHECK_THAT(errsep::test::read_file(file), Catch::Contains("# scan2_order: backward"));
+  const auto r = read_raw_displacement_csv(file);
+  CHECK(r.scan2_order == errsep::core::DisplacementScanOrder::backward);
+  CHECK(*r.t_scan2_s == *s.t_scan2_s);
+  for (const auto& kv : r.metadata)
+    CHECK(kv.first != "scan2_order");  // read into the field, not left in the metadata
+
+  // Times that run forward in a scan recorded backward: refused at the row where they turn.
+  auto b = s;
+  (*b.t_scan2_s)[1] = 3.5;
+  write_raw_displacement_csv(file, b);
+  CHECK_THROWS_WITH(read_raw_displacement_csv(file),
+                    Catch::StartsWith(where(file, 1)) &&
+                        Catch::Contains("scan2_order is backward") &&
+                        Catch::Contains("time goes backwards"));
+  // The same times recorded as forward: refused as before.
+  b = s;
+  b.scan2_order = errsep::core::DisplacementScanOrder::forward;
+  write_raw_displacement_csv(file, b);
+  CHECK_THROWS_WITH(read_raw_displacement_csv(file), Catch::Contains("time goes backwards"));
+  // An order nobody knows.
+  {
+    std::string text = errsep::test::read_file(file);
+    const auto at = text.find("# scan2_order: forward");
+    REQUIRE(at != std::string::npos);
+    text.replace(at, 22, "# scan2_order: sideways");
+    std::ofstream(file) << text;
+  }
+  CHECK_THROWS_WITH(read_raw_displacement_csv(file),
+                    Catch::Contains("scan2_order") && Catch::Contains("forward, backward"));
+  // A file without the line (written before it existed) is the paper's order.
+  b = s;
+  b.scan2_order = errsep::core::DisplacementScanOrder::forward;
+  b.t_scan2_s = std::vector<double>{4, 5, 6, 7};
+  write_raw_displacement_csv(file, b);
+  {
+    std::string text = errsep::test::read_file(file);
+    const auto at = text.find("# scan2_order: forward\n");
+    REQUIRE(at != std::string::npos);
+    text.erase(at, 23);
+    std::ofstream(file) << text;
+  }
+  CHECK(read_raw_displacement_csv(file).scan2_order ==
+        errsep::core::DisplacementScanOrder::forward);
 }

@@ -3,10 +3,12 @@
 // them, the files under a folder and the header line of a CSV, and the quick simulated machine
 // they scan.
 #include <catch2/catch.hpp>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <set>
 #include <string>
+#include <vector>
 
 #include "support/support.hpp"
 
@@ -18,6 +20,18 @@ inline std::set<std::string> files_under(const std::filesystem::path& dir) {
   for (const auto& e : std::filesystem::recursive_directory_iterator(dir))
     if (e.is_regular_file()) out.insert(std::filesystem::relative(e.path(), dir).generic_string());
   return out;
+}
+
+/// RMS of a − b after removing its mean: how far two displacement-method profiles differ in
+/// shape (their constant is the method's gauge).  Equal sizes expected.
+inline double rms_shape(const std::vector<double>& a, const std::vector<double>& b) {
+  double mean = 0;
+  for (std::size_t k = 0; k < a.size(); ++k)
+    mean += (a[k] - b[k]) / static_cast<double>(a.size());
+  double s = 0;
+  for (std::size_t k = 0; k < a.size(); ++k)
+    s += (a[k] - b[k] - mean) * (a[k] - b[k] - mean);
+  return a.empty() ? 0.0 : std::sqrt(s / static_cast<double>(a.size()));
 }
 
 /// The header line of an errsep CSV (the first line that is not a '#' metadata line).

@@ -29,6 +29,7 @@
 #include "errsep/acq/displacement_sensor.hpp"
 #include "errsep/acq/sampler.hpp"
 #include "errsep/acq/stage.hpp"
+#include "errsep/core/displacement_scan_order.hpp"
 #include "errsep/core/four_sensor_config.hpp"
 #include "errsep/core/machine_axes.hpp"
 #include "errsep/io/machine_config.hpp"
@@ -57,6 +58,9 @@ struct ScanOptions {
   double d_mm = 5.0;                 ///< displacement of the reference piece (also the spacing)
   int displacement_points = 25;      ///< slide positions per pass, x_k = k·d
   double reference_origin_mm = 0.0;  ///< reference-piece position of the first pass
+  /// The order pass 2 reads the points in (core/displacement_scan_order.hpp), recorded in the raw
+  /// file; backward reads x_{K-1} first.
+  core::DisplacementScanOrder scan2_order = core::DisplacementScanOrder::forward;
   // timing and robustness
   int move_timeout_ms = 30000;        ///< per move, wait-in-position included
   int max_errors_per_point = 20;      ///< failed readings in one window before it is re-read

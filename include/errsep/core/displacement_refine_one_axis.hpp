@@ -20,13 +20,14 @@
 // and m is widened by what it would do at the fitted size, and the result says so.
 //
 // Times: the recorded reading times (raw_displacement.csv's t_scan1_s, t_scan2_s), else equal
-// steps in the paper's order (said in the result).
+// steps in the order the options name (the paper's by default; said in the result).
 #include <Eigen/Core>
 #include <string>
 #include <vector>
 
 #include "errsep/core/displacement_joint.hpp"
 #include "errsep/core/displacement_refine.hpp"
+#include "errsep/core/displacement_scan_order.hpp"
 #include "errsep/core/step_decision.hpp"
 
 namespace errsep::core {
@@ -37,6 +38,9 @@ namespace errsep::core {
 /// linear drift in recorded simulator scans).
 struct OneAxisRefineOptions : DisplacementRefineOptions {
   OneAxisRefineOptions() { identifiable_tolerance = 0.05; }
+  /// The order scan 2 ran in, for the reading times modelled when none are recorded (equal
+  /// steps, scan 2 after scan 1; recorded times say it themselves).
+  DisplacementScanOrder scan2_order = DisplacementScanOrder::forward;
 };
 
 /// One row of the refine's account: an effect taken (applied or detected) or one the plan cannot

@@ -25,6 +25,7 @@
 #include "errsep/core/displacement_joint.hpp"
 #include "errsep/core/displacement_method.hpp"
 #include "errsep/core/displacement_residuals.hpp"
+#include "errsep/core/displacement_scan_order.hpp"
 #include "errsep/core/three_point_method.hpp"
 #include "errsep/core/two_axis_displacement.hpp"
 #include "errsep/core/two_axis_yaw.hpp"
@@ -37,6 +38,8 @@ struct OneAxisInput {
   Eigen::VectorXd s1_2_um;     ///< workpiece sensor in scan 2; empty when the file has none
   double dx_mm = 0;            ///< sampling interval found in the file
   std::optional<double> d_mm;  ///< the traverse d, when the file records it (# d_mm:)
+  /// The order scan 2 read the points in (a raw scan's "# scan2_order:"; else forward).
+  core::DisplacementScanOrder scan2_order = core::DisplacementScanOrder::forward;
 };
 
 struct TwoAxisInput {

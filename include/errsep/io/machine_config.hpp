@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "errsep/core/compensation.hpp"
+#include "errsep/core/displacement_scan_order.hpp"
 #include "errsep/core/four_sensor.hpp"
 #include "errsep/core/four_sensor_config.hpp"
 #include "errsep/core/machine_axes.hpp"
@@ -118,8 +119,11 @@ struct ScanConfig {
   /// non-repeating traverse show (issue 16 item 2); single_sensor set-ups only.
   core::ScanSequenceKind plan = core::ScanSequenceKind::single;
   // displacement method (Haramiishi 2024, section 2.1)
-  double d_mm = 5.0;             ///< displacement of the reference piece between the scans
-  int displacement_points = 0;   ///< points per scan, spaced d_mm (0 = geometry.N)
+  double d_mm = 5.0;            ///< displacement of the reference piece between the scans
+  int displacement_points = 0;  ///< points per scan, spaced d_mm (0 = geometry.N)
+  /// The order scan 2 reads its points in (core/displacement_scan_order.hpp): backward makes a
+  /// linear drift of the workpiece sensor identifiable (issue 16 item 4).
+  core::DisplacementScanOrder scan2_order = core::DisplacementScanOrder::forward;
   std::string workpiece_sensor;  ///< reads w(x) + m(x)
   std::string reference_sensor;  ///< reads r(x) + m(x), then r(x + d) + m(x)
   std::string reference_stage;   ///< role reference_piece: displaces the reference piece

@@ -36,7 +36,11 @@
 //
 //   # format: errsep raw displacement scan
 //   # d_mm: 5
+//   # scan2_order: backward                 <- absent: forward (core/displacement_scan_order.hpp)
 //   x_mm,s1_scan1_um,s2_scan1_um,s1_scan2_um,s2_scan2_um[,t_scan1_s,t_scan2_s]
+//
+// A row is a position whatever the order; scan 1 reads the rows top down, scan 2 top down
+// (forward) or bottom up (backward), and its times t_scan2_s must go that way.
 #include <array>
 #include <filesystem>
 #include <optional>
@@ -46,6 +50,7 @@
 
 #include <Eigen/Core>
 
+#include "errsep/core/displacement_scan_order.hpp"
 #include "errsep/core/four_sensor_config.hpp"
 #include "errsep/core/scan_sequence.hpp"
 #include "errsep/io/csv.hpp"
@@ -89,6 +94,8 @@ struct RawDisplacementScan {
   std::vector<double> s1_scan1_um, s2_scan1_um, s1_scan2_um, s2_scan2_um;
   std::optional<std::vector<double>> t_scan1_s, t_scan2_s;
   double d_mm = 0.0;
+  /// The order scan 2 read the rows in (scan 1 reads them top down).
+  core::DisplacementScanOrder scan2_order = core::DisplacementScanOrder::forward;
   bool complete = false;
   std::vector<std::pair<std::string, std::string>> metadata;
   std::optional<std::string> meta(const std::string& key) const;
