@@ -98,25 +98,27 @@ void Runner::move(Stage& stage, double pos_mm, const std::string& where) {
   const std::string what =
       "stage '" + stage.name() + "': move to " + fmt(pos_mm) + " mm (" + where + ")";
   // A link that drops (IoStatus::disconnected) is reconnected by the bus supervisor
-  // (drivers/modbus_bus.hpp) within its back-off; a loaded PC can miss enough answers to make it
-  // drop one.  The drive keeps its commanded target meanwhile, so the move waits for the link
-  // within its own deadline and commands the target again (an absolute position: the same
-  // command twice moves nowhere else) in case the first was lost with the link.  Each such wait
-  // is counted (ScanCounts::stage_link_losses); a link that stays down fails the scan at the
-  // deadline, naming it.
+  // (drivers/modbus_bus.hpp) within its back-off, and a loaded PC can leave a command
+  // unanswered (IoStatus::timeout) or miss enough answers to make the link drop.  The drive keeps
+  // its commanded target meanwhile, so the move waits within its own deadline and commands the
+  // target again (an absolute position: the same command twice moves nowhere else) in case the
+  // first was lost.  Each such wait is counted (ScanCounts::stage_link_waits); a link that stays
+  // down fails the scan at the deadline, naming it.
   bool command_pending = true;
   IoStatus last = IoStatus::ok;
   const auto deadline =
       std::chrono::steady_clock::now() + std::chrono::milliseconds(opts_.move_timeout_ms);
   for (;;) {
     check_abort();
+    bool unanswered = false;
     if (command_pending) {
       last = stage.move_to(pos_mm);
-      if (last == IoStatus::ok) {
+      if (last == IoStatus::ok)
         command_pending = false;
-      } else if (last != IoStatus::disconnected) {
+      else if (last == IoStatus::disconnected || last == IoStatus::timeout)
+        unanswered = true;
+      else
         throw ScanStop{ScanRunOutcome::failed, what + ": command failed: " + to_string(last)};
-      }
     }
     if (!command_pending) {
       // Wait in slices so Ctrl-C is honoured within ~100 ms even during a long move.
@@ -131,20 +133,26 @@ void Runner::move(Stage& stage, double pos_mm, const std::string& where) {
         if (fs == IoStatus::ok) os << " (fault code 0x" << std::hex << code << ")";
         throw ScanStop{ScanRunOutcome::failed, os.str()};
       }
-      if (last != IoStatus::timeout && last != IoStatus::disconnected)
+      if (last == IoStatus::disconnected) {
+        command_pending = unanswered = true;
+      } else if (last != IoStatus::timeout) {  // timeout: still moving
         throw ScanStop{ScanRunOutcome::failed,
                        what + ": waiting for in-position: " + to_string(last)};
-      if (last == IoStatus::disconnected) command_pending = true;
+      }
     }
-    if (last == IoStatus::disconnected) {
-      ++res_.counts.stage_link_losses;
+    if (unanswered) {
+      ++res_.counts.stage_link_waits;
       heartbeat();
-      sleep_checking_abort(std::chrono::milliseconds(100));
+      // A timeout has waited already; a link that is down answers at once.
+      if (last == IoStatus::disconnected) sleep_checking_abort(std::chrono::milliseconds(100));
     }
     if (std::chrono::steady_clock::now() >= deadline)
       throw ScanStop{ScanRunOutcome::failed,
                      what + ": not in position after " + std::to_string(opts_.move_timeout_ms) +
-                         " ms" + (last == IoStatus::disconnected ? " (link down)" : "")};
+                         " ms" +
+                         (!unanswered                      ? ""
+                          : last == IoStatus::disconnected ? " (link down)"
+                                                           : " (command unanswered)")};
   }
 }
 
@@ -606,8 +614,8 @@ std::string ScanResult::brief_report() const {
      << counts.samples_averaged << " averaged), missed periods " << counts.missed_periods
      << ", overruns " << counts.overruns << ", read errors " << counts.read_errors << ", retries "
      << counts.point_retries;
-  if (counts.stage_link_losses > 0)
-    os << ", stage link down " << counts.stage_link_losses << "x (waited for reconnect)";
+  if (counts.stage_link_waits > 0)
+    os << ", stage link down or unanswered " << counts.stage_link_waits << "x (waited, sent again)";
   for (std::size_t b = 0; b < samplers.size(); ++b)
     os << ", jitter p50/p99/max " << samplers[b].jitter.p50_us << "/" << samplers[b].jitter.p99_us
        << "/" << samplers[b].jitter.max_us << " us";

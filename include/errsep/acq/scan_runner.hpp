@@ -141,9 +141,9 @@ struct ScanCounts {
   std::array<std::uint64_t, kIoStatusCount> reads_by_status{};
   std::uint64_t read_errors = 0;    ///< reads whose status was not ok
   std::uint64_t point_retries = 0;  ///< points re-read after failed readings
-  /// Stage commands or in-position polls that found the link down and waited (100 ms each) for
-  /// the bus supervisor's reconnect within the move's deadline.
-  std::uint64_t stage_link_losses = 0;
+  /// Stage commands left unanswered or polls that found the link down, each waited for (the bus
+  /// supervisor reconnects) and the target commanded again, within the move's deadline.
+  std::uint64_t stage_link_waits = 0;
   int points_done = 0, points_total = 0;
 };
 
