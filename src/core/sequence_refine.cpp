@@ -1110,6 +1110,21 @@ SequenceRefineResult SequenceModel::Impl::refine_effects(const Eigen::MatrixXd& 
                         : "reversed traverses (each configuration forward and back)");
       res.report.push_back(buf);
     }
+  // Every traverse's residual, with its direction and time (a hysteresis or a non-linearity shows
+  // between traverses, not in one configuration's first traverse).
+  SequenceTraceInput ti;
+  ti.basis = Ff->Q;
+  ti.m_um = m_um;
+  ti.t_s = seq.times_s(cfg);
+  for (const auto& tr : seq.traverses) {
+    ti.configuration.push_back(tr.configuration);
+    ti.direction.push_back(tr.direction == TraverseDirection::forward ? 1 : -1);
+  }
+  ti.dx_mm = cfg.dx_mm;
+  ResidualTraceOptions to;
+  to.alpha = o.alpha;
+  res.trace = trace_sequence_residual(ti, to);
+  res.report.insert(res.report.end(), res.trace.findings.begin(), res.trace.findings.end());
   return res;
 }
 

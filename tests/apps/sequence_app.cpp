@@ -3,6 +3,7 @@
 // drift; errsep-refine finds in it what the plan can identify, applies only that, says what it
 // cannot identify, and the report prints the findings.  The refined S is checked against the
 // simulation's truth within the run's own stated u_S.
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdio>
@@ -177,6 +178,25 @@ TEST_CASE("reversed plan with drift: motion.csv is the sequence fit, u_S below t
   CHECK(std::abs(*T - T_true) <= 2.0 * *U);
   CHECK_THAT(test::read_file(sep / "summary.txt"),
              Catch::Contains("scan sequence fit (plan: reversed, 8 traverses"));
+  // Issue 16: summary.txt's first line names the sequence fit, not the single separation's
+  // lambda rule; residuals.csv holds every reading of every traverse with its direction.
+  const std::string summary = test::read_file(sep / "summary.txt");
+  const std::string first_line = summary.substr(0, summary.find('\n'));
+  CHECK_THAT(first_line, Catch::StartsWith("four-sensor scan sequence fit") &&
+                             Catch::Contains("plan reversed, 8 traverses"));
+  CHECK_THAT(first_line, !Catch::Contains("least_squares"));
+  const auto res = io::read_csv(sep / "residuals.csv");
+  CHECK(res.rows.size() == 8 * raw.positions());
+  const auto trav = res.column("traverse", "residuals.csv");
+  const auto dir = res.column("direction", "residuals.csv");
+  const auto rt = res.column("t_s", "residuals.csv");
+  int backward = 0;
+  for (std::size_t i = 0; i < dir.size(); ++i)
+    backward += dir[i] < 0 ? 1 : 0;
+  CHECK(backward == static_cast<int>(4 * raw.positions()));  // each configuration once back
+  CHECK(*std::max_element(trav.begin(), trav.end()) == 8.0);
+  CHECK(*std::max_element(rt.begin(), rt.end()) > 0.0);
+  CHECK_THAT(res.meta("units").value_or(""), Catch::Contains("t in s, residual in um"));
   std::string out;
   REQUIRE(test::run_command(
               test::app_path("report").string() + " " + sep.string() + " --subdir report 2>&1",

@@ -72,6 +72,7 @@
 #include "errsep/core/four_sensor_config.hpp"
 #include "errsep/core/iso230.hpp"
 #include "errsep/core/repeat_steps.hpp"
+#include "errsep/core/residual_trace.hpp"
 #include "errsep/core/scan_sequence.hpp"
 
 namespace errsep::core {
@@ -213,6 +214,9 @@ struct SequenceRefineResult {
   std::vector<SequenceIdentifiability> plan_identifiability;  ///< drift, thermal, traverse
   /// A knocked sensor named by the repeated traverses, fitted before the effects.
   SequenceKnock knock;
+  /// The residual of every traverse under the final fit traced against time, position, reading
+  /// level and direction (trace_sequence_residual); its findings are also in `report`.
+  ResidualTrace trace;
   /// One line per added effect and one per effect detected that this plan cannot identify, e.g.
   /// "drift: not identifiable from this plan (single): ...".  The report prints them.  An effect
   /// the plan cannot identify and the data do not suggest gets no line (a clean run says nothing).
