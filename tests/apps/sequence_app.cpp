@@ -253,3 +253,45 @@ TEST_CASE("errsep-scan with [scan] plan = reversed and a drifting sensor: the dr
   CHECK_THAT(test::read_file(out / "report" / "report.html"),
              Catch::Contains("Scan sequence (plan: reversed)"));
 }
+
+// Issue 16 item 3 in the loop: a knock recorded in one traverse of a reversed plan (the sensor
+// stays knocked for the later traverses) is named by errsep-refine's sequence refine, written to
+// sequence_refine.csv (knock_* metadata, u_S_knock_um) and printed by the report; the refined S
+// lies within 4 u_S of the simulation's truth.
+TEST_CASE(
+    "a knock in one traverse of a reversed plan: named in sequence_refine.csv and the report") {
+  TempDir tmp;
+  std::string log;
+  REQUIRE(test::run_command(test::app_path("simulate").string() + " --out " +
+                                (tmp / "reversed").string() + " --plan reversed --seed 11 2>&1",
+                            &log) == 0);
+  auto raw = io::read_raw_four_sensor_csv(tmp / "reversed" / "raw.csv");
+  REQUIRE(raw.sequence);
+  auto [seq, M] = io::scan_sequence_of(raw);
+  const Eigen::MatrixXd t = seq.times_s(*raw.geometry);
+  const int K = 4, P = static_cast<int>(M.rows()), n0 = P / 2;  // traverse 5, halfway
+  REQUIRE(seq.traverses[K].direction == core::TraverseDirection::forward);
+  M.block(n0, K, P - n0, 1).array() += 1.0;
+  for (int k = K + 1; k < M.cols(); ++k)
+    M.col(k).array() += 1.0;
+  io::set_sequence(raw, seq, M, t);
+  io::write_raw_four_sensor_csv(tmp / "reversed" / "raw_knocked.csv", raw);
+  const auto ref = tmp / "refined";
+  REQUIRE(test::run_command(test::app_path("refine").string() + " " +
+                                (tmp / "reversed" / "raw_knocked.csv").string() + " --out " +
+                                ref.string() + " 2>&1",
+                            &log) == 0);
+  INFO(log);
+  const auto s = io::read_csv(ref / "sequence_refine.csv");
+  findings(s);
+  CHECK(s.meta("knock_configuration") ==
+        std::optional<std::string>(std::to_string(seq.traverses[K].configuration + 1)));
+  CHECK(s.meta("knock_removed") == std::optional<std::string>("true"));
+  CHECK(outside_4u(tmp, "reversed", s.column("S_after_um", "f"), s.column("u_S_after_um", "f")) ==
+        0);
+  std::string out;
+  REQUIRE(test::run_command(
+              test::app_path("report").string() + " " + ref.string() + " --subdir report 2>&1",
+              &out) == 0);
+  CHECK_THAT(test::read_file(ref / "report" / "report.html"), Catch::Contains("knocked sensor"));
+}
