@@ -56,6 +56,7 @@ struct Best {
   double z = 0;
   int j = -1;
   double c = 0, sd = 0;
+  std::size_t pair = 0;  // index into the list of differences
 };
 
 // The largest likelihood-ratio statistic of one difference over the candidates.
@@ -126,7 +127,8 @@ RepeatStepScan find_repeat_steps(const FourSensorConfig& cfg, const ScanSequence
     double zmax = 0;
     for (std::size_t p = 0; p < pairs.size(); ++p) {
       const auto& [c, k0, k1] = pairs[p];
-      const Best b = best_step(search, m.col(k1) - m.col(k0));
+      Best b = best_step(search, m.col(k1) - m.col(k0));
+      b.pair = p;
       if (per_config && b.z > (*per_config)[static_cast<std::size_t>(c)].z)
         (*per_config)[static_cast<std::size_t>(c)] = b;
       if (b.z > zmax) {
@@ -157,6 +159,8 @@ RepeatStepScan find_repeat_steps(const FourSensorConfig& cfg, const ScanSequence
     return out;
   }
   out.configuration = c;
+  out.earlier_traverse = pairs[b.pair][1];
+  out.later_traverse = pairs[b.pair][2];
   out.position = search.first[static_cast<std::size_t>(b.j)];
   out.x_mm = out.position * cfg.dx_mm;
   const double nrm = search.norm(b.j);

@@ -31,24 +31,21 @@ struct Nested {
   double delta_rss = 0, F = 0, p = 1;
   Eigen::VectorXd beta;  // least-squares coefficients of Z's columns (minimum norm)
 };
-Nested nested_test(const ResidualSpace& space, const Eigen::VectorXd& r, const Eigen::MatrixXd& Z) {
+// The F test of columns already projected off the model (Zp, their unprojected norms D) on the
+// residual r with dof degrees of freedom.
+Nested projected_test(Eigen::MatrixXd Zp, const Eigen::VectorXd& D, const Eigen::VectorXd& r,
+                      int dof) {
   Nested out;
-  out.beta = Eigen::VectorXd::Zero(Z.cols());
-  if (Z.cols() == 0) return out;
-  Eigen::MatrixXd Zp = space.project_out(reduce_columns(space.config(), Z));
-  Eigen::VectorXd D(Z.cols());
-  const Eigen::MatrixXd Zr = reduce_columns(space.config(), Z);
-  for (Eigen::Index c = 0; c < Z.cols(); ++c) {
-    D(c) = Zr.col(c).norm();
+  out.beta = Eigen::VectorXd::Zero(Zp.cols());
+  if (Zp.cols() == 0) return out;
+  for (Eigen::Index c = 0; c < Zp.cols(); ++c)
     if (D(c) > 0) Zp.col(c) /= D(c);
-  }
   Eigen::BDCSVD<Eigen::MatrixXd> svd(Zp, Eigen::ComputeThinU | Eigen::ComputeThinV);
   const Eigen::VectorXd& sv = svd.singularValues();
   int k = 0;
   for (Eigen::Index j = 0; j < sv.size(); ++j)
     if (sv(j) > 1e-6) ++k;
   out.identifiable = k;
-  const int dof = space.dof();
   if (k == 0 || dof - k <= 0) return out;
   const Eigen::VectorXd c = svd.matrixU().leftCols(k).transpose() * r;
   out.delta_rss = c.squaredNorm();
@@ -56,9 +53,48 @@ Nested nested_test(const ResidualSpace& space, const Eigen::VectorXd& r, const E
   out.F = rest > 0 ? (out.delta_rss / k) / (rest / (dof - k)) : 0.0;
   out.p = f_test_p_value(out.F, k, dof - k);
   const Eigen::VectorXd bt = svd.matrixV().leftCols(k) * (c.array() / sv.head(k).array()).matrix();
-  for (Eigen::Index j = 0; j < Z.cols(); ++j)
+  for (Eigen::Index j = 0; j < Zp.cols(); ++j)
     out.beta(j) = D(j) > 0 ? bt(j) / D(j) : 0.0;
   return out;
+}
+
+Nested nested_test(const ResidualSpace& space, const Eigen::VectorXd& r, const Eigen::MatrixXd& Z) {
+  if (Z.cols() == 0) return projected_test(Eigen::MatrixXd(0, 0), Eigen::VectorXd(), r, 0);
+  const Eigen::MatrixXd Zr = reduce_columns(space.config(), Z);
+  return projected_test(space.project_out(Zr), Zr.colwise().norm().transpose(), r, space.dof());
+}
+
+// Each test's p-value times the number of tests run (at most 1), and which are significant.
+void bonferroni(ResidualTrace& out, double alpha) {
+  for (const auto& d : out.tests)
+    if (d.tested) ++out.tests_run;
+  for (auto& d : out.tests) {
+    if (!d.tested) continue;
+    d.p_adjusted = std::min(1.0, d.p_value * out.tests_run);
+    out.p_value = std::min(out.p_value, d.p_adjusted);
+    d.significant = d.p_adjusted < alpha;
+  }
+}
+
+// The polynomial test of one variable: DependenceTest from projected_test's figures.
+DependenceTest dependence_test(const std::string& name, const Nested& nt, int parameters, int dof) {
+  DependenceTest d;
+  d.variable = name;
+  d.parameters = parameters;
+  if (parameters == 0) {
+    d.not_tested = "constant or not recorded";
+    return d;
+  }
+  d.identifiable = nt.identifiable;
+  if (nt.identifiable == 0 || dof - nt.identifiable <= 0) {
+    d.not_tested = "the model already holds every such function";
+    return d;
+  }
+  d.tested = true;
+  d.statistic = nt.F;
+  d.p_value = nt.p;
+  d.coefficients_um = nt.beta;
+  return d;
 }
 
 // Legendre columns P_1..P_d of v scaled to [−1, 1] over the readings selected by `config`
@@ -176,24 +212,7 @@ ResidualTrace trace_residual(const ResidualSpace& space, const Eigen::MatrixXd& 
   const Eigen::VectorXd r = space.project_out(reduce_readings(cfg, m_um));
   const int dof = space.dof();
   auto polynomial_test = [&](const std::string& name, const Eigen::MatrixXd& Z) {
-    DependenceTest d;
-    d.variable = name;
-    d.parameters = static_cast<int>(Z.cols());
-    if (Z.cols() == 0) {
-      d.not_tested = "constant or not recorded";
-      return d;
-    }
-    const Nested nt = nested_test(space, r, Z);
-    d.identifiable = nt.identifiable;
-    if (nt.identifiable == 0 || dof - nt.identifiable <= 0) {
-      d.not_tested = "the model already holds every such function";
-      return d;
-    }
-    d.tested = true;
-    d.statistic = nt.F;
-    d.p_value = nt.p;
-    d.coefficients_um = nt.beta;
-    return d;
+    return dependence_test(name, nested_test(space, r, Z), static_cast<int>(Z.cols()), dof);
   };
 
   Eigen::MatrixXd x(P, 4);
@@ -338,13 +357,8 @@ ResidualTrace trace_residual(const ResidualSpace& space, const Eigen::MatrixXd& 
     out.tests.push_back(d);
   }
 
-  for (const auto& d : out.tests)
-    if (d.tested) ++out.tests_run;
+  bonferroni(out, opts.alpha);
   for (auto& d : out.tests) {
-    if (!d.tested) continue;
-    d.p_adjusted = std::min(1.0, d.p_value * out.tests_run);
-    out.p_value = std::min(out.p_value, d.p_adjusted);
-    d.significant = d.p_adjusted < opts.alpha;
     if (!d.significant) continue;
     std::string f = "residual depends on " + d.variable + fmt(": p = %.2g", d.p_adjusted);
     if (d.variable == "configuration") {
@@ -373,6 +387,155 @@ ResidualTrace trace_residual(const ResidualSpace& space, const Eigen::MatrixXd& 
           fmt("%.4g um (a non-linearity or gain of this sensor position)", d.range_hi_um);
     } else {
       f += fmt(", F = %.3g on %.0f directions", d.statistic, d.identifiable);
+    }
+    d.finding = f;
+    out.findings.push_back(f);
+  }
+  out.depends = !out.findings.empty();
+  return out;
+}
+
+ResidualTrace trace_sequence_residual(const SequenceTraceInput& in,
+                                      const ResidualTraceOptions& opts) {
+  std::string why;
+  if (!opts.is_valid(&why)) throw std::invalid_argument("invalid residual trace options: " + why);
+  const Eigen::Index P = in.m_um.rows(), T = in.m_um.cols();
+  if (in.basis.rows() != P * T || in.t_s.rows() != P || in.t_s.cols() != T ||
+      static_cast<Eigen::Index>(in.configuration.size()) != T ||
+      static_cast<Eigen::Index>(in.direction.size()) != T || !in.m_um.allFinite() ||
+      !in.t_s.allFinite())
+    throw std::invalid_argument(
+        "trace_sequence_residual: readings and times must be finite P x T, the basis PT rows, "
+        "configuration and direction T entries");
+  const Eigen::MatrixXd& Q = in.basis;
+  Eigen::VectorXd y(P * T);
+  for (Eigen::Index k = 0; k < T; ++k)
+    y.segment(k * P, P) = in.m_um.col(k);
+  const Eigen::VectorXd r = y - Q * (Q.transpose() * y);
+  const int dof = static_cast<int>(P * T - Q.cols());
+  // The nested F test of columns Z (PT × k, row k·P + n) against the fit.
+  auto test = [&](const std::string& name, const Eigen::MatrixXd& Z) {
+    const Nested nt = Z.cols() == 0 ? Nested{}
+                                    : projected_test(Z - Q * (Q.transpose() * Z),
+                                                     Z.colwise().norm().transpose(), r, dof);
+    return dependence_test(name, nt, static_cast<int>(Z.cols()), dof);
+  };
+  // Legendre P_1..P_d of v (PT) scaled to [−1, 1] over the selected rows.
+  auto legendre_of = [&](const Eigen::VectorXd& v, int degree, const std::vector<bool>& rows) {
+    double lo = 0, hi = 0;
+    bool any = false;
+    for (Eigen::Index i = 0; i < v.size(); ++i)
+      if (rows[static_cast<std::size_t>(i)]) {
+        lo = any ? std::min(lo, v(i)) : v(i);
+        hi = any ? std::max(hi, v(i)) : v(i);
+        any = true;
+      }
+    if (!(hi > lo)) return Eigen::MatrixXd(v.size(), 0);
+    Eigen::MatrixXd Z = Eigen::MatrixXd::Zero(v.size(), degree);
+    for (Eigen::Index i = 0; i < v.size(); ++i)
+      if (rows[static_cast<std::size_t>(i)])
+        for (int dg = 1; dg <= degree; ++dg)
+          Z(i, dg - 1) = legendre(dg, (v(i) - 0.5 * (lo + hi)) / (0.5 * (hi - lo)));
+    return Z;
+  };
+  auto append = [](Eigen::MatrixXd& A, const Eigen::MatrixXd& B) {
+    Eigen::MatrixXd C(A.rows(), A.cols() + B.cols());
+    C << A, B;
+    A = std::move(C);
+  };
+  ResidualTrace out;
+  out.alpha = opts.alpha;
+  const std::vector<bool> all(static_cast<std::size_t>(P * T), true);
+  Eigen::VectorXd t(P * T), x(P * T);
+  for (Eigen::Index k = 0; k < T; ++k)
+    for (Eigen::Index n = 0; n < P; ++n) {
+      t(k * P + n) = in.t_s(n, k);
+      x(k * P + n) = static_cast<double>(n) * in.dx_mm;
+    }
+  out.tests.push_back(test("time", legendre_of(t, opts.time_degree, all)));
+  {
+    Eigen::MatrixXd Z(P * T, 0);
+    for (int c = 0; c < 4; ++c) {
+      std::vector<bool> rows(static_cast<std::size_t>(P * T), false);
+      for (Eigen::Index k = 0; k < T; ++k)
+        if (in.configuration[static_cast<std::size_t>(k)] == c)
+          for (Eigen::Index n = 0; n < P; ++n)
+            rows[static_cast<std::size_t>(k * P + n)] = true;
+      append(Z, legendre_of(x, opts.position_degree, rows));
+    }
+    out.tests.push_back(test("position (per configuration)", Z));
+  }
+  // Fitted readings (independent of the residual: exact tests of columns built from them).
+  const Eigen::VectorXd fit = y - r;
+  {
+    const double lo = fit.minCoeff(), hi = fit.maxCoeff(), mid = 0.5 * (lo + hi);
+    for (int power : {2, 3}) {
+      Eigen::MatrixXd Z(P * T, hi > lo ? 1 : 0);
+      if (hi > lo)
+        for (Eigen::Index i = 0; i < P * T; ++i)
+          Z(i, 0) = std::pow(fit(i) - mid, power);
+      DependenceTest d = test(power == 2 ? "reading level (quadratic non-linearity)"
+                                         : "reading level (cubic non-linearity)",
+                              Z);
+      d.range_lo_um = lo;
+      d.range_hi_um = hi;
+      if (d.tested) {
+        (power == 2 ? d.kappa_per_um : d.kappa3_per_um2) = d.coefficients_um(0);
+        d.nonlinear_um = std::abs(d.coefficients_um(0)) * std::pow(0.5 * (hi - lo), power);
+      }
+      out.tests.push_back(d);
+    }
+  }
+  {
+    Eigen::MatrixXd Z(P * T, 0);
+    std::vector<int> both;
+    for (int c = 0; c < 4; ++c) {
+      bool fwd = false, bwd = false;
+      for (Eigen::Index k = 0; k < T; ++k)
+        if (in.configuration[static_cast<std::size_t>(k)] == c)
+          (in.direction[static_cast<std::size_t>(k)] > 0 ? fwd : bwd) = true;
+      if (!(fwd && bwd)) continue;
+      both.push_back(c);
+      Eigen::MatrixXd Zc = Eigen::MatrixXd::Zero(P * T, 2);
+      for (Eigen::Index k = 0; k < T; ++k) {
+        if (in.configuration[static_cast<std::size_t>(k)] != c) continue;
+        const double dir = in.direction[static_cast<std::size_t>(k)] > 0 ? 1.0 : -1.0;
+        for (Eigen::Index n = 0; n < P; ++n) {
+          const Eigen::Index a = k * P + std::max<Eigen::Index>(n - 1, 0),
+                             b = k * P + std::min<Eigen::Index>(n + 1, P - 1);
+          const double slope = fit(b) - fit(a);
+          Zc(k * P + n, 0) = dir < 0 ? 1.0 : 0.0;
+          Zc(k * P + n, 1) = slope > 0 ? -dir : slope < 0 ? dir : 0.0;
+        }
+      }
+      append(Z, Zc);
+    }
+    DependenceTest d = test("direction", Z);
+    if (both.empty())
+      d.not_tested =
+          "every configuration measured in one direction only: a hysteresis is not identifiable "
+          "from this plan (measure each configuration forward and back)";
+    out.tests.push_back(d);
+  }
+  bonferroni(out, opts.alpha);
+  for (auto& d : out.tests) {
+    if (!d.significant) continue;
+    std::string f =
+        "residual of every traverse depends on " + d.variable +
+        fmt(": p = %.2g, F = %.3g on %.0f directions", d.p_adjusted, d.statistic, d.identifiable);
+    if (d.variable == "direction") {
+      // The hysteresis coefficients (every second column), their mean: h.
+      double h = 0;
+      int m = 0;
+      for (Eigen::Index j = 1; j < d.coefficients_um.size(); j += 2, ++m)
+        h += d.coefficients_um(j);
+      f +=
+          fmt(" (a hysteresis: the sensor lags by about %.3g um in the direction its reading "
+              "changes; not in the effect library, not corrected)",
+              m ? h / m : 0.0);
+    } else if (d.variable.rfind("reading level (", 0) == 0) {
+      f += fmt(" (a sensor non-linearity, %.3g um at the ends of readings %.4g..%.4g um)",
+               d.nonlinear_um, d.range_lo_um, d.range_hi_um);
     }
     d.finding = f;
     out.findings.push_back(f);

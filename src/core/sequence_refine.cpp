@@ -47,6 +47,8 @@ bool SequenceRefineOptions::is_valid(std::string* why) const {
   if (!(undetermined_S_max > 0)) return fail("undetermined_S_max must be > 0");
   if (thermal_grid < 1) return fail("thermal_grid must be >= 1");
   if (traverse_degree < 1) return fail("traverse_degree must be >= 1");
+  std::string w;
+  if (!repeat_steps.is_valid(&w)) return fail("repeat_steps: " + w);
   return true;
 }
 
@@ -59,7 +61,31 @@ struct Base {
   int nf = 0, P = 0, T = 0;
   std::vector<int> e_column;  // per traverse: column of its e, or -1 (held at 0)
   Eigen::MatrixXd Bf;         // N × (N − 3)
+  int knock_column = -1;      // a knocked sensor's column (SequenceKnock), the last one; or -1
 };
+
+// The base design with a knocked sensor's column appended (after f, S, γ, e: their indices stay).
+Base with_knock(Base b, const Eigen::VectorXd& column) {
+  if (column.size() == 0) return b;
+  b.X.conservativeResize(Eigen::NoChange, b.X.cols() + 1);
+  b.X.col(b.X.cols() - 1) = column;
+  b.knock_column = static_cast<int>(b.X.cols() - 1);
+  return b;
+}
+
+// The knock of SequenceKnock: from the step's first position `pos` (the knock fell between
+// x_{pos−1} and x_pos) traverse K reads offset on the positions it visits after the knock
+// (forward: n >= pos; backward: n < pos), and every later traverse reads offset throughout.
+Eigen::VectorXd knock_column(const ScanSequence& seq, int P, int K, int pos) {
+  Eigen::VectorXd col = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(P) * seq.size());
+  const bool forward =
+      seq.traverses[static_cast<std::size_t>(K)].direction == TraverseDirection::forward;
+  for (int n = 0; n < P; ++n)
+    if (forward ? n >= pos : n < pos) col(static_cast<Eigen::Index>(K) * P + n) = 1.0;
+  for (int k = K + 1; k < seq.size(); ++k)
+    col.segment(static_cast<Eigen::Index>(k) * P, P).setOnes();
+  return col;
+}
 
 Base base_design(const FourSensorConfig& cfg, const ScanSequence& seq) {
   std::string why;
@@ -320,8 +346,10 @@ struct SequenceModel::Impl {
   std::map<std::vector<int>, Factor> factors;
   std::vector<SequenceIdentifiability> ids;
 
-  Impl(const FourSensorConfig& c, const ScanSequence& s, const SequenceRefineOptions& opt)
-      : cfg(c), seq(s), o(opt), b(base_design(c, s)) {
+  // `knock`: a knocked sensor's column in the base design (SequenceKnock), or empty.
+  Impl(const FourSensorConfig& c, const ScanSequence& s, const SequenceRefineOptions& opt,
+       const Eigen::VectorXd& knock = {})
+      : cfg(c), seq(s), o(opt), b(with_knock(base_design(c, s), knock)) {
     std::string why;
     if (!o.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
     Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
@@ -513,6 +541,10 @@ struct SequenceModel::Impl {
   }
 
   SequenceRefineResult refine(const Eigen::MatrixXd& m_um);
+  // The effects loop of the header (refine() first looks for a knocked sensor).
+  SequenceRefineResult refine_effects(const Eigen::MatrixXd& m_um);
+  // refine() when the repeated traverses name a knock (SequenceKnock).
+  SequenceRefineResult refine_with_knock(const Eigen::MatrixXd& m_um, const RepeatStepScan& rs);
 
   // The drift family's form by profile likelihood: the linear drift and the thermal one at 40 τ
   // (log-spaced over the grid's range and one grid step beyond), each fitted with the model's
@@ -714,6 +746,120 @@ SequenceRefineResult refine_four_sensor_sequence(const FourSensorConfig& cfg,
 }
 
 SequenceRefineResult SequenceModel::Impl::refine(const Eigen::MatrixXd& m_um) {
+  if (!o.find_knocks || b.knock_column >= 0) return refine_effects(m_um);
+  if (m_um.rows() != b.P || m_um.cols() != b.T)
+    throw std::invalid_argument("readings must be P x T (" + std::to_string(b.P) + " x " +
+                                std::to_string(b.T) + "), got " + std::to_string(m_um.rows()) +
+                                " x " + std::to_string(m_um.cols()));
+  const RepeatStepScan rs = find_repeat_steps(cfg, seq, m_um, o.repeat_steps);
+  if (rs.found && rs.attributed) return refine_with_knock(m_um, rs);
+  SequenceRefineResult res = refine_effects(m_um);
+  res.knock.scan = rs;
+  res.knock.u_S_added_um = Eigen::VectorXd::Zero(b.P);
+  if (rs.found) {
+    // Found in a difference but not told apart from another configuration's: said, not fitted.
+    res.knock.finding = rs.finding + "; not fitted";
+    res.report.push_back(res.knock.finding);
+  }
+  return res;
+}
+
+SequenceRefineResult SequenceModel::Impl::refine_with_knock(const Eigen::MatrixXd& m_um,
+                                                            const RepeatStepScan& rs) {
+  const Eigen::VectorXd y = flatten(m_um);
+  // The knock fell in one of the two traverses whose difference shows it: each fitted.
+  struct Alt {
+    int K = -1;
+    Eigen::VectorXd col;
+    SequenceFit fit;
+    double size = 0, u_size = 0;
+  };
+  std::array<Alt, 2> alt;
+  for (int a = 0; a < 2; ++a) {
+    alt[a].K = a == 0 ? rs.earlier_traverse : rs.later_traverse;
+    alt[a].col = knock_column(seq, b.P, alt[a].K, rs.position);
+    const Factor F = factorise(b, Eigen::MatrixXd(alt[a].col));
+    alt[a].fit = fit_with(b, F, m_um);
+    alt[a].size = alt[a].fit.extra_coefficients(0);
+    // The knock is the last unknown: its row of R⁻¹ is 1/R_nn.
+    const Eigen::Index last = F.R.cols() - 1;
+    alt[a].u_size = alt[a].fit.sigma_um / std::abs(F.R(last, last));
+  }
+  const int best = alt[1].fit.rss_um2 < alt[0].fit.rss_um2 ? 1 : 0;
+  const Alt& A = alt[static_cast<std::size_t>(best)];
+  const Alt& other = alt[static_cast<std::size_t>(1 - best)];
+  const double s2 = A.fit.sigma_um * A.fit.sigma_um;
+  const bool ambiguous =
+      !(s2 > 0) || (other.fit.rss_um2 - A.fit.rss_um2) / s2 < o.repeat_steps.attribution_chi2;
+  // Whether removing it helps S, γ and f (step_decision.hpp): their change when the knock's
+  // column is fitted, per µm of knock, is minus what the fit without it puts into them from the
+  // column (the gauge directions of S removed).
+  const Factor& F0 = factor({});
+  const SequenceFit before = fit_with(b, F0, m_um);
+  const Eigen::VectorXd beta_col =
+      F0.R.triangularView<Eigen::Upper>().solve(F0.Q.transpose() * A.col);
+  std::vector<QuantityImpact> q(3);
+  q[0] = {"S", "um", Pi * beta_col.segment(b.nf, b.P), before.u_S_um};
+  q[1] = {"gamma", "urad", beta_col.segment(b.nf + b.P, b.P), 1e6 * before.u_gamma_rad};
+  q[2] = {"f", "um", b.Bf * beta_col.head(b.nf), before.u_f_um};
+  const StepDecision d = decide_step(Eigen::VectorXd::Constant(1, A.size),
+                                     Eigen::MatrixXd::Constant(1, 1, A.u_size * A.u_size), q);
+  SequenceRefineResult res;
+  Eigen::VectorXd u_add = Eigen::VectorXd::Zero(b.P);
+  Eigen::MatrixXd G_add(b.P, 0);
+  if (d.apply) {
+    Impl with(cfg, seq, o, A.col);
+    res = with.refine_effects(m_um);
+    res.before = before;
+    if (ambiguous) {
+      // Either traverse may hold it: the RMS error of taking one of two equally likely
+      // alternatives is |ΔS|/√2.
+      G_add = (Pi * (other.fit.S_um - A.fit.S_um)) / std::sqrt(2.0);
+    }
+  } else {
+    res = refine_effects(m_um);
+    // Left out: u_S carries its bias, the change removing it would make (step_decision.hpp).
+    G_add = q[0].sensitivity * A.size;
+  }
+  if (G_add.cols()) {
+    Eigen::MatrixXd& G = res.after.S_covariance_factor_um;
+    G.conservativeResize(Eigen::NoChange, G.cols() + 1);
+    G.col(G.cols() - 1) = G_add.col(0);
+    u_add = G_add.col(0).cwiseAbs();
+    res.after.u_S_um = (res.after.u_S_um.cwiseAbs2() + u_add.cwiseAbs2()).cwiseSqrt();
+  }
+  SequenceKnock& k = res.knock;
+  k.scan = rs;
+  k.fitted = true;
+  k.applied = d.apply;
+  k.traverse = A.K;
+  k.traverse_ambiguous = ambiguous;
+  k.size_um = A.size;
+  k.u_size_um = A.u_size;
+  k.x_mm = rs.x_mm;
+  k.decision = d.reason;
+  k.u_S_added_um = u_add;
+  const Traverse& tr = seq.traverses[static_cast<std::size_t>(A.K)];
+  char alt_txt[80] = "", add_txt[80] = "";
+  if (ambiguous)
+    std::snprintf(alt_txt, sizeof alt_txt, "; or traverse %d, not told apart", other.K + 1);
+  if (u_add.maxCoeff() > 0)
+    std::snprintf(add_txt, sizeof add_txt, " (adds %.2g um RMS to u_S)",
+                  std::sqrt(u_add.squaredNorm() / static_cast<double>(b.P)));
+  char buf[700];
+  std::snprintf(buf, sizeof buf,
+                "knocked sensor: configuration %d, traverse %d (%s%s), %+.3g +- %.2g um from x = "
+                "%.4g mm on (named by its two traverses: z = %.3g, p = %.2g): %s%s",
+                rs.configuration + 1, A.K + 1,
+                tr.direction == TraverseDirection::forward ? "forward" : "backward", alt_txt,
+                A.size, A.u_size, rs.x_mm, rs.z, rs.p_value,
+                d.apply ? "removed" : "not removed, carried in u_S", add_txt);
+  k.finding = buf;
+  res.report.insert(res.report.begin(), k.finding);
+  return res;
+}
+
+SequenceRefineResult SequenceModel::Impl::refine_effects(const Eigen::MatrixXd& m_um) {
   SequenceRefineResult res;
   res.plan = seq.name;
   res.before = fit_with(b, factor({}), m_um);
@@ -964,6 +1110,21 @@ SequenceRefineResult SequenceModel::Impl::refine(const Eigen::MatrixXd& m_um) {
                         : "reversed traverses (each configuration forward and back)");
       res.report.push_back(buf);
     }
+  // Every traverse's residual, with its direction and time (a hysteresis or a non-linearity shows
+  // between traverses, not in one configuration's first traverse).
+  SequenceTraceInput ti;
+  ti.basis = Ff->Q;
+  ti.m_um = m_um;
+  ti.t_s = seq.times_s(cfg);
+  for (const auto& tr : seq.traverses) {
+    ti.configuration.push_back(tr.configuration);
+    ti.direction.push_back(tr.direction == TraverseDirection::forward ? 1 : -1);
+  }
+  ti.dx_mm = cfg.dx_mm;
+  ResidualTraceOptions to;
+  to.alpha = o.alpha;
+  res.trace = trace_sequence_residual(ti, to);
+  res.report.insert(res.report.end(), res.trace.findings.begin(), res.trace.findings.end());
   return res;
 }
 

@@ -1,6 +1,7 @@
 #include "errsep/io/four_sensor_result_csv.hpp"
 
 #include <sstream>
+#include <stdexcept>
 
 #include "errsep/core/four_sensor_evaluation.hpp"
 #include "errsep/core/four_sensor_model.hpp"
@@ -135,14 +136,35 @@ void write_four_sensor_result(const std::filesystem::path& dir, const core::Four
 
   CsvTable res;
   common_meta(res, r, info);
-  res.set_meta("units", "x in mm, residual in um; config 1..4");
-  res.columns = {"x_mm", "config", "residual_um"};
-  for (Eigen::Index n = 0; n < r.sensor_residual_um.rows(); ++n)
-    for (int j = 0; j < 4; ++j)
-      res.rows.push_back({r.x_mm(n), static_cast<double>(j + 1), r.sensor_residual_um(n, j)});
+  if (const auto& tr = info.traverses) {
+    // Every traverse of a scan sequence, in the order measured (a hysteresis or a drift shows
+    // between traverses of one configuration, not in its first traverse alone).
+    const Eigen::Index T = tr->residual_um.cols();
+    if (tr->residual_um.rows() != r.x_mm.size() || tr->t_s.rows() != tr->residual_um.rows() ||
+        tr->t_s.cols() != T || static_cast<Eigen::Index>(tr->configuration.size()) != T ||
+        static_cast<Eigen::Index>(tr->direction.size()) != T)
+      throw std::invalid_argument("write_four_sensor_result: traverse residuals are not P x T");
+    res.set_meta("units",
+                 "x in mm, t in s, residual in um; traverse 1..T in the order measured, config "
+                 "1..4, direction +1 forward, -1 backward");
+    res.set_meta("traverses", std::to_string(T));
+    res.columns = {"x_mm", "traverse", "config", "direction", "t_s", "residual_um"};
+    for (Eigen::Index j = 0; j < T; ++j)
+      for (Eigen::Index n = 0; n < tr->residual_um.rows(); ++n)
+        res.rows.push_back({r.x_mm(n), static_cast<double>(j + 1),
+                            static_cast<double>(tr->configuration[static_cast<std::size_t>(j)]),
+                            static_cast<double>(tr->direction[static_cast<std::size_t>(j)]),
+                            tr->t_s(n, j), tr->residual_um(n, j)});
+  } else {
+    res.set_meta("units", "x in mm, residual in um; config 1..4");
+    res.columns = {"x_mm", "config", "residual_um"};
+    for (Eigen::Index n = 0; n < r.sensor_residual_um.rows(); ++n)
+      for (int j = 0; j < 4; ++j)
+        res.rows.push_back({r.x_mm(n), static_cast<double>(j + 1), r.sensor_residual_um(n, j)});
+  }
 
   std::ostringstream summary;
-  summary << r.brief_report() << "\n"
+  summary << (info.title.empty() ? r.brief_report() : info.title) << "\n"
           << "source: " << info.source << "\n"
           << "identifiability: the constant and linear parts of f are fixed by f(x_0) = "
              "f(x_{N-1}) = 0 (Eq. 11); its quadratic part by the assumption that "

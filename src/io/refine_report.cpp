@@ -292,6 +292,21 @@ CsvTable sequence_refine_csv(const core::SequenceRefineResult& r, const std::vec
   for (const auto& a : r.added)
     added += (added.empty() ? "" : ", ") + std::string(core::to_string(a.kind));
   t.set_meta("added", added.empty() ? "none" : added);
+  // A knocked sensor the repeated traverses named (core::SequenceKnock), fitted before the effects.
+  const core::SequenceKnock& kn = r.knock;
+  if (kn.fitted) {
+    t.set_meta("knock_configuration", std::to_string(kn.scan.configuration + 1));
+    t.set_meta("knock_traverse",
+               std::to_string(kn.traverse + 1) +
+                   (kn.traverse_ambiguous ? " (or its pair: not told apart)" : ""));
+    t.set_meta("knock_x_mm", g(kn.x_mm, 6));
+    t.set_meta("knock_size_um", g(kn.size_um, 4) + " +- " + g(kn.u_size_um, 2));
+    t.set_meta("knock_removed", kn.applied ? "true" : "false");
+  } else {
+    t.set_meta("knock", kn.scan.not_tested.empty()
+                            ? (kn.scan.found ? "found, not attributed" : "none found")
+                            : kn.scan.not_tested);
+  }
   t.set_meta("findings", std::to_string(r.report.size()));
   for (std::size_t k = 0; k < r.report.size(); ++k)
     t.set_meta("finding_" + std::to_string(k + 1), r.report[k]);
@@ -307,6 +322,7 @@ CsvTable sequence_refine_csv(const core::SequenceRefineResult& r, const std::vec
   t.add_column("S_after_um", col(r.after.S_um));
   t.add_column("u_S_after_um", col(r.after.u_S_um));
   t.add_column("u_S_widening_um", col(r.u_S_widening_um));
+  t.add_column("u_S_knock_um", col(r.knock.u_S_added_um));
   return t;
 }
 

@@ -180,6 +180,28 @@ RefineRunResult run_refine(const FourSensorInputs& in, const fs::path& out_dir,
           break;
         }
   }
+  if (in.sequence) {
+    // The redundant traverses (issue 16 items 2, 3): a knocked sensor the repeated traverses
+    // name, drift, thermal drift and a non-repeating traverse, applied only where the plan
+    // identifies them, said where it does not.
+    core::SequenceRefineOptions so;
+    so.alpha = opts.refine.alpha;
+    out.sequence =
+        core::refine_four_sensor_sequence(in.cfg, in.sequence->first, in.sequence->second, so);
+    // m1..m4 are each configuration's first traverse: a knock the sequence named in one of them
+    // is a step there, attributed by the repeats (gross_errors.hpp) for the single refine too.
+    const core::SequenceKnock& kn = out.sequence->knock;
+    if (kn.fitted && kn.applied) {
+      const core::ScanSequence& seq = in.sequence->first;
+      int first = -1;
+      for (int k = 0; k < seq.size() && first < 0; ++k)
+        if (seq.traverses[static_cast<std::size_t>(k)].configuration == kn.scan.configuration)
+          first = k;
+      if (first == kn.traverse)
+        ro.gross.attributed_steps.push_back({kn.scan.configuration, kn.scan.position, kn.size_um,
+                                             kn.u_size_um, "the configuration's two traverses"});
+    }
+  }
   out.result = core::refine_four_sensor(in.cfg, in.m_um, in.t_s, ro, truth ? &*truth : nullptr);
   const core::RefineResult& r = out.result;
   if (opts.reference_csv)
@@ -187,21 +209,16 @@ RefineRunResult run_refine(const FourSensorInputs& in, const fs::path& out_dir,
         compare_with_reference(r.before, r.after, in.x_mm, in.cfg.dx_mm, *opts.reference_csv);
   out.text = format_refine_text(r);
   if (out.reference) out.text += format_reference_text(*out.reference);
-  if (in.sequence) {
-    // The redundant traverses (issue 16 item 2): drift, thermal drift and a non-repeating
-    // traverse, applied only where the plan identifies them, said where it does not.
-    core::SequenceRefineOptions so;
-    so.alpha = opts.refine.alpha;
-    out.sequence =
-        core::refine_four_sensor_sequence(in.cfg, in.sequence->first, in.sequence->second, so);
+  if (out.sequence) {
     out.text += "\nScan sequence (plan: " + out.sequence->plan + ", " +
                 std::to_string(in.sequence->first.size()) + " traverses):\n";
     for (const auto& line : out.sequence->report)
       out.text += "  " + line + "\n";
     if (out.sequence->report.empty())
-      out.text += "  nothing detected: no drift, thermal drift or non-repeating traverse\n";
+      out.text +=
+          "  nothing detected: no knocked sensor, drift, thermal drift or non-repeating "
+          "traverse\n";
   }
-
   // One result set: the files appear in DIR only when all are written, replacing an earlier
   // refine result whole (io/staged_directory.hpp).
   StagedDirectory stage(out_dir, {"refine", std::string("errsep-refine ") + kVersion, false, {}});

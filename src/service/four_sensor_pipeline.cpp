@@ -122,6 +122,30 @@ FourSensorPipelineResult FourSensorPipeline::separate(const io::RawFourSensorSca
       const std::string what =
           "scan sequence fit (plan: " + seq.name + ", " + std::to_string(seq.size()) +
           " traverses, least squares), effects applied: " + (added.empty() ? "none" : added);
+      {
+        // summary.txt's first line names the fit (brief_report() would say "least_squares").
+        const core::FourSensorConfig& g = *raw.geometry;
+        char title[512];
+        std::snprintf(title, sizeof title,
+                      "four-sensor scan sequence fit N=%d P=%d s=(%d,%d,%d) dx=%.4g mm: plan %s, "
+                      "%d traverses, every reading in one unregularised least-squares fit (Eq. 1 "
+                      "per traverse, own zero adjustment each), effects applied: %s%s, "
+                      "sigma_hat=%.3g um (dof %d)",
+                      g.N, g.positions(), g.s2, g.s3, g.s4, g.dx_mm, seq.name.c_str(), seq.size(),
+                      added.empty() ? "none" : added.c_str(),
+                      sr.knock.fitted && sr.knock.applied ? ", knocked sensor removed" : "",
+                      sr.after.sigma_um, sr.after.dof);
+        info.title = title;
+        // residuals.csv: every traverse, with its direction and time.
+        io::ResultWriteInfo::TraverseResiduals tr;
+        tr.residual_um = sr.after.residual_um;
+        tr.t_s = seq.times_s(g);
+        for (const auto& t : seq.traverses) {
+          tr.configuration.push_back(t.configuration + 1);
+          tr.direction.push_back(t.direction == core::TraverseDirection::forward ? 1 : -1);
+        }
+        info.traverses = std::move(tr);
+      }
       info.extra_metadata.emplace_back("scan_plan", seq.name);
       info.extra_metadata.emplace_back("separation", what);
       info.summary_notes.push_back("result: " + what + "; sigma_hat " +

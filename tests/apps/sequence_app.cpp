@@ -3,6 +3,7 @@
 // drift; errsep-refine finds in it what the plan can identify, applies only that, says what it
 // cannot identify, and the report prints the findings.  The refined S is checked against the
 // simulation's truth within the run's own stated u_S.
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdio>
@@ -177,6 +178,25 @@ TEST_CASE("reversed plan with drift: motion.csv is the sequence fit, u_S below t
   CHECK(std::abs(*T - T_true) <= 2.0 * *U);
   CHECK_THAT(test::read_file(sep / "summary.txt"),
              Catch::Contains("scan sequence fit (plan: reversed, 8 traverses"));
+  // Issue 16: summary.txt's first line names the sequence fit, not the single separation's
+  // lambda rule; residuals.csv holds every reading of every traverse with its direction.
+  const std::string summary = test::read_file(sep / "summary.txt");
+  const std::string first_line = summary.substr(0, summary.find('\n'));
+  CHECK_THAT(first_line, Catch::StartsWith("four-sensor scan sequence fit") &&
+                             Catch::Contains("plan reversed, 8 traverses"));
+  CHECK_THAT(first_line, !Catch::Contains("least_squares"));
+  const auto res = io::read_csv(sep / "residuals.csv");
+  CHECK(res.rows.size() == 8 * raw.positions());
+  const auto trav = res.column("traverse", "residuals.csv");
+  const auto dir = res.column("direction", "residuals.csv");
+  const auto rt = res.column("t_s", "residuals.csv");
+  int backward = 0;
+  for (std::size_t i = 0; i < dir.size(); ++i)
+    backward += dir[i] < 0 ? 1 : 0;
+  CHECK(backward == static_cast<int>(4 * raw.positions()));  // each configuration once back
+  CHECK(*std::max_element(trav.begin(), trav.end()) == 8.0);
+  CHECK(*std::max_element(rt.begin(), rt.end()) > 0.0);
+  CHECK_THAT(res.meta("units").value_or(""), Catch::Contains("t in s, residual in um"));
   std::string out;
   REQUIRE(test::run_command(
               test::app_path("report").string() + " " + sep.string() + " --subdir report 2>&1",
@@ -232,4 +252,46 @@ TEST_CASE("errsep-scan with [scan] plan = reversed and a drifting sensor: the dr
   CHECK_FALSE(any_starts(f, "drift: not identifiable"));
   CHECK_THAT(test::read_file(out / "report" / "report.html"),
              Catch::Contains("Scan sequence (plan: reversed)"));
+}
+
+// Issue 16 item 3 in the loop: a knock recorded in one traverse of a reversed plan (the sensor
+// stays knocked for the later traverses) is named by errsep-refine's sequence refine, written to
+// sequence_refine.csv (knock_* metadata, u_S_knock_um) and printed by the report; the refined S
+// lies within 4 u_S of the simulation's truth.
+TEST_CASE(
+    "a knock in one traverse of a reversed plan: named in sequence_refine.csv and the report") {
+  TempDir tmp;
+  std::string log;
+  REQUIRE(test::run_command(test::app_path("simulate").string() + " --out " +
+                                (tmp / "reversed").string() + " --plan reversed --seed 11 2>&1",
+                            &log) == 0);
+  auto raw = io::read_raw_four_sensor_csv(tmp / "reversed" / "raw.csv");
+  REQUIRE(raw.sequence);
+  auto [seq, M] = io::scan_sequence_of(raw);
+  const Eigen::MatrixXd t = seq.times_s(*raw.geometry);
+  const int K = 4, P = static_cast<int>(M.rows()), n0 = P / 2;  // traverse 5, halfway
+  REQUIRE(seq.traverses[K].direction == core::TraverseDirection::forward);
+  M.block(n0, K, P - n0, 1).array() += 1.0;
+  for (int k = K + 1; k < M.cols(); ++k)
+    M.col(k).array() += 1.0;
+  io::set_sequence(raw, seq, M, t);
+  io::write_raw_four_sensor_csv(tmp / "reversed" / "raw_knocked.csv", raw);
+  const auto ref = tmp / "refined";
+  REQUIRE(test::run_command(test::app_path("refine").string() + " " +
+                                (tmp / "reversed" / "raw_knocked.csv").string() + " --out " +
+                                ref.string() + " 2>&1",
+                            &log) == 0);
+  INFO(log);
+  const auto s = io::read_csv(ref / "sequence_refine.csv");
+  findings(s);
+  CHECK(s.meta("knock_configuration") ==
+        std::optional<std::string>(std::to_string(seq.traverses[K].configuration + 1)));
+  CHECK(s.meta("knock_removed") == std::optional<std::string>("true"));
+  CHECK(outside_4u(tmp, "reversed", s.column("S_after_um", "f"), s.column("u_S_after_um", "f")) ==
+        0);
+  std::string out;
+  REQUIRE(test::run_command(
+              test::app_path("report").string() + " " + ref.string() + " --subdir report 2>&1",
+              &out) == 0);
+  CHECK_THAT(test::read_file(ref / "report" / "report.html"), Catch::Contains("knocked sensor"));
 }

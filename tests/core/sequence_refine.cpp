@@ -538,3 +538,176 @@ TEST_CASE("must-show at sigma 0.05 and 0.2 um: single and reversed plans") {
                          {Case::none, Case::drift_all, Case::thermal_all, Case::traverse}, false);
   }
 }
+
+// Issue 16 item 3 with item 2's plans: a knocked sensor in a reversed plan is named by the
+// difference of its configuration's two traverses (repeat_steps.hpp) and fitted in the sequence
+// fit (SequenceKnock), removed when decide_step expects S, γ, f to improve, else carried in u_S.
+// Random profiles per seed, noise on every reading; the knock (0.5-1.5 um, either sign) falls
+// during a random traverse at a random position in the middle three fifths, and the sensor stays
+// knocked for every later traverse.  Asserted per σ: the knocked configuration and place named in
+// >= 80 % of runs; in every run S lies within 4 u_S of the truth at every point (bow removed from
+// both, as u_S); on clean scans of the same seeds (σ 0.1) a knock is fitted in at most 1 of 20.
+// Printed: the same runs with the knock search off (the sequence fit before this change).
+TEST_CASE("a knock in one traverse of a reversed plan is named and S ends within 4 u_S") {
+  const FourSensorConfig cfg;
+  const ScanSequence seq = ScanSequence::make(ScanSequenceKind::reversed, cfg);
+  SequenceRefineOptions off;
+  off.find_knocks = false;
+  SequenceModel model(cfg, seq), model_off(cfg, seq, off);
+  const int P = cfg.positions(), T = seq.size();
+  for (const auto& [sigma, seeds] : {std::pair{0.05, 10}, std::pair{0.1, 20}, std::pair{0.2, 10}}) {
+    int named = 0, within = 0, within_off = 0, applied = 0, clean_fitted = 0, clean_runs = 0;
+    double covered = 0, points = 0;
+    std::vector<double> before, after, worst_z;
+    for (int s = 1; s <= seeds; ++s) {
+      const std::uint64_t seed = 700 + static_cast<std::uint64_t>(s);
+      const SlidewayTruth truth = random_smooth_truth(cfg, seed);
+      SequenceSimOptions so;
+      so.sigma_um = sigma;
+      so.seed = seed;
+      const SequenceSimData d = simulate_four_sensor_sequence(cfg, truth, seq, so);
+      std::mt19937_64 rng(seed * 31 + 5);
+      const int K = std::uniform_int_distribution<int>(0, T - 1)(rng);
+      const int n0 = std::uniform_int_distribution<int>(P / 5, 4 * P / 5)(rng);
+      const double a =
+          (rng() % 2 ? 1.0 : -1.0) * std::uniform_real_distribution<double>(0.5, 1.5)(rng);
+      const bool backward =
+          seq.traverses[static_cast<std::size_t>(K)].direction == TraverseDirection::backward;
+      Eigen::MatrixXd m = d.m_um;
+      if (backward)
+        m.block(0, K, n0 + 1, 1).array() += a;  // visited after the knock: x_0 .. x_n0
+      else
+        m.block(n0, K, P - n0, 1).array() += a;
+      for (int k = K + 1; k < T; ++k)
+        m.col(k).array() += a;
+      const int first = backward ? n0 + 1 : n0;  // the first position the two traverses differ
+      const int ci = seq.traverses[static_cast<std::size_t>(K)].configuration;
+      const SequenceRefineResult r = model.refine(m);
+      const SequenceRefineResult r_off = model_off.refine(m);
+      const bool right = r.knock.fitted && r.knock.scan.configuration == ci &&
+                         std::abs(r.knock.scan.position - first) <= 1;
+      named += right ? 1 : 0;
+      applied += r.knock.applied ? 1 : 0;
+      auto max_z = [&](const SequenceFit& f) {
+        const Eigen::VectorXd dev = remove_polynomial(f.S_um - d.S_um, 2);
+        return (dev.array().abs() / f.u_S_um.array()).maxCoeff();
+      };
+      const double z = max_z(r.after);
+      within += z <= 4.0 ? 1 : 0;
+      within_off += max_z(r_off.after) <= 4.0 ? 1 : 0;
+      worst_z.push_back(z);
+      before.push_back(s_error(r.before.S_um, d.S_um));
+      after.push_back(s_error(r.after.S_um, d.S_um));
+      const Eigen::VectorXd dev = remove_polynomial(r.after.S_um - d.S_um, 2);
+      for (Eigen::Index n = 0; n < dev.size(); ++n, ++points)
+        covered += std::abs(dev(n)) <= 2.0 * r.after.u_S_um(n) ? 1 : 0;
+      if (std::getenv("ERRSEP_DEBUG_SEQUENCE") || z > 4.0 || !right)
+        std::printf(
+            "    s %.2f seed %d: knock c%d traverse %d at %d (%+.2f um): search c%d at %d, p %.2g, "
+            "attributed %d: %s; max z %.2f\n",
+            sigma, static_cast<int>(seed), ci + 1, K + 1, first, a, r.knock.scan.configuration + 1,
+            r.knock.scan.position, r.knock.scan.p_value, r.knock.scan.attributed ? 1 : 0,
+            r.knock.finding.empty() ? "(nothing)" : r.knock.finding.c_str(), z);
+      if (sigma == 0.1) {
+        ++clean_runs;
+        clean_fitted += model.refine(d.m_um).knock.fitted ? 1 : 0;
+      }
+    }
+    std::printf(
+        "knock, reversed plan, s %.2f: named %d/%d, removed %d, S within 4 u_S %d/%d (knock "
+        "search off: %d/%d), worst |dS|/u_S median %.2f max %.2f, S err um median %.3f -> %.3f "
+        "(worst %.3f -> %.3f), coverage 2u %.3f; clean runs with a knock fitted %d/%d\n",
+        sigma, named, seeds, applied, within, seeds, within_off, seeds, median(worst_z),
+        worst(worst_z), median(before), median(after), worst(before), worst(after),
+        covered / points, clean_fitted, clean_runs);
+    CHECK(named * 10 >= 8 * seeds);
+    CHECK(within == seeds);
+    CHECK(clean_fitted * 20 <= clean_runs);
+  }
+}
+
+// Issue 16 items 2-3: every traverse reaches the residual trace with its direction and time.
+// A hysteresis of the sensor (it reads r − h·sign(dr/dt): behind the surface in the direction
+// its reading changes; with the slide at ±v, dr/dt = ±v·dr/dx) alternates with the profile's
+// slope and flips with the slide's direction.  Random profiles per seed, noise on every reading,
+// h 0.1-0.3 um per seed.  Asserted: on the reversed plan the trace's direction test finds it in
+// >= 80 % of runs per σ, on clean reversed scans of the same seeds in at most 1 of 20 (σ 0.1);
+// on the single plan the direction test is not run and says the plan cannot show it.
+TEST_CASE("a hysteresis is found in the trace of every traverse of a reversed plan") {
+  const FourSensorConfig cfg;
+  const ScanSequence rev = ScanSequence::make(ScanSequenceKind::reversed, cfg);
+  const ScanSequence single = ScanSequence::make(ScanSequenceKind::single, cfg);
+  SequenceModel model(cfg, rev), model_single(cfg, single);
+  const int P = cfg.positions();
+  auto direction_test = [](const SequenceRefineResult& r) {
+    for (const auto& t : r.trace.tests)
+      if (t.variable == "direction") return t;
+    FAIL("no direction test in the sequence trace");
+    return DependenceTest{};
+  };
+  // Readings with the hysteresis: the slope's sign from the noise-free readings.
+  auto with_hysteresis = [&](const ScanSequence& seq, std::uint64_t seed, double sigma, double h,
+                             Eigen::MatrixXd* clean) {
+    const SlidewayTruth truth = random_smooth_truth(cfg, seed);
+    SequenceSimOptions so;
+    so.seed = seed;
+    so.sigma_um = 0.0;
+    const SequenceSimData d0 = simulate_four_sensor_sequence(cfg, truth, seq, so);
+    so.sigma_um = sigma;
+    const SequenceSimData d = simulate_four_sensor_sequence(cfg, truth, seq, so);
+    if (clean) *clean = d.m_um;
+    Eigen::MatrixXd m = d.m_um;
+    for (int k = 0; k < seq.size(); ++k) {
+      const double dir =
+          seq.traverses[static_cast<std::size_t>(k)].direction == TraverseDirection::forward ? 1.0
+                                                                                             : -1.0;
+      for (int n = 0; n < P; ++n) {
+        const double slope = d0.m_um(std::min(n + 1, P - 1), k) - d0.m_um(std::max(n - 1, 0), k);
+        m(n, k) -= h * dir * (slope > 0 ? 1.0 : slope < 0 ? -1.0 : 0.0);
+      }
+    }
+    return m;
+  };
+  for (const auto& [sigma, seeds] : {std::pair{0.05, 10}, std::pair{0.1, 20}, std::pair{0.2, 10}}) {
+    int found = 0, clean_found = 0, clean_runs = 0;
+    std::vector<double> err_clean, err_rev, err_single;
+    for (int s = 1; s <= seeds; ++s) {
+      const std::uint64_t seed = 500 + static_cast<std::uint64_t>(s);
+      const SlidewayTruth truth = random_smooth_truth(cfg, seed);
+      SequenceSimOptions so0;
+      so0.seed = seed;
+      so0.sigma_um = 0.0;
+      const Eigen::VectorXd S_true = simulate_four_sensor_sequence(cfg, truth, rev, so0).S_um;
+      std::mt19937_64 rng(seed * 13 + 1);
+      const double h = std::uniform_real_distribution<double>(0.1, 0.3)(rng);
+      Eigen::MatrixXd clean;
+      const SequenceRefineResult r = model.refine(with_hysteresis(rev, seed, sigma, h, &clean));
+      const DependenceTest d = direction_test(r);
+      found += d.significant ? 1 : 0;
+      err_rev.push_back(s_error(r.after.S_um, S_true));
+      if (!d.significant)
+        std::printf("    s %.2f seed %d h %.3f: direction not found (p %.3g, %d directions)\n",
+                    sigma, static_cast<int>(seed), h, d.p_adjusted, d.identifiable);
+      const SequenceRefineResult rc = model.refine(clean);
+      err_clean.push_back(s_error(rc.after.S_um, S_true));
+      const SequenceRefineResult rs =
+          model_single.refine(with_hysteresis(single, seed, sigma, h, nullptr));
+      err_single.push_back(s_error(rs.after.S_um, S_true));
+      const DependenceTest ds = direction_test(rs);
+      CHECK_FALSE(ds.tested);
+      CHECK_THAT(ds.not_tested, Catch::Contains("not identifiable from this plan"));
+      if (sigma == 0.1) {
+        ++clean_runs;
+        clean_found += direction_test(rc).significant ? 1 : 0;
+      }
+    }
+    std::printf(
+        "hysteresis 0.1-0.3 um, s %.2f: found by the direction test of every traverse on the "
+        "reversed plan %d/%d; clean reversed scans with a direction found %d/%d; single plan: "
+        "not identifiable; S err um median: reversed %.3f (clean %.3f), single %.3f\n",
+        sigma, found, seeds, clean_found, clean_runs, median(err_rev), median(err_clean),
+        median(err_single));
+    CHECK(found * 10 >= 8 * seeds);
+    CHECK(clean_found * 20 <= clean_runs);
+  }
+}

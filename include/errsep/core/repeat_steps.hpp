@@ -52,6 +52,9 @@ struct RepeatStepScan {
   bool found = false;         ///< p_value < alpha
   int configuration = -1;     ///< of the largest step (0-based)
   int position = -1;          ///< first position of the step (n >= position differ)
+  /// The two traverses (0-based, earlier and later) of `configuration` whose difference holds
+  /// the step: the knock fell in one of them (file comment).
+  int earlier_traverse = -1, later_traverse = -1;
   double x_mm = 0;
   double size_um = 0, u_size_um = 0;  ///< of the later traverse minus the earlier
   double z = 0;                       ///< its likelihood-ratio statistic

@@ -109,6 +109,35 @@ ResidualTrace trace_residual(const ResidualSpace& space, const Eigen::MatrixXd& 
                              const RecordedVariables& recorded = {},
                              const ResidualTraceOptions& opts = {});
 
+/// A scan sequence's readings and what it recorded of each, P × T (column k = traverse k,
+/// row n = slide position n; scan_sequence.hpp), with the fit's column space.
+struct SequenceTraceInput {
+  /// PT × p orthonormal basis of the fit's columns (row k·P + n): the residual is the
+  /// readings' part orthogonal to it.
+  Eigen::MatrixXd basis;
+  Eigen::MatrixXd m_um;            ///< P × T readings
+  Eigen::MatrixXd t_s;             ///< P × T reading times
+  std::vector<int> configuration;  ///< T, 0..3
+  std::vector<int> direction;      ///< T, +1 forward, −1 backward
+  double dx_mm = 1.0;
+};
+
+/// The trace of every reading of a scan sequence under its fit (sequence_refine.hpp): time
+/// (common), position (per configuration), reading level (the common non-linearity's score
+/// columns a², a³ at the fitted readings, as trace_residual) and direction.  Direction, for each
+/// configuration measured both ways: an offset of its backward traverses, and a hysteresis of the
+/// sensor — it reads r − h·sign(dr/dt), lagging behind the surface in the direction its reading
+/// changes; with the slide moving at ±v, dr/dt = ±v·dr/dx, so the column is
+/// −(direction)·sign(dr̂/dx) of the fitted readings (its coefficient h, µm).  On a traverse with
+/// its own zero adjustment a constant offset is absorbed; the hysteresis alternates with the
+/// profile's slope and is not.  A configuration measured in one direction only cannot show it:
+/// with none measured both ways the direction test is not run ("not identifiable from this
+/// plan").  The fitted readings carry the noise Hε, independent of the residual under Gaussian
+/// noise, so the F tests are exact; Bonferroni over the tests run, as trace_residual.
+/// Throws std::invalid_argument for inconsistent shapes or invalid options.
+ResidualTrace trace_sequence_residual(const SequenceTraceInput& in,
+                                      const ResidualTraceOptions& opts = {});
+
 /// Diagonal of the reading-space residual projector (P × 4): the variance of each reading's
 /// residual in units of σ².  0 for a reading the model fits exactly.
 Eigen::MatrixXd reading_projector_diagonal(const ResidualSpace& space);

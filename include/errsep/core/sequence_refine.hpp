@@ -71,6 +71,8 @@
 
 #include "errsep/core/four_sensor_config.hpp"
 #include "errsep/core/iso230.hpp"
+#include "errsep/core/repeat_steps.hpp"
+#include "errsep/core/residual_trace.hpp"
 #include "errsep/core/scan_sequence.hpp"
 
 namespace errsep::core {
@@ -146,7 +148,37 @@ struct SequenceRefineOptions {
   double undetermined_S_max = 0.1;
   int thermal_grid = 10;    ///< τ values searched (ThermalDriftEffect::tau_grid_s)
   int traverse_degree = 4;  ///< K of the progressive traverse change
+  /// Search the differences of repeated traverses for a knocked sensor first (repeat_steps.hpp)
+  /// and, when one is attributed, fit its step before the effects (SequenceKnock).
+  bool find_knocks = true;
+  RepeatStepOptions repeat_steps;
   bool is_valid(std::string* why = nullptr) const;
+};
+
+/// A knocked sensor that the plan's repeated traverses name (repeat_steps.hpp), in the fit.
+/// The physics: the one sensor of the single-sensor system is knocked during traverse K between
+/// two positions; from there on (in K's direction of travel) traverse K and every later traverse
+/// read offset by the knock's size.  Its column in the fit is exactly that; on a traverse with its
+/// own zero adjustment the later constant is absorbed, the step within K is not.  The difference
+/// of a configuration's two traverses shows the step but not which of the two held it; the fit
+/// tells them apart only through the few positions a single scan sees a step at (gross_errors
+/// .hpp), so both are fitted and the better taken; when their residuals differ by less than
+/// attribution_chi2·σ̂² the difference of their S enters u_S as |ΔS|/√2 (the RMS error of taking
+/// one of two equally likely alternatives).  Removed when decide_step (step_decision.hpp) expects
+/// S, γ and f to improve; else the fit stays without it and u_S carries its bias (D_S·p̂)².
+struct SequenceKnock {
+  RepeatStepScan scan;   ///< the search; scan.found && scan.attributed: a knock named
+  bool fitted = false;   ///< its column was fitted (a knock named)
+  bool applied = false;  ///< removed from the result (decide_step); else carried in u_S
+  int traverse = -1;     ///< 0-based: the traverse the knock fell in (the better fitting)
+  bool traverse_ambiguous = false;    ///< the other of the pair fits within attribution_chi2
+  double size_um = 0, u_size_um = 0;  ///< fitted in the sequence model (no effects)
+  double x_mm = 0;                    ///< where (the first position the step holds)
+  std::string decision;               ///< decide_step's reason
+  /// P: what the knock adds to u_S (traverse ambiguity; when not applied, its bias); zeros when
+  /// none.
+  Eigen::VectorXd u_S_added_um;
+  std::string finding;  ///< one line (also in SequenceRefineResult::report); empty when none
 };
 
 struct SequenceCandidate {
@@ -180,6 +212,11 @@ struct SequenceRefineResult {
   /// applied; one line each, also in `report`.
   std::vector<std::string> ambiguous;
   std::vector<SequenceIdentifiability> plan_identifiability;  ///< drift, thermal, traverse
+  /// A knocked sensor named by the repeated traverses, fitted before the effects.
+  SequenceKnock knock;
+  /// The residual of every traverse under the final fit traced against time, position, reading
+  /// level and direction (trace_sequence_residual); its findings are also in `report`.
+  ResidualTrace trace;
   /// One line per added effect and one per effect detected that this plan cannot identify, e.g.
   /// "drift: not identifiable from this plan (single): ...".  The report prints them.  An effect
   /// the plan cannot identify and the data do not suggest gets no line (a clean run says nothing).

@@ -5,11 +5,16 @@
 //   DIR/reference.csv  x_mm,f_um,u_f_um                                          (N rows)
 //   DIR/lcurve.csv     lambda,residual_norm,solution_norm,curvature  (+ "# lambda_chosen")
 //   DIR/residuals.csv  x_mm,config,residual_um                        (4P rows)
-//   DIR/summary.txt    brief_report() and the identifiability assumptions
+//                      a scan sequence's fit: x_mm,traverse,config,direction,t_s,residual_um,
+//                      every reading of every traverse (P·T rows; ResultWriteInfo::traverses)
+//   DIR/summary.txt    brief_report() (or ResultWriteInfo::title) and the identifiability
+//                      assumptions
 // Every file goes through write_file_atomic: a result is whole or absent.  γ is reported up to the
 // constant e_4/(D2+D3+D4) (Eq. 19), u_* are standard uncertainties (k = 1) from the noise level
 // implied by the redundant equations.
+#include <Eigen/Core>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -28,6 +33,17 @@ struct ResultWriteInfo {
   std::vector<std::pair<std::string, std::string>> motion_metadata = {};
   /// Lines appended to summary.txt (what the result is, when it is not the single separation).
   std::vector<std::string> summary_notes = {};
+  /// summary.txt's first line in place of FourSensorResult::brief_report() (a scan sequence's
+  /// fit names itself); empty: brief_report().
+  std::string title = {};
+  /// A scan sequence's residual of every traverse: residuals.csv then holds all of them.
+  struct TraverseResiduals {
+    Eigen::MatrixXd residual_um;     ///< P × T, column k = traverse k
+    Eigen::MatrixXd t_s;             ///< P × T reading times
+    std::vector<int> configuration;  ///< T, 1..4
+    std::vector<int> direction;      ///< T, +1 forward, −1 backward
+  };
+  std::optional<TraverseResiduals> traverses = {};
 };
 
 /// The machine axes a raw scan records (io/machine_axes_metadata.hpp) carried into a result:
