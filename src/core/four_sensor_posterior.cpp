@@ -426,7 +426,12 @@ Criterion gcv_at(TikhonovSolver& s, const Eigen::VectorXd& b, const Eigen::Vecto
 
 struct SearchOutcome {
   double lambda = 0.0;
+  /// The minimum is not bracketed: no finite criterion was evaluated on one side of the chosen λ
+  /// (the chosen λ is at an end of the range, or every λ beyond it on that side was refused).
   bool at_edge = false;
+  /// at_edge because of refused λ: the criterion still falls at the last λ the factorisation
+  /// accepted, and the λ beyond it (toward which it falls) were refused (issue 15, N = 10⁶).
+  bool at_refused_edge = false;
   int worker_factorizations = 0;  ///< done by the worker threads (not in the solver's stats)
   std::vector<double> grid_lambda, grid_criterion;  ///< the grid's finite points
   std::vector<std::string> rejected;                ///< λ that could not be evaluated, and why
@@ -484,6 +489,9 @@ SearchOutcome minimise_over_lambda(TikhonovSolver& solver, const LambdaSearchOpt
           eval(s, grid[static_cast<std::size_t>(i)], why[static_cast<std::size_t>(i)]);
   });
   SearchOutcome out;
+  std::vector<bool> refused(grid.size());
+  for (std::size_t q = 0; q < grid.size(); ++q)
+    refused[q] = !why[q].empty();
   for (auto& w : why)
     if (!w.empty()) out.rejected.push_back(std::move(w));
   for (std::size_t q = 0; q < grid.size(); ++q)
@@ -494,7 +502,26 @@ SearchOutcome minimise_over_lambda(TikhonovSolver& solver, const LambdaSearchOpt
   const auto best = static_cast<int>(std::min_element(val.begin(), val.end()) - val.begin());
   if (!std::isfinite(val[static_cast<std::size_t>(best)]))
     throw std::runtime_error("lambda search: the factorisation failed at every lambda of the grid");
-  out.at_edge = best == 0 || best == count - 1;
+  // The minimum is at the edge when the grid's best is an end of the range (the collapse rule
+  // reads it), or when on one side of it the grid has no accepted λ but a refused one: the
+  // criterion may still fall beyond the last λ the factorisation accepted (at N = 10⁶ REML falls
+  // up to the largest accepted λ and every larger one is refused).  Judged on the grid, as the
+  // range's end is: the refinement only halves the spacing around the grid's best.
+  const bool range_edge = best == 0 || best == count - 1;
+  bool below = false, above = false, refused_below = false, refused_above = false;
+  for (int q = 0; q < count; ++q) {
+    const auto u = static_cast<std::size_t>(q);
+    const bool finite = std::isfinite(val[u]);
+    if (q < best) {
+      below = below || finite;
+      refused_below = refused_below || refused[u];
+    } else if (q > best) {
+      above = above || finite;
+      refused_above = refused_above || refused[u];
+    }
+  }
+  out.at_refused_edge = (!below && refused_below) || (!above && refused_above);
+  out.at_edge = range_edge || out.at_refused_edge;
   double best_l = grid[static_cast<std::size_t>(best)],
          best_v = val[static_cast<std::size_t>(best)];
   double h = grid[1] - grid[0];
@@ -594,6 +621,8 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
   int extra_factorizations = 0;
   double lambda = 0.0;
   double rejected_lambda = 0.0;  // the rule's λ when the collapse rule rejects the prior
+  bool refused_edge = false;     // the rule's minimum sits next to refused λ (not bracketed)
+  double rule_lambda = 0.0;      // the λ the rule chose (before a collapse)
   res.penalty = prior ? opts.penalty : Penalty::none;
   double sigma2 = 0.0;
   if (prior) {
@@ -623,6 +652,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         });
         lambda = o.lambda;
         res.lambda_at_edge = o.at_edge;
+        refused_edge = o.at_refused_edge;
         extra_factorizations = o.worker_factorizations;
         res.lambda_grid = o.grid_lambda;
         res.lambda_criterion = o.grid_criterion;
@@ -635,6 +665,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         });
         lambda = o.lambda;
         res.lambda_at_edge = o.at_edge;
+        refused_edge = o.at_refused_edge;
         extra_factorizations = o.worker_factorizations;
         res.lambda_grid = o.grid_lambda;
         res.lambda_criterion = o.grid_criterion;
@@ -672,6 +703,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         break;
     }
   }
+  rule_lambda = lambda;
   // The least-squares separation's selected inverse is what its u needs after a collapse: with
   // two threads it is formed beside the final factorisation and the edf of the prior (at
   // N = 10⁶ both ~0.5 s; long scans are where collapses happen), and dropped if not used.
@@ -874,6 +906,17 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
                   "A'A + lambda^2 P lost precision (first: ",
                   res.lambda_rejected.size());
     res.determination_note += note + res.lambda_rejected.front() + ")";
+  }
+  if (refused_edge) {
+    // Not bracketed (issue 15): the λ beyond the rule's best were refused, so the criterion's
+    // minimum may lie there; lambda_at_edge is set.
+    std::snprintf(note, sizeof note,
+                  "; the %s minimum is not bracketed: the criterion still falls at the last "
+                  "lambda of the search's grid that the factorisation accepted and the lambda "
+                  "beyond it were refused, so the search's lambda %.3g may not be the minimum "
+                  "(lambda at the edge)",
+                  to_string(opts.rule), rule_lambda);
+    res.determination_note += note;
   }
   res.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return res;
