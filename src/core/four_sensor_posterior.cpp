@@ -15,6 +15,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -880,22 +881,49 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
     res.u_gamma_rad.resize(P);
     res.u_f_um = Eigen::VectorXd::Zero(N);
     std::vector<std::pair<int, double>> h;
-    for (int which = 0; which < 2; ++which) {
-      const Eigen::Vector4d& w = which == 0 ? parts.w_S : parts.w_g;
-      const Eigen::Vector2d ew = parts.E.transpose() * w;
-      for (int n = 0; n < P; ++n) {
-        h.clear();
+    // S and γ at a position take the same unknowns (its f̃ samples and η̃) with other weights:
+    // the block of Z over them is read once for both (summed in the same order as quad()).
+    const Eigen::Vector2d ew_S = parts.E.transpose() * parts.w_S,
+                          ew_g = parts.E.transpose() * parts.w_g;
+    for (int n = 0; n < P; ++n) {
+      std::array<int, 6> cols{};
+      int nc = 0;
+      for (int j = 0; j < 4; ++j) {
+        const int col = parts.f_index[static_cast<std::size_t>(n + k[static_cast<std::size_t>(j)])];
+        if (col >= 0) cols[static_cast<std::size_t>(nc++)] = col;
+      }
+      cols[static_cast<std::size_t>(nc++)] = parts.m;
+      cols[static_cast<std::size_t>(nc++)] = parts.m + 1;
+      double zb[6][6];
+      for (int p = 0; p < nc; ++p)
+        for (int c = 0; c < nc; ++c)
+          zb[p][c] = z(cols[static_cast<std::size_t>(p)], cols[static_cast<std::size_t>(c)]);
+      for (int which = 0; which < 2; ++which) {
+        const Eigen::Vector4d& w = which == 0 ? parts.w_S : parts.w_g;
+        const Eigen::Vector2d& ew = which == 0 ? ew_S : ew_g;
+        std::array<double, 6> coef{};
+        int q = 0;
         double nh = 0.0;
         for (int j = 0; j < 4; ++j) {
           const int i = n + k[static_cast<std::size_t>(j)];
-          const int col = parts.f_index[static_cast<std::size_t>(i)];
-          if (col >= 0) h.emplace_back(col, w(j));
+          if (parts.f_index[static_cast<std::size_t>(i)] >= 0)
+            coef[static_cast<std::size_t>(q++)] = w(j);
           nh += w(j) * parts.bow(i);
         }
-        h.emplace_back(parts.m, ew(0));
-        h.emplace_back(parts.m + 1, ew(1));
+        coef[static_cast<std::size_t>(q++)] = ew(0);
+        coef[static_cast<std::size_t>(q++)] = ew(1);
         nh += ew.dot(parts.n_eta);
-        const double u = std::sqrt(std::max(0.0, sigma2 * (w.squaredNorm() + quad(h, nh))));
+        // quad() on the block: tᵀZt for t = h − a_h·g.
+        const double ah = nh / parts.gn;
+        double hZh = 0.0, hZg = 0.0;
+        for (int p = 0; p < nc; ++p) {
+          const double cp = coef[static_cast<std::size_t>(p)];
+          hZg += cp * Zg(cols[static_cast<std::size_t>(p)]);
+          for (int c = 0; c < nc; ++c)
+            hZh += cp * coef[static_cast<std::size_t>(c)] * zb[p][c];
+        }
+        const double qf = hZh - 2.0 * ah * hZg + ah * ah * gZg;
+        const double u = std::sqrt(std::max(0.0, sigma2 * (w.squaredNorm() + qf)));
         if (which == 0)
           res.u_S_um(n) = u;
         else
