@@ -146,6 +146,7 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
   std::vector<int> sizes{69, 1000, 10000, 100000, 1000000};
   int count = 40, dense_max = 2000, threads = 2;
+  bool no_sweep = false;
   app.add_option("--N", sizes, "problem sizes")->capture_default_str();
   app.add_option("--lambdas", count, "lambda values in the sweep (>= 40 for the target)")
       ->capture_default_str();
@@ -154,6 +155,7 @@ int main(int argc, char** argv) {
   app.add_option("--threads", threads, "threads for the lambda grid (the target is for 2 cores)")
       ->capture_default_str()
       ->check(CLI::Range(1, 64));
+  app.add_flag("--no-sweep", no_sweep, "time the default estimator only (e.g. for a profile)");
   CLI11_PARSE(app, argc, argv);
   std::printf("lambda grid: %d values, %d thread(s)\n", count, threads);
 
@@ -161,7 +163,7 @@ int main(int argc, char** argv) {
               "sweep_cpu_s", "analyze_s", "factorize_s", "solve_s", "factor", "peak_MiB", "lambda",
               "dense_svd_s");
   std::fflush(stdout);
-  for (int N : sizes) {
+  for (int N : no_sweep ? std::vector<int>{} : sizes) {
     Figures f;
     double peak = 0;
     int status = 0;

@@ -15,6 +15,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -94,22 +95,56 @@ PinnedSystem assemble_pinned_system(const FourSensorConfig& cfg, const Eigen::Ma
   sys.border = with_bow_unknown ? 3 : 2;
   const Eigen::Matrix<double, 4, 2> Q = reading_combinations(cfg);
   const auto k = cfg.offsets_samples();
-  std::vector<Eigen::Triplet<double>> trip;
-  trip.reserve(static_cast<std::size_t>(P) * 12);
   sys.b.resize(2 * P);
   for (int n = 0; n < P; ++n)
-    for (int r = 0; r < 2; ++r) {
-      const int row = 2 * n + r;
-      for (int j = 0; j < 4; ++j) {
-        const int col = sys.f_index[static_cast<std::size_t>(n + k[static_cast<std::size_t>(j)])];
-        if (col >= 0) trip.emplace_back(row, col, Q(j, r));
-      }
-      trip.emplace_back(row, m + r, 1.0);  // η̃_r
-      sys.b(row) = Q.col(r).dot(m_um.row(n).transpose());
+    for (int r = 0; r < 2; ++r)
+      sys.b(2 * n + r) = Q.col(r).dot(m_um.row(n).transpose());
+  // A written column by column into its compressed storage (no triplets: at N = 10⁶ the triplet
+  // list and its sort were a quarter of the set-up's page faults).  Row 2n + r holds Q(j, r) in
+  // the column of f̃(x_{n + k_j}) for each sensor j and 1 in the column of η̃_r.  The column of
+  // f̃(x_i) has rows 2n, 2n + 1 for n = i − k_j (j from the last sensor: rows ascending); the
+  // offsets increase strictly, so no two entries share a row.
+  const int cols = m + sys.border;
+  std::vector<int> outer(static_cast<std::size_t>(cols) + 1, 0);
+  for (int i = 0; i < N; ++i) {
+    const int col = sys.f_index[static_cast<std::size_t>(i)];
+    if (col < 0) continue;
+    int rows = 0;
+    for (int j = 0; j < 4; ++j) {
+      const int n = i - k[static_cast<std::size_t>(j)];
+      if (n >= 0 && n < P) rows += 2;
     }
-  sys.A.resize(2 * P, m + sys.border);  // the bow unknown β, if any, has an empty column
-  sys.A.setFromTriplets(trip.begin(), trip.end());
-  sys.A.makeCompressed();
+    outer[static_cast<std::size_t>(col) + 1] = rows;
+  }
+  outer[static_cast<std::size_t>(m) + 1] = P;  // η̃_1, η̃_2: every reading
+  outer[static_cast<std::size_t>(m) + 2] = P;
+  for (std::size_t c = 0; c < static_cast<std::size_t>(cols); ++c)
+    outer[c + 1] += outer[c];
+  sys.A.resize(2 * P, cols);  // the bow unknown β, if any, has an empty column
+  sys.A.data().resize(outer.back());
+  std::copy(outer.begin(), outer.end(), sys.A.outerIndexPtr());
+  int* inner = sys.A.innerIndexPtr();
+  double* val = sys.A.valuePtr();
+  for (int i = 0; i < N; ++i) {
+    const int col = sys.f_index[static_cast<std::size_t>(i)];
+    if (col < 0) continue;
+    int q = outer[static_cast<std::size_t>(col)];
+    for (int j = 3; j >= 0; --j) {
+      const int n = i - k[static_cast<std::size_t>(j)];
+      if (n < 0 || n >= P) continue;
+      for (int r = 0; r < 2; ++r, ++q) {
+        inner[q] = 2 * n + r;
+        val[q] = Q(j, r);
+      }
+    }
+  }
+  for (int r = 0; r < 2; ++r) {
+    int q = outer[static_cast<std::size_t>(m + r)];
+    for (int n = 0; n < P; ++n, ++q) {
+      inner[q] = 2 * n + r;
+      val[q] = 1.0;
+    }
+  }
   return sys;
 }
 
@@ -426,7 +461,12 @@ Criterion gcv_at(TikhonovSolver& s, const Eigen::VectorXd& b, const Eigen::Vecto
 
 struct SearchOutcome {
   double lambda = 0.0;
+  /// The minimum is not bracketed: no finite criterion was evaluated on one side of the chosen λ
+  /// (the chosen λ is at an end of the range, or every λ beyond it on that side was refused).
   bool at_edge = false;
+  /// at_edge because of refused λ: the criterion still falls at the last λ the factorisation
+  /// accepted, and the λ beyond it (toward which it falls) were refused (issue 15, N = 10⁶).
+  bool at_refused_edge = false;
   int worker_factorizations = 0;  ///< done by the worker threads (not in the solver's stats)
   std::vector<double> grid_lambda, grid_criterion;  ///< the grid's finite points
   std::vector<std::string> rejected;                ///< λ that could not be evaluated, and why
@@ -484,6 +524,9 @@ SearchOutcome minimise_over_lambda(TikhonovSolver& solver, const LambdaSearchOpt
           eval(s, grid[static_cast<std::size_t>(i)], why[static_cast<std::size_t>(i)]);
   });
   SearchOutcome out;
+  std::vector<bool> refused(grid.size());
+  for (std::size_t q = 0; q < grid.size(); ++q)
+    refused[q] = !why[q].empty();
   for (auto& w : why)
     if (!w.empty()) out.rejected.push_back(std::move(w));
   for (std::size_t q = 0; q < grid.size(); ++q)
@@ -494,7 +537,26 @@ SearchOutcome minimise_over_lambda(TikhonovSolver& solver, const LambdaSearchOpt
   const auto best = static_cast<int>(std::min_element(val.begin(), val.end()) - val.begin());
   if (!std::isfinite(val[static_cast<std::size_t>(best)]))
     throw std::runtime_error("lambda search: the factorisation failed at every lambda of the grid");
-  out.at_edge = best == 0 || best == count - 1;
+  // The minimum is at the edge when the grid's best is an end of the range (the collapse rule
+  // reads it), or when on one side of it the grid has no accepted λ but a refused one: the
+  // criterion may still fall beyond the last λ the factorisation accepted (at N = 10⁶ REML falls
+  // up to the largest accepted λ and every larger one is refused).  Judged on the grid, as the
+  // range's end is: the refinement only halves the spacing around the grid's best.
+  const bool range_edge = best == 0 || best == count - 1;
+  bool below = false, above = false, refused_below = false, refused_above = false;
+  for (int q = 0; q < count; ++q) {
+    const auto u = static_cast<std::size_t>(q);
+    const bool finite = std::isfinite(val[u]);
+    if (q < best) {
+      below = below || finite;
+      refused_below = refused_below || refused[u];
+    } else if (q > best) {
+      above = above || finite;
+      refused_above = refused_above || refused[u];
+    }
+  }
+  out.at_refused_edge = (!below && refused_below) || (!above && refused_above);
+  out.at_edge = range_edge || out.at_refused_edge;
   double best_l = grid[static_cast<std::size_t>(best)],
          best_v = val[static_cast<std::size_t>(best)];
   double h = grid[1] - grid[0];
@@ -594,6 +656,8 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
   int extra_factorizations = 0;
   double lambda = 0.0;
   double rejected_lambda = 0.0;  // the rule's λ when the collapse rule rejects the prior
+  bool refused_edge = false;     // the rule's minimum sits next to refused λ (not bracketed)
+  double rule_lambda = 0.0;      // the λ the rule chose (before a collapse)
   res.penalty = prior ? opts.penalty : Penalty::none;
   double sigma2 = 0.0;
   if (prior) {
@@ -623,6 +687,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         });
         lambda = o.lambda;
         res.lambda_at_edge = o.at_edge;
+        refused_edge = o.at_refused_edge;
         extra_factorizations = o.worker_factorizations;
         res.lambda_grid = o.grid_lambda;
         res.lambda_criterion = o.grid_criterion;
@@ -635,6 +700,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         });
         lambda = o.lambda;
         res.lambda_at_edge = o.at_edge;
+        refused_edge = o.at_refused_edge;
         extra_factorizations = o.worker_factorizations;
         res.lambda_grid = o.grid_lambda;
         res.lambda_criterion = o.grid_criterion;
@@ -672,6 +738,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
         break;
     }
   }
+  rule_lambda = lambda;
   // The least-squares separation's selected inverse is what its u needs after a collapse: with
   // two threads it is formed beside the final factorisation and the edf of the prior (at
   // N = 10⁶ both ~0.5 s; long scans are where collapses happen), and dropped if not used.
@@ -814,22 +881,49 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
     res.u_gamma_rad.resize(P);
     res.u_f_um = Eigen::VectorXd::Zero(N);
     std::vector<std::pair<int, double>> h;
-    for (int which = 0; which < 2; ++which) {
-      const Eigen::Vector4d& w = which == 0 ? parts.w_S : parts.w_g;
-      const Eigen::Vector2d ew = parts.E.transpose() * w;
-      for (int n = 0; n < P; ++n) {
-        h.clear();
+    // S and γ at a position take the same unknowns (its f̃ samples and η̃) with other weights:
+    // the block of Z over them is read once for both (summed in the same order as quad()).
+    const Eigen::Vector2d ew_S = parts.E.transpose() * parts.w_S,
+                          ew_g = parts.E.transpose() * parts.w_g;
+    for (int n = 0; n < P; ++n) {
+      std::array<int, 6> cols{};
+      int nc = 0;
+      for (int j = 0; j < 4; ++j) {
+        const int col = parts.f_index[static_cast<std::size_t>(n + k[static_cast<std::size_t>(j)])];
+        if (col >= 0) cols[static_cast<std::size_t>(nc++)] = col;
+      }
+      cols[static_cast<std::size_t>(nc++)] = parts.m;
+      cols[static_cast<std::size_t>(nc++)] = parts.m + 1;
+      double zb[6][6];
+      for (int p = 0; p < nc; ++p)
+        for (int c = 0; c < nc; ++c)
+          zb[p][c] = z(cols[static_cast<std::size_t>(p)], cols[static_cast<std::size_t>(c)]);
+      for (int which = 0; which < 2; ++which) {
+        const Eigen::Vector4d& w = which == 0 ? parts.w_S : parts.w_g;
+        const Eigen::Vector2d& ew = which == 0 ? ew_S : ew_g;
+        std::array<double, 6> coef{};
+        int q = 0;
         double nh = 0.0;
         for (int j = 0; j < 4; ++j) {
           const int i = n + k[static_cast<std::size_t>(j)];
-          const int col = parts.f_index[static_cast<std::size_t>(i)];
-          if (col >= 0) h.emplace_back(col, w(j));
+          if (parts.f_index[static_cast<std::size_t>(i)] >= 0)
+            coef[static_cast<std::size_t>(q++)] = w(j);
           nh += w(j) * parts.bow(i);
         }
-        h.emplace_back(parts.m, ew(0));
-        h.emplace_back(parts.m + 1, ew(1));
+        coef[static_cast<std::size_t>(q++)] = ew(0);
+        coef[static_cast<std::size_t>(q++)] = ew(1);
         nh += ew.dot(parts.n_eta);
-        const double u = std::sqrt(std::max(0.0, sigma2 * (w.squaredNorm() + quad(h, nh))));
+        // quad() on the block: tᵀZt for t = h − a_h·g.
+        const double ah = nh / parts.gn;
+        double hZh = 0.0, hZg = 0.0;
+        for (int p = 0; p < nc; ++p) {
+          const double cp = coef[static_cast<std::size_t>(p)];
+          hZg += cp * Zg(cols[static_cast<std::size_t>(p)]);
+          for (int c = 0; c < nc; ++c)
+            hZh += cp * coef[static_cast<std::size_t>(c)] * zb[p][c];
+        }
+        const double qf = hZh - 2.0 * ah * hZg + ah * ah * gZg;
+        const double u = std::sqrt(std::max(0.0, sigma2 * (w.squaredNorm() + qf)));
         if (which == 0)
           res.u_S_um(n) = u;
         else
@@ -874,6 +968,17 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
                   "A'A + lambda^2 P lost precision (first: ",
                   res.lambda_rejected.size());
     res.determination_note += note + res.lambda_rejected.front() + ")";
+  }
+  if (refused_edge) {
+    // Not bracketed (issue 15): the λ beyond the rule's best were refused, so the criterion's
+    // minimum may lie there; lambda_at_edge is set.
+    std::snprintf(note, sizeof note,
+                  "; the %s minimum is not bracketed: the criterion still falls at the last "
+                  "lambda of the search's grid that the factorisation accepted and the lambda "
+                  "beyond it were refused, so the search's lambda %.3g may not be the minimum "
+                  "(lambda at the edge)",
+                  to_string(opts.rule), rule_lambda);
+    res.determination_note += note;
   }
   res.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return res;

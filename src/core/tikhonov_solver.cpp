@@ -6,6 +6,7 @@
 #include <Eigen/SVD>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -15,6 +16,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "band_ldlt.hpp"
 #include "cholmod_views.hpp"
 
 namespace errsep::core {
@@ -90,6 +92,11 @@ struct TikhonovSolver::Normal {
   /// four-sensor band): a λ's values are AᵀA copied, plus λ² times these.
   std::vector<std::size_t> pen_nz;
   Eigen::MatrixXd C_P, D_P, U_P;
+  /// The banded path (build_banded): B and P's band part in BandLdlt's upper band storage of
+  /// half-bandwidth band_b (band_b < 0: the general path, factorised by CHOLMOD).  B's band is
+  /// factorised by detail::BandLdlt, not CHOLMOD (band_ldlt.hpp: 5-10x faster for b = 7).
+  int band_b = -1;
+  std::vector<double> band_x, pen_band_x;
   Normal() { start_common(cm); }
   ~Normal() {
     cholmod_free_sparse(&upper, &cm);
@@ -101,7 +108,14 @@ struct TikhonovSolver::Normal {
 
 struct TikhonovSolver::Impl {
   cholmod_common cm{};
+  Eigen::Index m = 0;  ///< unknowns of the band block
+  /// The band block's factor: BandLdlt on the banded path, else CHOLMOD's (L).
+  bool banded = false;
+  detail::BandLdlt ldl;
   cholmod_factor* L = nullptr;
+  /// Banded path: the multi-column forward substitution's output [L⁻¹U | L⁻¹rhs] (what Xk is
+  /// for CHOLMOD), kept between λ.
+  Eigen::MatrixXd Wk;
   // Solution and workspace of cholmod_solve2, kept between solves: a fresh 8 MB vector per solve
   // at N = 10⁶ costs page faults comparable to the solve itself.
   // One set per right-hand-side width (1 and the border's k): alternating widths in one set would
@@ -135,6 +149,13 @@ struct TikhonovSolver::Impl {
   /// out = op⁻¹·v for CHOLMOD system `sys` (CHOLMOD_L or CHOLMOD_DLt) on the band factor, one
   /// column of `rows` entries.
   void band_solve(int sys, const double* v, Eigen::Index rows, double* out) {
+    if (banded) {
+      if (sys == CHOLMOD_L)
+        ldl.forward(v, 1, out);
+      else
+        ldl.back_dlt(v, 1, out);
+      return;
+    }
     cholmod_dense b = view(v, rows, 1);
     if (!cholmod_solve2(sys, L, &b, nullptr, &X, nullptr, &Y, &E, &cm))
       throw std::runtime_error("CHOLMOD solve failed (status " + std::to_string(cm.status) + ")");
@@ -142,10 +163,17 @@ struct TikhonovSolver::Impl {
   }
   /// Xk = L⁻¹·v for the multi-column right-hand side v (rows × cols), left in Xk.
   void band_solve_k(const double* v, Eigen::Index rows, Eigen::Index cols) {
+    if (banded) {
+      Wk.resize(rows, cols);
+      ldl.forward(v, cols, Wk.data());
+      return;
+    }
     cholmod_dense b = view(v, rows, cols);
     if (!cholmod_solve2(CHOLMOD_L, L, &b, nullptr, &Xk, nullptr, &Yk, &Ek, &cm))
       throw std::runtime_error("CHOLMOD solve failed (status " + std::to_string(cm.status) + ")");
   }
+  /// The multi-column forward substitution's output (column-major, m rows).
+  const double* forward_k() const { return banded ? Wk.data() : static_cast<const double*>(Xk->x); }
   Impl() { start_common(cm); }
   ~Impl() {
     cholmod_free_dense(&X, &cm);
@@ -196,7 +224,9 @@ void TikhonovSolver::build(int border_columns, const Eigen::SparseMatrix<double>
           "TikhonovSolver: a penalty needs narrow rows (the banded normal matrix)");
     build_general(At);
   }
-  if (general_form) {
+  impl_->m = A_->cols() - border_;
+  impl_->banded = normal_->band_b >= 0;
+  if (general_form && !impl_->banded) {
     impl_->work_x.assign(static_cast<const double*>(normal_->band.x),
                          static_cast<const double*>(normal_->band.x) + normal_->pen_x.size());
     impl_->work = normal_->band;
@@ -204,6 +234,7 @@ void TikhonovSolver::build(int border_columns, const Eigen::SparseMatrix<double>
   }
   compress_border();
   stats_.analyze_s = seconds_since(t0);
+  if (impl_->banded) return;  // BandLdlt needs no analysis: the band is its structure
   const auto t1 = std::chrono::steady_clock::now();
   impl_->L = cholmod_analyze(&normal_->band, &impl_->cm);
   if (!impl_->L || impl_->cm.status < CHOLMOD_OK)
@@ -341,6 +372,9 @@ bool TikhonovSolver::build_banded(const Eigen::SparseMatrix<double>& At,
   normal_->band = *normal_->upper;
   normal_->C = std::move(C);
   normal_->D = std::move(D);
+  normal_->band_b = bw;
+  normal_->band_x = std::move(band);
+  if (general_form) normal_->pen_band_x = std::move(pband);
   return true;
 }
 
@@ -445,6 +479,9 @@ std::unique_ptr<TikhonovSolver> TikhonovSolver::worker() const {
   w->sigma_max_bound_ = sigma_max_bound_;
   w->border_ = border_;
   w->impl_ = std::make_unique<Impl>();
+  w->impl_->m = impl_->m;
+  w->impl_->banded = impl_->banded;
+  if (impl_->banded) return w;
   w->impl_->L = cholmod_copy_factor(impl_->L, &w->impl_->cm);
   if (!w->impl_->L) throw std::runtime_error("CHOLMOD could not copy the factor for a worker");
   if (has_penalty()) {
@@ -461,7 +498,7 @@ SolverStatus TikhonovSolver::factorize(double lambda) {
 
 SolverStatus TikhonovSolver::factorize_and_solve(double lambda, const Eigen::VectorXd& rhs,
                                                  Eigen::VectorXd& x) {
-  const auto m = static_cast<Eigen::Index>(impl_->L->n);
+  const Eigen::Index m = impl_->m;
   if (rhs.size() != m + border_)
     throw std::invalid_argument("TikhonovSolver::factorize_and_solve: right-hand side has " +
                                 std::to_string(rhs.size()) + " entries, expected " +
@@ -471,7 +508,7 @@ SolverStatus TikhonovSolver::factorize_and_solve(double lambda, const Eigen::Vec
 
 SolverStatus TikhonovSolver::factorize_and_quadratic_form(double lambda, const Eigen::VectorXd& v,
                                                           double& q) {
-  const auto m = static_cast<Eigen::Index>(impl_->L->n);
+  const Eigen::Index m = impl_->m;
   if (v.size() != m + border_)
     throw std::invalid_argument("TikhonovSolver::factorize_and_quadratic_form: vector has " +
                                 std::to_string(v.size()) + " entries, expected " +
@@ -483,83 +520,104 @@ SolverStatus TikhonovSolver::factorize_impl(double lambda, const Eigen::VectorXd
                                             Eigen::VectorXd* x, double* quad) {
   const auto t0 = std::chrono::steady_clock::now();
   const bool general_form = has_penalty();
+  const double l2 = lambda * lambda;
+  const Eigen::Index m = impl_->m;
   impl_->selinv.reset();
-  // B + βI with β = λ² (CHOLMOD's shift), or B + λ²P written into this solver's value array.
-  double beta[2] = {general_form ? 0.0 : lambda * lambda, 0.0};
-  if (general_form) {
-    const double l2 = lambda * lambda;
-    const auto* a = static_cast<const double*>(normal_->band.x);
-    const double* pen = normal_->pen_x.data();
-    double* wx = impl_->work_x.data();
-    std::copy_n(a, impl_->work_x.size(), wx);
-    for (const std::size_t q : normal_->pen_nz)
-      wx[q] += l2 * pen[q];
-  }
-  const int ok = cholmod_factorize_p(general_form ? &impl_->work : &normal_->band, beta, nullptr, 0,
-                                     impl_->L, &impl_->cm);
   ++stats_.factorizations;
   lambda_ = lambda;
-  // cholmod_factorize_p returns TRUE even when a pivot failed: check status and L->minor too.
-  impl_->factor_ok =
-      ok && impl_->cm.status == CHOLMOD_OK && impl_->L->minor == impl_->L->n && !impl_->L->is_ll;
-  const auto m = static_cast<Eigen::Index>(impl_->L->n);
-  // The matrix's diagonal entry j of the band (upper storage: the last entry of column j).
-  auto band_diagonal = [&](Eigen::Index j) {
-    const cholmod_sparse& B = general_form ? impl_->work : normal_->band;
-    const int q = static_cast<const int*>(B.p)[j + 1] - 1;
-    return static_cast<const double*>(B.x)[q] + beta[0];
-  };
   failure_ = FactorFailure{};
   failure_.lambda = lambda;
   failure_.unknowns = m + border_;
-  if (!impl_->factor_ok && impl_->L->minor < impl_->L->n) {
-    const auto j = static_cast<Eigen::Index>(impl_->L->minor);
-    failure_.pivot = j;
-    failure_.diagonal = band_diagonal(j);
-    failure_.stopped_by_cholmod = true;
+  // The border's block LDLᵀ of [B C; Cᵀ D] with C = U·Vᵀ needs W = L⁻¹U; with a right-hand
+  // side, its forward substitution rides along in the same multi-column pass over the factor
+  // (CHOLMOD takes up to 4 columns in one pass over L; BandLdlt does it while it factorises).
+  const Eigen::Index r = border_ > 0 ? normal_->U.cols() : 0;
+  const bool fuse = rhs != nullptr && r > 0 && r + 1 <= 4;
+  // The coupling of this λ: U, or U + λ²U_P when the penalty reaches the border.
+  const bool pen_border = border_ > 0 && general_form && normal_->U_P.size() > 0;
+  if (pen_border) impl_->U_l = normal_->U + l2 * normal_->U_P;
+  const Eigen::MatrixXd& U = pen_border ? impl_->U_l : normal_->U;
+  if (fuse) {
+    if (impl_->rhs_block.rows() != m || impl_->rhs_block.cols() != r + 1 || pen_border) {
+      impl_->rhs_block.resize(m, r + 1);
+      impl_->rhs_block.leftCols(r) = U;
+    }
+    impl_->rhs_block.col(r) = rhs->head(m);
+  }
+  const double* forward_in = fuse ? impl_->rhs_block.data() : (r > 0 ? U.data() : nullptr);
+  const Eigen::Index forward_cols = fuse ? r + 1 : r;
+
+  if (impl_->banded) {
+    // B + λ²P, or B + λ²I without a penalty, read from the shared band as it is factorised.
+    const auto w = static_cast<std::size_t>(normal_->band_b + 1);
+    const double* pen = general_form ? normal_->pen_band_x.data() : nullptr;
+    const double shift = general_form ? 0.0 : l2;
+    impl_->Wk.resize(m, forward_cols);
+    const Eigen::Index bad =
+        impl_->ldl.factorize(normal_->band_x.data(), pen, l2, shift, m, normal_->band_b, forward_in,
+                             forward_cols, impl_->Wk.data());
+    impl_->factor_ok = bad < 0;
+    if (bad >= 0) {
+      const auto q = static_cast<std::size_t>(bad) * w;
+      failure_.pivot = bad;
+      failure_.pivot_value = impl_->ldl.d()(bad);
+      failure_.diagonal = normal_->band_x[q] + shift + (pen != nullptr ? l2 * pen[q] : 0.0);
+    } else {
+      impl_->d = impl_->ldl.d();
+    }
+  } else {
+    // B + βI with β = λ² (CHOLMOD's shift), or B + λ²P written into this solver's value array.
+    double beta[2] = {general_form ? 0.0 : l2, 0.0};
+    if (general_form) {
+      const auto* a = static_cast<const double*>(normal_->band.x);
+      const double* pen = normal_->pen_x.data();
+      double* wx = impl_->work_x.data();
+      std::copy_n(a, impl_->work_x.size(), wx);
+      for (const std::size_t q : normal_->pen_nz)
+        wx[q] += l2 * pen[q];
+    }
+    const int ok = cholmod_factorize_p(general_form ? &impl_->work : &normal_->band, beta, nullptr,
+                                       0, impl_->L, &impl_->cm);
+    // cholmod_factorize_p returns TRUE even when a pivot failed: check status and L->minor too.
+    impl_->factor_ok =
+        ok && impl_->cm.status == CHOLMOD_OK && impl_->L->minor == impl_->L->n && !impl_->L->is_ll;
+    // The matrix's diagonal entry j of the band (upper storage: the last entry of column j).
+    auto band_diagonal = [&](Eigen::Index j) {
+      const cholmod_sparse& B = general_form ? impl_->work : normal_->band;
+      const int q = static_cast<const int*>(B.p)[j + 1] - 1;
+      return static_cast<const double*>(B.x)[q] + beta[0];
+    };
+    if (!impl_->factor_ok && impl_->L->minor < impl_->L->n) {
+      const auto j = static_cast<Eigen::Index>(impl_->L->minor);
+      failure_.pivot = j;
+      failure_.diagonal = band_diagonal(j);
+      failure_.stopped_by_cholmod = true;
+    }
+    if (impl_->factor_ok) {
+      const auto* Lp = static_cast<const int*>(impl_->L->p);
+      const auto* Lx = static_cast<const double*>(impl_->L->x);
+      impl_->d.resize(m);
+      for (Eigen::Index j = 0; j < m; ++j)
+        impl_->d(j) = Lx[Lp[j]];  // D_j on L's diagonal
+      // CHOLMOD's LDLᵀ stops only at an exactly zero pivot and takes a negative one silently:
+      // the matrix is then indefinite to working precision (log det NaN, a meaningless
+      // solution).
+      for (Eigen::Index j = 0; j < m; ++j)
+        if (!(impl_->d(j) > 0.0 && std::isfinite(impl_->d(j)))) {
+          impl_->factor_ok = false;
+          failure_.pivot = j;
+          failure_.pivot_value = impl_->d(j);
+          failure_.diagonal = band_diagonal(j);
+          break;
+        }
+    }
+    if (impl_->factor_ok && forward_cols > 0) impl_->band_solve_k(forward_in, m, forward_cols);
   }
   bool solved = false;
   if (impl_->factor_ok) {
-    const auto* Lp = static_cast<const int*>(impl_->L->p);
-    const auto* Lx = static_cast<const double*>(impl_->L->x);
-    impl_->d.resize(m);
-    for (Eigen::Index j = 0; j < m; ++j)
-      impl_->d(j) = Lx[Lp[j]];  // D_j on L's diagonal
-    // CHOLMOD's LDLᵀ stops only at an exactly zero pivot and takes a negative one silently: the
-    // matrix is then indefinite to working precision (log det NaN, a meaningless solution).
-    for (Eigen::Index j = 0; j < m; ++j)
-      if (!(impl_->d(j) > 0.0 && std::isfinite(impl_->d(j)))) {
-        impl_->factor_ok = false;
-        failure_.pivot = j;
-        failure_.pivot_value = impl_->d(j);
-        failure_.diagonal = band_diagonal(j);
-        break;
-      }
-  }
-  if (impl_->factor_ok) {
     if (border_ > 0) {
-      // Block LDLᵀ of [B C; Cᵀ D] with C = U·Vᵀ: W = L⁻¹U, Schur complement
-      // S = D + λ²I − V·(WᵀD_B⁻¹W)·Vᵀ.  With a right-hand side, its forward substitution rides
-      // along in the same multi-column solve (CHOLMOD takes up to 4 columns in one pass over L):
-      // one pass over the factor fewer per λ.
-      const Eigen::Index r = normal_->U.cols();
-      const bool fuse = rhs != nullptr && r > 0 && r + 1 <= 4;
-      // The coupling of this λ: U, or U + λ²U_P when the penalty reaches the border.
-      const bool pen_border = general_form && normal_->U_P.size() > 0;
-      if (pen_border) impl_->U_l = normal_->U + (lambda * lambda) * normal_->U_P;
-      const Eigen::MatrixXd& U = pen_border ? impl_->U_l : normal_->U;
-      if (fuse) {
-        if (impl_->rhs_block.rows() != m || impl_->rhs_block.cols() != r + 1 || pen_border) {
-          impl_->rhs_block.resize(m, r + 1);
-          impl_->rhs_block.leftCols(r) = U;
-        }
-        impl_->rhs_block.col(r) = rhs->head(m);
-        impl_->band_solve_k(impl_->rhs_block.data(), m, r + 1);
-      } else if (r > 0) {
-        impl_->band_solve_k(U.data(), m, r);
-      }
-      new (&impl_->W) Eigen::Map<const Eigen::MatrixXd>(
-          r > 0 ? static_cast<const double*>(impl_->Xk->x) : nullptr, m, r);
+      // Schur complement S = D + λ²I − V·(WᵀD_B⁻¹W)·Vᵀ of the border.
+      new (&impl_->W) Eigen::Map<const Eigen::MatrixXd>(r > 0 ? impl_->forward_k() : nullptr, m, r);
       // WᵀD_B⁻¹W in one pass over the rows of W (no m × r temporary: memory traffic is what a
       // λ costs at N = 10⁶).
       const double* Wp = impl_->W.data();
@@ -604,8 +662,7 @@ SolverStatus TikhonovSolver::factorize_impl(double lambda, const Eigen::VectorXd
       }
       if (fuse && impl_->factor_ok) {
         const auto t1 = std::chrono::steady_clock::now();
-        const Eigen::Map<const Eigen::VectorXd> zf(static_cast<const double*>(impl_->Xk->x) + r * m,
-                                                   m);
+        const Eigen::Map<const Eigen::VectorXd> zf(impl_->forward_k() + r * m, m);
         if (quad != nullptr) {
           // vᵀM⁻¹v from the forward substitution alone (as inverse_quadratic_form): no back
           // substitution, which is a third of a λ's passes over the factor.
@@ -646,7 +703,7 @@ double TikhonovSolver::quadratic_form_from_forward(const Eigen::VectorXd& v,
 // From z = L⁻¹r₁: y = S⁻¹(r₂ − V·WᵀD_B⁻¹z), x = (D_B Lᵀ)⁻¹(z − W·Vᵀy).
 void TikhonovSolver::finish_solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& z,
                                   Eigen::VectorXd& out) {
-  const auto m = static_cast<Eigen::Index>(impl_->L->n);
+  const Eigen::Index m = impl_->m;
   impl_->zd.resize(m);
   impl_->zd = z.cwiseQuotient(impl_->d);
   const Eigen::VectorXd y =
@@ -660,14 +717,17 @@ void TikhonovSolver::finish_solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& z
 Eigen::VectorXd TikhonovSolver::solve_normal(const Eigen::VectorXd& rhs) {
   if (!impl_->factor_ok)
     throw std::logic_error("TikhonovSolver::solve_normal without a successful factorisation");
-  const auto m = static_cast<Eigen::Index>(impl_->L->n);
+  const Eigen::Index m = impl_->m;
   if (rhs.size() != m + border_)
     throw std::invalid_argument("TikhonovSolver::solve_normal: right-hand side has " +
                                 std::to_string(rhs.size()) + " entries, expected " +
                                 std::to_string(m + border_));
   const auto t0 = std::chrono::steady_clock::now();
   Eigen::VectorXd out(rhs.size());
-  if (border_ == 0) {
+  if (border_ == 0 && impl_->banded) {
+    impl_->ldl.forward(rhs.data(), 1, out.data());
+    impl_->ldl.back_dlt(out.data(), 1, out.data());
+  } else if (border_ == 0) {
     cholmod_dense b = view(rhs.data(), rhs.size(), 1);
     if (!cholmod_solve2(CHOLMOD_A, impl_->L, &b, nullptr, &impl_->X, nullptr, &impl_->Y, &impl_->E,
                         &impl_->cm))
@@ -687,7 +747,7 @@ Eigen::VectorXd TikhonovSolver::solve_normal(const Eigen::VectorXd& rhs) {
 double TikhonovSolver::inverse_quadratic_form(const Eigen::VectorXd& v) {
   if (!impl_->factor_ok)
     throw std::logic_error("TikhonovSolver::inverse_quadratic_form without a factorisation");
-  const auto m = static_cast<Eigen::Index>(impl_->L->n);
+  const Eigen::Index m = impl_->m;
   if (v.size() != m + border_)
     throw std::invalid_argument("TikhonovSolver::inverse_quadratic_form: wrong vector size");
   const auto t0 = std::chrono::steady_clock::now();
@@ -777,14 +837,15 @@ const SelectedInverse& TikhonovSolver::selected_inverse() {
     throw std::logic_error("TikhonovSolver::selected_inverse without a successful factorisation");
   if (impl_->selinv) return *impl_->selinv;
   const auto t0 = std::chrono::steady_clock::now();
+  const Eigen::Index m = impl_->m;
+  const bool banded = impl_->banded;
   const cholmod_factor* L = impl_->L;
-  const auto m = static_cast<Eigen::Index>(L->n);
-  const auto* Lp = static_cast<const int*>(L->p);
-  const auto* Li = static_cast<const int*>(L->i);
-  const auto* Lx = static_cast<const double*>(L->x);
-  const auto* Lnz = static_cast<const int*>(L->nz);
-  int bw = 0;
-  for (Eigen::Index j = 0; j < m; ++j)
+  const auto* Lp = banded ? nullptr : static_cast<const int*>(L->p);
+  const auto* Li = banded ? nullptr : static_cast<const int*>(L->i);
+  const auto* Lx = banded ? nullptr : static_cast<const double*>(L->x);
+  const auto* Lnz = banded ? nullptr : static_cast<const int*>(L->nz);
+  int bw = banded ? normal_->band_b : 0;
+  for (Eigen::Index j = 0; j < m && !banded; ++j)
     for (int q = Lp[j] + 1; q < Lp[j] + Lnz[j]; ++q)
       bw = std::max(bw, Li[q] - static_cast<int>(j));
   SelectedInverse z;
@@ -796,9 +857,37 @@ const SelectedInverse& TikhonovSolver::selected_inverse() {
     if (a > b) std::swap(a, b);
     return z.band[static_cast<std::size_t>(a) * w + static_cast<std::size_t>(b - a)];
   };
+  if (banded) {
+    // The same recurrence on BandLdlt's rows, summed in the same order, with the band's index
+    // arithmetic written out (at N = 10⁶ the general loop's per-entry bookkeeping was most of
+    // the selected inverse's time).
+    double* zb = z.band.data();
+    std::array<double, 64> lv{};  // column j of L below the diagonal (bw <= 64: build_banded)
+    for (Eigen::Index j = m - 1; j >= 0; --j) {
+      const Eigen::Index cnt = std::min<Eigen::Index>(m - 1, j + bw) - j;
+      for (Eigen::Index t = 0; t < cnt; ++t)
+        lv[static_cast<std::size_t>(t)] = impl_->ldl.l(j + 1 + t, j);
+      const auto jw = static_cast<std::size_t>(j) * w;
+      for (Eigen::Index i = j + 1; i <= j + cnt; ++i) {
+        double s = 0.0;
+        for (Eigen::Index t = 0; t < cnt; ++t) {
+          const Eigen::Index a = j + 1 + t;  // Z(a, i) of the band: (min, |a − i|)
+          const std::size_t q =
+              a <= i ? static_cast<std::size_t>(a) * w + static_cast<std::size_t>(i - a)
+                     : static_cast<std::size_t>(i) * w + static_cast<std::size_t>(a - i);
+          s += lv[static_cast<std::size_t>(t)] * zb[q];
+        }
+        zb[jw + static_cast<std::size_t>(i - j)] = -s;
+      }
+      double s = 0.0;
+      for (Eigen::Index t = 0; t < cnt; ++t)
+        s += lv[static_cast<std::size_t>(t)] * zb[jw + 1 + static_cast<std::size_t>(t)];
+      zb[jw] = 1.0 / impl_->d(j) - s;
+    }
+  }
   std::vector<int> rows;
   std::vector<double> vals;
-  for (Eigen::Index j = m - 1; j >= 0; --j) {
+  for (Eigen::Index j = m - 1; j >= 0 && !banded; --j) {
     rows.clear();
     vals.clear();
     for (int q = Lp[j] + 1; q < Lp[j] + Lnz[j]; ++q) {
@@ -822,7 +911,9 @@ const SelectedInverse& TikhonovSolver::selected_inverse() {
     // All r columns in one pass over the factor (into their own CHOLMOD buffers: Xk holds W).
     const Eigen::Index r = normal_->U.cols();
     Eigen::MatrixXd BinvU(m, r);
-    if (r > 0) {
+    if (r > 0 && banded) {
+      impl_->ldl.back_dlt(impl_->W.data(), r, BinvU.data());
+    } else if (r > 0) {
       cholmod_dense wv = view(impl_->W.data(), m, r);
       cholmod_dense *X = nullptr, *Y = nullptr, *E = nullptr;
       const int ok =

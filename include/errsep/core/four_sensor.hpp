@@ -145,7 +145,7 @@ struct FourSensorResult {
   /// posterior; NaN when not computed).
   double edf = std::numeric_limits<double>::quiet_NaN();
   double edf_f = std::numeric_limits<double>::quiet_NaN();
-  /// Rules reml and gcv: the λ of the search was at an end of its range.
+  /// Rules reml and gcv: the λ of the search was at an end of its range or next to refused λ.
   bool lambda_at_edge = false;
   /// What the data could not determine, in words (empty when nothing is to be said): the
   /// gauge, and after a collapse the level at which S is undetermined.

@@ -1,13 +1,13 @@
 #pragma once
-// Tikhonov solutions of A·X ≈ b (Eq. 17 of Zhao 2019): X_λ = (AᵀA + λ²I)⁻¹Aᵀb, by CHOLMOD on the
-// regularised normal equations, or in general form X_λ = (AᵀA + λ²P)⁻¹Aᵀb with a penalty
-// P = LᵀL (a smoothness prior: L a difference operator) that is banded on the band unknowns and
-// may couple them with the border.  AᵀA is formed once (from A's rows in band storage when they are
-// narrow, else by cholmod_aat; upper triangle kept); the symbolic analysis (natural ordering,
-// simplicial LDLᵀ: AᵀA is banded with a few dense trailing rows) is done once in the constructor
-// and each λ costs one numeric factorisation with CHOLMOD's diagonal shift β = λ² (Ceres-style:
-// Tikhonov is a per-solve option, not a matrix edit).  This is the only place that talks to CHOLMOD
-// (its C API, in tikhonov_solver.cpp).
+// Tikhonov solutions of A·X ≈ b (Eq. 17 of Zhao 2019): X_λ = (AᵀA + λ²I)⁻¹Aᵀb, or in general
+// form (AᵀA + λ²P)⁻¹Aᵀb with a penalty P = LᵀL (a smoothness prior) banded on the band unknowns
+// and possibly coupled with the border.  AᵀA is formed once (from A's rows in band storage when
+// they are narrow, else by cholmod_aat; upper triangle kept).  Narrow rows (the four-sensor
+// systems): each λ is one banded LDLᵀ of the band block (src/core/band_ldlt.hpp, several times
+// faster than CHOLMOD's simplicial LDLᵀ at a half-bandwidth of 7).  Otherwise the symbolic
+// analysis (natural ordering, simplicial LDLᵀ) is done once and each λ is one CHOLMOD numeric
+// factorisation with its shift β = λ² (Ceres-style: Tikhonov is a per-solve option, not a matrix
+// edit).  This is the only place that talks to CHOLMOD (its C API, in tikhonov_solver.cpp).
 //
 // Read as a prior (x_band ~ N(0, σ²/λ²·P⁻¹), border flat), M = AᵀA + λ²P is the posterior
 // precision in units of 1/σ²: log_det() and selected_inverse() give what a likelihood-based λ rule
@@ -15,7 +15,7 @@
 // half-width b (Takahashi's recurrence), without forming anything dense of size n.
 //
 // A sweep over λ can run on several threads: worker() gives another solver over the same A and
-// AᵀA (shared, read-only) with its own CHOLMOD workspace and a copy of the analysed factor.  Each
+// AᵀA (shared, read-only) with its own factor (and CHOLMOD workspace on the general path).  Each
 // solver object is used by one thread at a time.
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
