@@ -18,6 +18,10 @@ RULES (comma separated):
   If     identity on f (the prototype that reached the bars; not a rule the evidence picks)
   MIXf   precision a*I + b*D2'D2 on f, two scales by REML
   SHOf   damped-oscillator spectrum on f (peak kappa0, width, scale by REML)
+  FLf    the default's long-wave spectrum (T^2, its own REML scale) kept as a floor, an SHO peak
+         added on top by REML (prior covariance never below the floor)
+  EVSf   D2f or SHOf, whichever has the smaller REML -2 log L + 2 per hyperparameter (AIC)
+  EVSHf  the same without the charge
   SHD2f  covariance sum of a D2-like tail (1/kappa^2) and the SHO peak, four scales by REML
   PMf    D2 prior, posterior averaged over lambda with REML weights instead of the REML lambda
   SD2f   D2 on f and D2 on S, two lambdas jointly by REML (full model with S, gamma unknown)
@@ -148,6 +152,7 @@ class Rules:
             _, pen, ll = best
             info['pen'] = pen
             info['ll'] = ll
+            info['crit'] = best[0]
             if rule == 'D2e':
                 Mx = mod.AtA.copy(); Mx[:n, :n] += 10**(2 * ll) * self.Pf[pen]
                 x = np.linalg.solve(Mx, Aty); r = y - mod.A @ x
@@ -183,7 +188,44 @@ class Rules:
             r = minimize(cth, np.array(best[1], float), method='Nelder-Mead',
                          options=dict(xatol=0.02, fatol=1e-3, maxiter=300))
             info['th'] = r.x
+            info['crit'] = r.fun
             return self.post(m, prec(r.x)[0], s) + (info,)
+        if rule == 'FLf':
+            # the default's long-wave prior kept as a floor (T^2 spectrum at its own REML scale),
+            # a damped-oscillator peak added on top by REML: prior covariance never below the floor
+            kap = self.kap
+
+            def c0(a):
+                P, ld = self.spectral(10**a / kap**2)
+                return self.crit(y, Aty, P, ld, s)
+            g0 = np.linspace(-8, 4, 25)
+            v0 = [c0(a) for a in g0]
+            i0 = int(np.argmin(v0))
+            a0 = minimize_scalar(c0, bounds=(g0[max(i0 - 1, 0)], g0[min(i0 + 1, 24)]), method='bounded',
+                                 options=dict(xatol=0.01)).x
+
+            def precfl(th):
+                return self.spectral(10**a0 / kap**2 + 10**th[0] / ((kap - 10**th[1])**2 + 10**th[2] * kap + 1e-12))
+
+            def cfl(th):
+                P, ld = precfl(th)
+                return self.crit(y, Aty, P, ld, s)
+            starts = [(a, b, c) for a in (-6, -4, -2) for b in np.log10(kap[[1, 4, 12]]) for c in (-3, -1)]
+            best = min((cfl(np.array(st, float)), st) for st in starts)
+            r = minimize(cfl, np.array(best[1], float), method='Nelder-Mead',
+                         options=dict(xatol=0.02, fatol=1e-3, maxiter=300))
+            info['th'] = r.x
+            return self.post(m, precfl(r.x)[0], s) + (info,)
+        if rule in ('EVSf', 'EVSHf'):
+            # choose between the default (1 hyperparameter) and the peaked spectrum (3) by the
+            # restricted likelihood with an AIC charge per hyperparameter (EVSf) or without (EVSHf)
+            a = self.fit('D2f', m, s_ls)
+            b = self.fit('SHOf', m, s_ls)
+            pen = 2.0 if rule == 'EVSf' else 0.0
+            pick = b if b[4]['crit'] + 3 * pen < a[4]['crit'] + 1 * pen else a
+            pick[4]['picked_sho'] = pick is b
+            pick[4]['dcrit'] = b[4]['crit'] - a[4]['crit']
+            return pick
         if rule in ('SD2f', 'SGD2f'):
             return self.fit_full(rule, m, s) + (info,)
         raise ValueError(rule)
