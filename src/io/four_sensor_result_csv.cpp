@@ -35,7 +35,7 @@ void common_meta(CsvTable& t, const core::FourSensorResult& r, const ResultWrite
   t.set_meta("s3", std::to_string(r.config.s3));
   t.set_meta("s4", std::to_string(r.config.s4));
   t.set_meta("N", std::to_string(r.config.N));
-  t.set_meta("estimator", core::to_string(r.estimator));
+  t.set_meta("estimator", info.estimator.empty() ? core::to_string(r.estimator) : info.estimator);
   t.set_meta("prior", core::to_string(r.penalty));
   t.set_meta("lambda", fmt(r.lambda));
   t.set_meta("lambda_rule", core::to_string(r.rule));
@@ -45,7 +45,8 @@ void common_meta(CsvTable& t, const core::FourSensorResult& r, const ResultWrite
   // σ̂'s degrees of freedom: a user sizing a simultaneous band (or a t-based k) needs them.
   t.set_meta("sigma_hat_dof", std::to_string(r.redundancy_dof));
   t.set_meta("uncertainty_model",
-             r.covariance
+             !info.uncertainty_model.empty() ? info.uncertainty_model
+             : r.covariance
                  ? "posterior covariance of the separation (prior included), sigma from "
                    "the redundant readings"
                  : "covariance of the estimate at its lambda (shrinkage bias not included)");

@@ -6,6 +6,7 @@
 
 #include "errsep/core/four_sensor_system.hpp"
 
+#include "errsep/io/csv.hpp"
 #include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/refine_run.hpp"
 #include "errsep/io/staged_directory.hpp"
@@ -77,12 +78,6 @@ core::FourSensorResult result_of_sequence(const core::FourSensorResult& single,
   return r;
 }
 
-std::string format_um(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.10g", v);
-  return b;
-}
-
 }  // namespace
 
 FourSensorPipeline::FourSensorPipeline(FourSensorPipelineOptions opts) : opts_(std::move(opts)) {
@@ -146,10 +141,15 @@ FourSensorPipelineResult FourSensorPipeline::separate(const io::RawFourSensorSca
         }
         info.traverses = std::move(tr);
       }
+      info.estimator = "scan_sequence_fit";
+      info.uncertainty_model =
+          "covariance of the unregularised least-squares fit of every traverse (no prior, no "
+          "shrinkage), sigma from its residual; applied effects' parameters and tau included, "
+          "widened by what effects detected but not identifiable from the plan could do to S";
       info.extra_metadata.emplace_back("scan_plan", seq.name);
       info.extra_metadata.emplace_back("separation", what);
       info.summary_notes.push_back("result: " + what + "; sigma_hat " +
-                                   format_um(sr.after.sigma_um) + " um (" +
+                                   io::format_number(sr.after.sigma_um) + " um (" +
                                    std::to_string(sr.after.dof) + " dof)");
       if (sr.u_S_widening_um.size() && sr.u_S_widening_um.maxCoeff() > 0)
         info.summary_notes.push_back(
@@ -165,11 +165,11 @@ FourSensorPipelineResult FourSensorPipeline::separate(const io::RawFourSensorSca
                              core::ReferenceLine::minimum_zone}) {
         const auto e = core::sequence_straightness(sr.after, out.separation->x_mm, ref);
         const std::string key = std::string("straightness_") + core::to_string(ref);
-        info.motion_metadata.emplace_back(key + "_um", format_um(e.straightness_um));
-        info.motion_metadata.emplace_back(key + "_U_um", format_um(e.expanded_um));
-        info.motion_metadata.emplace_back(key + "_bias_um", format_um(e.bias_um));
+        info.motion_metadata.emplace_back(key + "_um", io::format_number(e.straightness_um));
+        info.motion_metadata.emplace_back(key + "_U_um", io::format_number(e.expanded_um));
+        info.motion_metadata.emplace_back(key + "_bias_um", io::format_number(e.bias_um));
         info.motion_metadata.emplace_back(key + "_of_estimate_um",
-                                          format_um(e.zone.straightness_um));
+                                          io::format_number(e.zone.straightness_um));
       }
     }
   }

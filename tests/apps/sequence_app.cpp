@@ -143,6 +143,12 @@ TEST_CASE("reversed plan with drift: motion.csv is the sequence fit, u_S below t
   INFO(log);
   const auto motion = io::read_csv(sep / "motion.csv");
   CHECK(motion.meta("scan_plan") == std::optional<std::string>("reversed"));
+  // The metadata describe the fit, not the single separation it replaced.
+  CHECK(motion.meta("estimator") == std::optional<std::string>("scan_sequence_fit"));
+  CHECK(motion.meta("prior") == std::optional<std::string>("none"));
+  CHECK_THAT(motion.meta("uncertainty_model").value_or(""),
+             Catch::Contains("least-squares fit of every traverse") &&
+                 !Catch::Contains("shrinkage bias not included"));
   const auto S = motion.column("S_um", "motion.csv"), u = motion.column("u_S_um", "motion.csv");
   CHECK(outside_4u(tmp, "reversed", S, u) == 0);
   // The single scan: the separation of each configuration's first traverse (m1..m4).

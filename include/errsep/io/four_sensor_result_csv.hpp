@@ -33,6 +33,10 @@ struct ResultWriteInfo {
   std::vector<std::pair<std::string, std::string>> motion_metadata = {};
   /// Lines appended to summary.txt (what the result is, when it is not the single separation).
   std::vector<std::string> summary_notes = {};
+  /// The result's `estimator` and `uncertainty_model` metadata in place of the separation's own
+  /// (a scan sequence's fit is not the posterior separation and carries no shrinkage); empty:
+  /// the separation's.
+  std::string estimator = {}, uncertainty_model = {};
   /// summary.txt's first line in place of FourSensorResult::brief_report() (a scan sequence's
   /// fit names itself); empty: brief_report().
   std::string title = {};
