@@ -16,7 +16,7 @@ namespace errsep::core {
 // conflict is settled (issue 16 item 1).
 StepDecisionOptions refine_step_decision() {
   StepDecisionOptions o;
-  o.bias_z = 0.0;
+  o.bias_z = 2.0;
   return o;
 }
 
@@ -728,7 +728,10 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
       und = std::sqrt(s2_und * (D_S.middleCols(c0, k) * Z).squaredNorm() / P);
     }
     const bool unidentifiable = k0 > 0 && und > 0.1 * d.quantity("S")->rms_u_base;
-
+    if (d.apply && unidentifiable && !opts.apply_unidentifiable) {
+      d.apply = false;
+      d.reason = "not identifiable from this plan, so not applied (" + d.reason + ")";
+    }
     if (d.apply) {
       carried.block(c0, c0, k, k) = Ce;
       applied.effects.push_back(M.effects[e]);

@@ -72,6 +72,12 @@ struct RefineOptions {
   /// Whether a significant effect's correction is applied (step_decision.hpp): on the expected
   /// error of S, γ and f, not on the F-test alone.
   StepDecisionOptions decision = refine_step_decision();
+  /// Whether the determined part of an effect is applied when the rest of it, which this plan
+  /// cannot determine, could move S by more than a tenth of u_S ("not identifiable from this
+  /// plan", RefineStep::undetermined_S_um).  Off: such an effect is reported and carried in u, not
+  /// applied, because its correction is then judged on a part of the effect only (errsep-refine-
+  /// sweep: a thermal drift of one configuration, single plan, S 0.64 -> 2.16 um, u_S 0.95).
+  bool apply_unidentifiable = false;
   /// The final residual traced against the recorded variables (residual_trace.hpp): reported in
   /// RefineResult::trace and its findings; only a non-linearity is acted on (correct_nonlinearity).
   ResidualTraceOptions trace;
