@@ -45,13 +45,11 @@
 
 namespace errsep::core {
 
-/// The refine's step decision.  bias_z = 2 (the lower confidence bound of the bias a
-/// correction removes, step_decision.hpp, because the effect was chosen for the size of the same
-/// fit that estimates that bias) is NOT the default yet: it stops the corrections
-/// core/refine_effects expects (8 % gain at 0.1 um); set decision.bias_z = 2 to use it.  Without it
-/// a noise fit 3-4 sd from zero (clean data) or a poorly determined parameter fitted 3 sd from its
-/// value (PE1's dD4, PE2's c2) was applied and made gamma worse beyond its stated u
-/// (errsep-refine-sweep, seeds 1-20).
+/// The refine's step decision: bias_z = 2, the lower confidence bound of the bias a correction
+/// removes (step_decision.hpp), because the effect was chosen for the size of the same fit that
+/// estimates that bias.  Without it a noise fit 3-4 sd from zero (clean data) or a poorly
+/// determined parameter fitted 3 sd from its value (PE1's dD4) was applied and made gamma worse
+/// beyond its stated u (errsep-refine-sweep, seeds 1-20; refine.cpp has the figures).
 StepDecisionOptions refine_step_decision();
 
 struct RefineOptions {
