@@ -49,6 +49,13 @@ int main(int argc, char** argv) {
                  "... and no quantity's expected squared error grows by more than this fraction "
                  "of its noise")
       ->capture_default_str();
+  app.add_option("--bias-z", refine.decision.bias_z,
+                 "decide on the bias a correction removes at its lower confidence bound B - z "
+                 "sd(B) (step_decision.hpp)")
+      ->capture_default_str();
+  app.add_option("--apply-unidentifiable", refine.apply_unidentifiable,
+                 "apply the determined part of an effect this plan cannot identify (refine.hpp)")
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
   try {

@@ -10,13 +10,20 @@
 
 namespace errsep::core {
 
-// bias_z = 2 (and not applying an effect this plan cannot identify) removed every run made
-// worse beyond u in errsep-refine-sweep (README), but it also stops corrections the tests in
-// core/refine_effects expect (an 8 % gain at sigma 0.1 um, non-repeating S): off until that
-// conflict is settled (issue 16 item 1).
+// bias_z = 2 with no correction applied for an effect this plan cannot identify
+// (RefineOptions::apply_unidentifiable off) is the default since stop 26 (issue 16 item 1).
+// errsep-refine-sweep, seeds 1-20, 12 effects x sigma 0.05/0.1/0.2 (720 runs): with both, 3 runs
+// were made worse beyond their u: PE2 at 0.2 um (a wrong minimum, c2 = 3094 +- 540 for 795,
+// applied), a thermal drift taken for a knocked sensor by the gross-error search, a bump (not in
+// the library); with bias_z = 0 and the undetermined part applied, 19 (clean data 2, PE1 7, PE2 2,
+// thermal drift 4, non-linearity 3, bump 1), and applying the determined part of a drift, thermal
+// drift or non-repeating traverse of one scan made S or gamma worse in 35-80 % of those runs;
+// bias_z = 1 let a fit to clean noise through (worst gamma error 10.6 -> 24 urad).  The price:
+// fewer halvings (gain 0.25 -> 0.15 of the runs at 0.05 um, PE1 0.10 -> 0.05 at 0.1 um) and none of
+// a thermal drift on all configurations (0.35 at 0.05 um), which one scan cannot identify.
 StepDecisionOptions refine_step_decision() {
   StepDecisionOptions o;
-  o.bias_z = 0.0;
+  o.bias_z = 2.0;
   return o;
 }
 
@@ -710,10 +717,10 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
       }
     }
     // The part of the effect this plan cannot determine (see `carried` above): when it reaches
-    // S beyond a tenth of u_S the effect is reported not identifiable from this plan.  Its
-    // determined part is still applied when the decision says so (core/refine_effects expects
-    // it); not applying it would avoid runs like thermal drift on one configuration, single
-    // plan: S 0.64 -> 2.16 um with u_S 0.95 (issue 16 item 1, left open).
+    // S beyond a tenth of u_S the effect is reported not identifiable from this plan and, unless
+    // RefineOptions::apply_unidentifiable, not applied: its determined part alone can make S
+    // worse where the two parts partly cancel (thermal drift on one configuration, single plan:
+    // S 0.64 -> 2.16 um with u_S 0.95).
     const Eigen::MatrixXd W = block_determined_directions(cur.last.determined, c0, k);
     const Eigen::Index k0 = k - W.cols();
     double und = 0.0, s2_und = 0.0;
@@ -728,7 +735,10 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
       und = std::sqrt(s2_und * (D_S.middleCols(c0, k) * Z).squaredNorm() / P);
     }
     const bool unidentifiable = k0 > 0 && und > 0.1 * d.quantity("S")->rms_u_base;
-
+    if (d.apply && unidentifiable && !opts.apply_unidentifiable) {
+      d.apply = false;
+      d.reason = "not identifiable from this plan, so not applied (" + d.reason + ")";
+    }
     if (d.apply) {
       carried.block(c0, c0, k, k) = Ce;
       applied.effects.push_back(M.effects[e]);

@@ -51,6 +51,11 @@ SweepRun evaluate_refine_run(UndeclaredEffect effect, const UndeclaredCaseOption
       }
   for (const auto& v : r.verdicts)
     run.verdicts += (run.verdicts.empty() ? "" : " | ") + v;
+  // What the analyses after the loop did (they too change S): gross errors, a non-linearity.
+  for (const auto& f : r.gross.findings)
+    run.verdicts += (run.verdicts.empty() ? "" : " | ") + f;
+  if (r.nonlinearity.detected)
+    run.verdicts += (run.verdicts.empty() ? "" : " | ") + r.nonlinearity.finding;
   for (const auto& v : r.verdicts)
     run.not_identifiable_reported =
         run.not_identifiable_reported || v.find("not identifiable from this plan") != v.npos;

@@ -35,6 +35,7 @@ namespace {
 using errsep::test::print_steps;
 
 using errsep::test::check_identified;
+using errsep::test::check_identified_not_applied;
 using errsep::test::check_parameters;
 
 using errsep::test::check_realistic;
@@ -138,12 +139,19 @@ Eigen::MatrixXd drift_null_basis(const FourSensorConfig& cfg, const Eigen::Matri
 
 // The identifiable combination alone (configuration 3 drifting at 0.02 um/s less its part in the
 // null space): it is not only residual, much of it looks like f, S and gamma (its column is mostly
-// inside the base model), so it biases the unregularised separation, and removing it must halve
-// its errors (seed 13: S 0.385 um against 0.074 without the drift).  The default posterior
-// separation is not biased by it at this size (S 0.060 um, 0.062 without the drift: the
-// second-difference prior does not take the rough f the least-squares fit puts it into), so
-// there is nothing to halve there; this test uses the unregularised separations.
-TEST_CASE("drift: the identifiable drift combination is found and removed") {
+// inside the base model), so it biases the unregularised separation (seed 13: S 0.385 um against
+// 0.074 without the drift).  The truth here was built with no part in the null space, but the
+// refine cannot know that: from one scan three of the four rates are undetermined and could
+// move S by more than u_S, so the drift is "not identifiable from this plan".  Until issue 16
+// item 1 (stop 26) the determined part was applied and this test asserted that gamma and f
+// halved (they did, for this truth); applying the determined part alone over the sweep
+// (errsep-refine-sweep, seeds 1-20, drift on one configuration) made S or gamma worse in 60-65 %
+// of the runs, halved none, and left the median S error unchanged (0.433 -> 0.438 um at 0.05 um).
+// So the assertion is now what the issue asks of an effect the plan cannot identify: found, its
+// determined combination within its uncertainty, reported not identifiable, not applied, S and
+// gamma as the raw separation has them, u_S widened.  A plan with a closing pass or reversed
+// traverses determines the rates (core/sequence_refine).
+TEST_CASE("drift: the identifiable combination is found, reported not identifiable from one scan") {
   const auto c0 = make_refine_case(0.02, 13);
   const Eigen::MatrixXd Z = drift_null_basis(c0.cfg, c0.sim.m_um);
   REQUIRE(Z.cols() == 3);
@@ -156,10 +164,7 @@ TEST_CASE("drift: the identifiable drift combination is found and removed") {
   });
   const auto r = run(c, least_squares_separations());
   print_steps("drift (identifiable combination), sigma 0.02 um", r);
-  // With the error of S taken after removing its bow (issue 16) the drift's part in S is the
-  // bow and line a drift makes, so there is little left to halve: 0.034 -> 0.056 um, within the
-  // refined u_S (checked); gamma and f halve.
-  check_identified(r, "drift", a, /*S_halved=*/false);
+  check_identified_not_applied(r, "drift", a);
 }
 
 // A realistic drift: the sensor, re-clamped for configuration 3, creeps at 0.02 um/s during that
@@ -171,10 +176,13 @@ TEST_CASE("drift: the identifiable drift combination is found and removed") {
 // and S, a quadratic in gamma).  The loop finds the drift and removes the identifiable part (its
 // errors halve, the test above); what the invisible part does to S, gamma and f no refinement of
 // this scan can undo.  Here that part dominates: S 1.67 um of error before, 1.83 um from the
-// invisible part alone (the two parts partly cancel), 0.30 um without drift.  So the test asserts
-// what is true: the drift is found, its determined combination recovered within its uncertainty,
-// and after the refinement the errors are those of a scan carrying only the invisible part (within
-// the noise of the separation), not that they halve.
+// invisible part alone (the two parts partly cancel), 0.30 um without drift: removing the
+// determined part alone would make S worse.  Until stop 26 it was removed and this test asserted
+// that the errors after were those of the invisible part alone; now (issue 16 item 1) a drift this
+// plan cannot identify is reported and carried in u, not applied: the test asserts that the drift
+// is found, its determined combination recovered within its uncertainty, the verdict says it is
+// not identifiable from this plan, S, gamma and f stay as the raw separation has them and u_S
+// covers what is left (not worse beyond u).
 TEST_CASE("drift: one configuration drifting, the part no scan can see stays in S, gamma, f") {
   const double sigma = 0.1, rate = 0.02;  // µm, µm/s
   const auto c0 = make_refine_case(sigma, 16);
@@ -216,11 +224,14 @@ TEST_CASE("drift: one configuration drifting, the part no scan can see stays in 
       e_clean.gamma_urad, e_clean.f_um);
   // The drift matters: its errors are well above those of the same noise without it.
   CHECK(e0.S_um > 3.0 * e_clean.S_um);
-  // After the refinement: the errors of the invisible part alone, within the separation's noise
-  // (the no-drift errors).
-  CHECK(std::abs(e1.S_um - e_null.S_um) < e_clean.S_um);
-  CHECK(std::abs(e1.gamma_urad - e_null.gamma_urad) < e_clean.gamma_urad);
-  CHECK(std::abs(e1.f_um - e_null.f_um) < e_clean.f_um);
+  // Not applied: the raw separation's errors, the drift carried in u.
+  CHECK_FALSE(s.applied);
+  REQUIRE(!r.verdicts.empty());
+  INFO(r.verdicts.front());
+  CHECK(r.verdicts.front().find("not identifiable from this plan") != std::string::npos);
+  CHECK(e1.S_um == Approx(e0.S_um).epsilon(1e-9));
+  CHECK(e1.gamma_urad == Approx(e0.gamma_urad).epsilon(1e-9));
+  errsep::test::check_not_worse_beyond_u(e0, e1, r.after);
 }
 
 TEST_CASE("PE2: a smooth slide positioning error is found and corrected") {
@@ -321,14 +332,50 @@ TEST_CASE("realistic noise: periodic positioning error 600 um / 23 mm at sigma 0
       });
 }
 
+// Until stop 26 this case asserted that the error the gain causes halves over the four seeds
+// (RMS).  With the decision on the lower confidence bound of the bias a correction removes
+// (bias_z = 2, refine.hpp: the fit that estimates that bias is the one whose size chose the
+// effect) the gain is applied in one seed of four here (S 1.69 -> 1.05 um of the error it
+// causes); in the other three it is detected, reported "not applied" and carried in u_S.  Over
+// the sweep (errsep-refine-sweep, seeds 1-20, gain 3-6 % on one configuration) the rule costs
+// halving in 2 of 20 runs at 0.05 um (0.25 -> 0.15) and 2 of 20 at 0.1 um; without it a gain
+// fitted to clean noise was applied and made gamma worse beyond its u (5.9 -> 24 urad).  So the
+// assertions are what the issue asks: found first, parameters within their uncertainty, never
+// worse beyond u (check_realistic, halving not asserted); applied wherever the effect is
+// identifiable from the plan (effect_identifiability, from the design and sigma-hat, never the
+// truth); where not applied, reported so and u_S widened.
 TEST_CASE("realistic noise: an 8 % gain error of configuration 3 at sigma 0.1 um") {
   const Eigen::Vector3d g(0.0, 0.08, 0.0);
+  auto make = [&](double sigma, std::uint64_t seed) {
+    return make_refine_case(
+        sigma, seed, {},
+        [&](Eigen::MatrixXd& m, const Eigen::MatrixXd&) { m.col(2) *= 1.0 + g(1); }, 3);
+  };
   check_realistic(
-      "gain, Example 2 (k = 3)", "gain", 0.1, 4, 3,
-      [&](double sigma, std::uint64_t seed) {
-        return make_refine_case(
-            sigma, seed, {},
-            [&](Eigen::MatrixXd& m, const Eigen::MatrixXd&) { m.col(2) *= 1.0 + g(1); }, 3);
-      },
-      [&](const ModelEffect&) { return Eigen::VectorXd(g); });
+      "gain, Example 2 (k = 3)", "gain", 0.1, 4, 3, make,
+      [&](const ModelEffect&) { return Eigen::VectorXd(g); }, true, {},
+      /*halved=*/false);
+  auto rms = [](const Eigen::VectorXd& v) { return std::sqrt(v.squaredNorm() / v.size()); };
+  int applied = 0, identifiable = 0;
+  for (std::uint64_t seed = 1; seed <= 4; ++seed) {
+    const auto c = make(0.1, seed);
+    const RefineResult r = run(c);
+    REQUIRE(r.effects.size() >= 1);
+    REQUIRE(r.effects.front()->name() == "gain");
+    const EffectIdentifiability id =
+        effect_identifiability(c.cfg, c.sim.m_um, Eigen::MatrixXd(), *r.effects.front());
+    INFO("seed " << seed << ": " << r.verdicts.front() << " | " << id.brief());
+    std::printf("  seed %d: %s\n    %s\n", static_cast<int>(seed), r.verdicts.front().c_str(),
+                id.brief().c_str());
+    identifiable += id.identifiable ? 1 : 0;
+    applied += r.applied.front() ? 1 : 0;
+    if (id.identifiable) CHECK(r.applied.front());
+    if (!r.applied.front()) {
+      CHECK(r.verdicts.front().find("not applied") != std::string::npos);
+      CHECK(rms(r.after.u_S_um) > rms(r.before.u_S_um));
+    }
+  }
+  std::printf(
+      "  gain 8 %%, sigma 0.1 um: applied in %d of 4 seeds, identifiable from the plan in %d\n",
+      applied, identifiable);
 }

@@ -140,7 +140,14 @@ TEST_CASE(
   }
 }
 
-TEST_CASE("thermal drift: the identifiable combination is found, tau refined, error halved") {
+// Until stop 26 this asserted that S, gamma and f halve: the truth was built with no part in the
+// null space and the determined part was applied.  The refine cannot know that part is zero: from
+// one scan the rest of the effect is undetermined and could move S beyond u_S, so the effect is
+// now reported "not identifiable from this plan" and carried in u_S, not applied (issue 16 item
+// 1: applying the determined part of a drift alone made S or gamma worse in 60-65 % of the
+// sweep's single-scan drift runs and halved none; core/sequence_refine identifies it from a
+// plan with a closing pass or reversed traverses).
+TEST_CASE("thermal drift: the identifiable combination is found, tau refined, not applied") {
   const double tau = 25.0;  // s; the scan lasts 128 s (4 traverses of 32 s)
   const std::uint64_t sd = 33;
   const auto c0 = make_refine_case(0.02, sd);
@@ -174,7 +181,7 @@ TEST_CASE("thermal drift: the identifiable combination is found, tau refined, er
   p_true << a - Zh * (Zh.transpose() * a), tau - th->tau0_s();
   std::printf("  Gauss-Newton iterations %d\n", r.steps[1].gauss_newton_iterations);
   std::printf("  tau = %.3f +- %.3f s (truth %g s)\n", tau_hat, r.u_parameters.front()(4), tau);
-  check_identified(r, "thermal", p_true);
+  errsep::test::check_identified_not_applied(r, "thermal", p_true);
   CHECK(std::abs(th->tau_s(r.parameters.front()) - tau) < 2.0 * r.u_parameters.front()(4));
 }
 
@@ -222,7 +229,14 @@ TEST_CASE("traverse: per-traverse S of degree 1..K leaves K directions, K-1 afte
               distance_to_span(Z, q));
 }
 
-TEST_CASE("traverse: S not repeating between traverses is found and corrected") {
+// Until stop 26 this asserted that S, gamma and f halve: the truth was built with no part in the
+// null space and the determined part was applied.  The refine cannot know that part is zero: from
+// one scan the rest of the effect is undetermined and could move S beyond u_S, so the effect is
+// now reported "not identifiable from this plan" and carried in u_S, not applied (issue 16 item
+// 1: applying the determined part of a drift alone made S or gamma worse in 60-65 % of the
+// sweep's single-scan drift runs and halved none; core/sequence_refine identifies it from a
+// plan with a closing pass or reversed traverses).
+TEST_CASE("traverse: S not repeating between traverses is found, reported, not applied") {
   const std::uint64_t sd = 34;
   const auto c0 = make_refine_case(0.02, sd);
   const EffectContext ctx = scan_context(c0);
@@ -241,7 +255,7 @@ TEST_CASE("traverse: S not repeating between traverses is found and corrected") 
   const auto c = make_refine_case(0.02, sd, {}, add_traverse_polynomials(p));
   const auto r = run(c);
   print_steps("non-repeating S (identifiable part), sigma 0.02 um", r);
-  check_identified(r, "traverse", p);
+  errsep::test::check_identified_not_applied(r, "traverse", p);
 }
 
 TEST_CASE("yaw (two axes): the lateral pair identifies a yaw Eqs. (10)-(27) cannot see") {
@@ -410,6 +424,10 @@ TEST_CASE("realistic noise: non-repeating S at sigma 0.1 and 0.3 um") {
   // 301-900 the z have RMS 1.007 and 4.7 % beyond 2, as a t with ~52 dof should (5.1 %), so the
   // count is made on a sample large enough not to hang on a few seeds.  At 0.3 µm the same seeds
   // give the same z (the error is linear in the noise): four seeds, for the error check only.
+  // The halving of the error is no longer asserted (stop 26, issue 16 item 1): the traverse
+  // effect is not identifiable from one scan's plan and is carried in u_S, not applied; what is
+  // asserted is that it is found, its determined part within its uncertainty, and no seed worse
+  // beyond its u.
   for (const auto& [sigma, seeds] : {std::pair{0.1, 40}, std::pair{0.3, 4}})
     errsep::test::check_realistic(
         "non-repeating S (identifiable part of a 2 um P2 + 1 um P3 on traverse 3)", "traverse",
@@ -417,5 +435,5 @@ TEST_CASE("realistic noise: non-repeating S at sigma 0.1 and 0.3 um") {
         [&](double sg, std::uint64_t seed) {
           return make_refine_case(sg, seed, {}, add_traverse_polynomials(p));
         },
-        [&](const ModelEffect&) { return p; }, /*count_z=*/sigma < 0.2);
+        [&](const ModelEffect&) { return p; }, /*count_z=*/sigma < 0.2, {}, /*halved=*/false);
 }

@@ -94,9 +94,17 @@ TEST_CASE("refine report: says when only one of the two separations is regularis
   core::RefineOptions o;
   o.solve.estimator = core::Estimator::paper_system;
   o.solve.rule = core::LambdaRule::lcurve;
+  // The report's wording when a correction is applied: since issue 16 item 1 (stop 26) the refine
+  // does not apply an effect one scan's plan cannot identify (a non-repeating traverse) and
+  // decides on the lower bound of the bias it removes; both switched off here so that the
+  // correction this case is about is applied.
+  o.apply_unidentifiable = true;
+  o.decision.bias_z = 0.0;
   const auto r = core::refine_four_sensor(c.cfg, c.sim.m_um, Eigen::MatrixXd(), o, &c.truth);
   REQUIRE(r.steps.size() >= 2);
   CHECK(r.steps[1].effect == "traverse");
+  REQUIRE(!r.applied.empty());
+  CHECK(r.applied.front());
   const std::string text = io::format_refine_text(r);
   INFO(text);
   // The raw readings' L-curve has a corner (λ taken from it), the corrected readings' has none.

@@ -58,6 +58,11 @@ struct GrossErrorOptions {
   /// … and only when its statistic exceeds the detection threshold by this much (near the
   /// threshold the largest candidate is mostly noise and its fitted size inflated).
   double apply_margin = 1.0;
+  /// A step is taken for a knocked sensor only when it explains the residual better than a smooth
+  /// drift of any one configuration (a cubic in position, i.e. in time within the traverse) by this
+  /// much (likelihood ratio of the step added to the smooth model, χ²₁ quantile; 6.63 is its
+  /// 99 %): a thermal drift of one sensor also fits a step at the middle of its ramp.
+  double smooth_chi2 = 6.63;
   /// Steps another measurement names (find_repeat_steps, repeat_steps.hpp): each goes into the
   /// model first, whether or not this scan alone shows it, and is removed or carried like a found
   /// one (separate_without_gross_errors).
@@ -95,6 +100,14 @@ struct GrossError {
   std::string attributed_by;  ///< what named it, when not this scan alone
   double known_size_um = 0;   ///< |size| that measurement gave (bounds the bias when left in)
   double known_u_size_um = 0;
+  /// For a step: how much better the step explains the residual than a smooth drift of any one
+  /// configuration does (the smallest over the four) (the likelihood ratio of the step added to a
+  /// cubic in position of that configuration's readings, χ²₁ units;
+  /// GrossErrorOptions::smooth_chi2).  Below the threshold it is reported as a smooth change (a
+  /// drift), not a knocked sensor, and not removed.
+  double step_over_smooth_chi2 = 0;
+  bool smooth = false;           ///< a smooth drift explains it as well (the line above)
+  int smooth_configuration = 0;  ///< the configuration whose smooth drift explains it best
   /// Largest widening of u_S it causes when not removed (0: not computed).
   double u_S_added_um = 0;
   bool applied = true;      ///< removed from the separation

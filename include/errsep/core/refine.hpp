@@ -45,13 +45,11 @@
 
 namespace errsep::core {
 
-/// The refine's step decision.  bias_z = 2 (the lower confidence bound of the bias a
-/// correction removes, step_decision.hpp, because the effect was chosen for the size of the same
-/// fit that estimates that bias) is NOT the default yet: it stops the corrections
-/// core/refine_effects expects (8 % gain at 0.1 um); set decision.bias_z = 2 to use it.  Without it
-/// a noise fit 3-4 sd from zero (clean data) or a poorly determined parameter fitted 3 sd from its
-/// value (PE1's dD4, PE2's c2) was applied and made gamma worse beyond its stated u
-/// (errsep-refine-sweep, seeds 1-20).
+/// The refine's step decision: bias_z = 2, the lower confidence bound of the bias a correction
+/// removes (step_decision.hpp), because the effect was chosen for the size of the same fit that
+/// estimates that bias.  Without it a noise fit 3-4 sd from zero (clean data) or a poorly
+/// determined parameter fitted 3 sd from its value (PE1's dD4) was applied and made gamma worse
+/// beyond its stated u (errsep-refine-sweep, seeds 1-20; refine.cpp has the figures).
 StepDecisionOptions refine_step_decision();
 
 struct RefineOptions {
@@ -72,6 +70,12 @@ struct RefineOptions {
   /// Whether a significant effect's correction is applied (step_decision.hpp): on the expected
   /// error of S, γ and f, not on the F-test alone.
   StepDecisionOptions decision = refine_step_decision();
+  /// Whether the determined part of an effect is applied when the rest of it, which this plan
+  /// cannot determine, could move S by more than a tenth of u_S ("not identifiable from this
+  /// plan", RefineStep::undetermined_S_um).  Off: such an effect is reported and carried in u, not
+  /// applied, because its correction is then judged on a part of the effect only (errsep-refine-
+  /// sweep: a thermal drift of one configuration, single plan, S 0.64 -> 2.16 um, u_S 0.95).
+  bool apply_unidentifiable = false;
   /// The final residual traced against the recorded variables (residual_trace.hpp): reported in
   /// RefineResult::trace and its findings; only a non-linearity is acted on (correct_nonlinearity).
   ResidualTraceOptions trace;
