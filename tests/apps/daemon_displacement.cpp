@@ -183,7 +183,17 @@ TEST_CASE(
       io::read_csv(dir / "refine" / "displacement_refine.csv", {.allow_non_finite = true});
   CHECK(account.meta("source") ==
         std::optional<std::string>((dir / "raw_displacement.csv").string()));
-  CHECK(account.meta("step1_effect") == std::optional<std::string>("drift of sensor 1"));
+  std::string steps;  // the account's steps and notes, so a failure says what was found
+  for (const auto& [k, v] : account.metadata)
+    if (k.rfind("step", 0) == 0 || k.rfind("note", 0) == 0) steps += k + ": " + v + "\n";
+  INFO(steps);
+  // devsim drifts linearly in its own time; the readings' recorded times carry the loaded
+  // machine's scheduling jitter, and on a scan of a few seconds the first-order thermal drift
+  // of the library (one parameter more, counted by AIC) then fits sensor 1's drift as well or
+  // better (seen in CI under ASan: "thermal drift of sensor 1 (tau = 0.306 s)", applied, w moved
+  // 0.02 um).  Either is the drift of sensor 1; which of the two is not what this test is about.
+  const std::string effect = account.meta("step1_effect").value_or("(none)");
+  CHECK((effect == "drift of sensor 1" || effect.rfind("thermal drift of sensor 1 (", 0) == 0));
   const auto d = account.meta("step1_decision").value_or("");
   CHECK((d == "applied" || d == "detected, not applied"));
   // The same drift of the reference sensor 2 is suspected and no two scans identify it: the
