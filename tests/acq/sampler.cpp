@@ -1,5 +1,6 @@
 #include "errsep/acq/sampler.hpp"
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <map>
@@ -99,13 +100,30 @@ TEST_CASE("a slow read is counted as missed periods, not caught up in a burst") 
   REQUIRE(slow_reads >= 10);
   // A loop that caught up on late deadlines in a burst would report no missed period at all.
   CHECK(r.stats.missed_periods >= 2 * slow_reads);
-  CHECK(r.stats.missed_periods <= 4 * slow_reads + 20);  // + scheduler noise on a shared machine
-  // The gaps in seq after each slow read account for every missed period.
-  std::uint64_t gaps = 0;
-  for (std::size_t i = 1; i < r.got.size(); ++i)
-    gaps += r.got[i].seq - r.got[i - 1].seq - 1;
+  // The gaps in seq account for every missed period. Sample k (0-based, pushed in read order) is
+  // read k + 1, so the gap after it is a slow read's when (k + 1) is a multiple of 50; the other
+  // gaps are the scheduler's (a shared machine preempts the thread) and are only counted.
+  REQUIRE(r.consumed == r.stats.samples_pushed);
+  std::uint64_t gaps = 0, other_gaps = 0;
+  std::vector<std::uint64_t> after_slow;
+  for (std::size_t i = 1; i < r.got.size(); ++i) {
+    const std::uint64_t gap = r.got[i].seq - r.got[i - 1].seq - 1;
+    gaps += gap;
+    if (i % 50 == 0)
+      after_slow.push_back(gap);
+    else
+      other_gaps += gap;
+  }
   CHECK(gaps == r.stats.missed_periods);
-  CHECK(r.consumed == r.stats.samples_pushed);
+  REQUIRE(after_slow.size() >= 10);
+  // Every slow read skips at least 2 periods; a typical one 2 or 3 (3.5 ms at 1 ms periods). The
+  // median, not the total, is bounded above: preemption on a loaded machine adds to a few gaps.
+  std::sort(after_slow.begin(), after_slow.end());
+  INFO("gaps after slow reads: min " << after_slow.front() << ", median "
+                                     << after_slow[after_slow.size() / 2] << ", max "
+                                     << after_slow.back() << "; other gaps " << other_gaps);
+  CHECK(after_slow.front() >= 2);
+  CHECK(after_slow[after_slow.size() / 2] <= 4);
   // The period started after a slow read is 3.5 ms - 3 periods = 0.5 ms late at least.
   CHECK(r.stats.jitter.max_us >= 490.0);
 }
