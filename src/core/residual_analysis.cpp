@@ -322,6 +322,40 @@ class UpperTail {
   double u_ = 0, beta_ = 0;
 };
 
+// The p-values of a Monte-Carlo pool: row 0 the data's statistics, rows 1.. the draws'.  Each
+// statistic's tail is fitted to the data and the draws together, so that every member of the pool,
+// the data included, counts itself: the members are treated alike, exchangeable under the null, and
+// the rank of the data's smallest p among the pool's smallest p is an exact level-α test.
+void pool_p_values(const Eigen::MatrixXd& T, double alpha, WhitenessTest& w) {
+  const auto M = static_cast<int>(T.rows());
+  Eigen::MatrixXd p(M, kStatistics);
+  for (int j = 0; j < kStatistics; ++j) {
+    std::vector<double> draws(T.col(j).data(), T.col(j).data() + M);
+    const UpperTail tail(std::move(draws));
+    for (int s = 0; s < M; ++s)
+      p(s, j) = tail.p_value(T(s, j));
+  }
+  const Eigen::VectorXd minp = p.rowwise().minCoeff();
+  int le = 0;
+  for (int s = 0; s < M; ++s)
+    if (minp(s) <= minp(0)) ++le;
+  w.p_ljung_box = p(0, 0);
+  w.p_periodogram = p(0, 1);
+  w.p_cumulative_periodogram = p(0, 2);
+  w.p_runs = p(0, 3);
+  w.p_local = p(0, 4);
+  w.p_value = static_cast<double>(le) / M;
+  if (w.p_value < alpha) {
+    Eigen::Index jmin = 0;
+    p.row(0).minCoeff(&jmin);
+    for (int j = 0; j < kStatistics; ++j)
+      if (j == jmin || p(0, j) < alpha) {
+        if (!w.rejected_by.empty()) w.rejected_by += ", ";
+        w.rejected_by += kStatisticNames[j];
+      }
+  }
+}
+
 }  // namespace
 
 ResidualAnalysis analyse_residual(const ResidualSpace& space, const Eigen::MatrixXd& m_um,
@@ -405,32 +439,7 @@ ResidualAnalysis analyse_residual(const ResidualSpace& space, const Eigen::Matri
       for (int j = 0; j < kStatistics; ++j)
         T(s, j) = st.v[j];
     }
-    Eigen::MatrixXd pr(M, kStatistics);
-    for (int j = 0; j < kStatistics; ++j) {
-      std::vector<double> draws(T.col(j).data() + 1, T.col(j).data() + M);
-      const UpperTail tail(std::move(draws));
-      for (int s = 0; s < M; ++s)
-        pr(s, j) = tail.p_value(T(s, j));
-    }
-    const Eigen::VectorXd minp = pr.rowwise().minCoeff();
-    int le = 0;
-    for (int s = 0; s < M; ++s)
-      if (minp(s) <= minp(0)) ++le;
-    w.p_ljung_box = pr(0, 0);
-    w.p_periodogram = pr(0, 1);
-    w.p_cumulative_periodogram = pr(0, 2);
-    w.p_runs = pr(0, 3);
-    w.p_local = pr(0, 4);
-    w.p_value = static_cast<double>(le) / M;
-    if (w.p_value < opts.alpha) {
-      Eigen::Index jmin = 0;
-      pr.row(0).minCoeff(&jmin);
-      for (int j = 0; j < kStatistics; ++j)
-        if (j == jmin || pr(0, j) < opts.alpha) {
-          if (!w.rejected_by.empty()) w.rejected_by += ", ";
-          w.rejected_by += kStatisticNames[j];
-        }
-    }
+    pool_p_values(T, opts.alpha, w);
   }
   w.white = w.p_value >= opts.alpha;
   return out;
@@ -596,34 +605,7 @@ WhitenessTest test_projected_whiteness(const ProjectedResidual& pr,
     for (int j = 0; j < kStatistics; ++j)
       T(s, j) = st.v[j];
   }
-  // The tail is fitted to the data and the draws together, so that every member of the pool,
-  // the data included, counts itself: exchangeable under the null, an exact level-α test.
-  Eigen::MatrixXd p(M, kStatistics);
-  for (int j = 0; j < kStatistics; ++j) {
-    std::vector<double> draws(T.col(j).data(), T.col(j).data() + M);
-    const UpperTail tail(std::move(draws));
-    for (int s = 0; s < M; ++s)
-      p(s, j) = tail.p_value(T(s, j));
-  }
-  const Eigen::VectorXd minp = p.rowwise().minCoeff();
-  int le = 0;
-  for (int s = 0; s < M; ++s)
-    if (minp(s) <= minp(0)) ++le;
-  w.p_ljung_box = p(0, 0);
-  w.p_periodogram = p(0, 1);
-  w.p_cumulative_periodogram = p(0, 2);
-  w.p_runs = p(0, 3);
-  w.p_local = p(0, 4);
-  w.p_value = static_cast<double>(le) / M;
-  if (w.p_value < opts.alpha) {
-    Eigen::Index jmin = 0;
-    p.row(0).minCoeff(&jmin);
-    for (int j = 0; j < kStatistics; ++j)
-      if (j == jmin || p(0, j) < opts.alpha) {
-        if (!w.rejected_by.empty()) w.rejected_by += ", ";
-        w.rejected_by += kStatisticNames[j];
-      }
-  }
+  pool_p_values(T, opts.alpha, w);
   w.white = w.p_value >= opts.alpha;
   return w;
 }
