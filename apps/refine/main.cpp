@@ -10,8 +10,8 @@
 #include <iostream>
 
 #include "errsep/io/machine_config.hpp"
-#include "errsep/io/refine_run.hpp"
 #include "errsep/io/staged_directory.hpp"
+#include "errsep/service/refine_run.hpp"
 #include "errsep/version.hpp"
 
 int main(int argc, char** argv) {
@@ -27,7 +27,7 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
   std::string input, out_dir = "out/refine", truth, reference, gauge, config;
   errsep::io::GeometryOverrides geo;
-  errsep::io::RefineRunOptions opts;
+  errsep::service::RefineRunOptions opts;
   app.add_option("raw_csv", input, "raw four-sensor scan CSV")->required();
   app.add_option("--out", out_dir, "result directory")->capture_default_str();
   app.add_option("--truth", truth, "truth CSV of a simulated scan (errors against it per step)");
@@ -72,7 +72,7 @@ int main(int argc, char** argv) {
     opts.refine.solve = separation.options();
     if (!truth.empty()) opts.truth_csv = truth;
     if (!reference.empty()) opts.reference_csv = reference;
-    const auto run = errsep::io::run_refine(input, out_dir, opts, geo);
+    const auto run = errsep::service::run_refine(input, out_dir, opts, geo);
     if (const std::string swept = errsep::io::describe_swept(run.swept); !swept.empty())
       std::cout << swept << "\n";
     std::cout << run.text << "\nwritten:";

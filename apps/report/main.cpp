@@ -11,6 +11,7 @@
 #include "errsep/io/cnc/compensation_format.hpp"
 #include "errsep/io/machine_config.hpp"
 #include "errsep/io/scan_report.hpp"
+#include "errsep/service/pdf_print.hpp"
 #include "errsep/service/scan_report_job.hpp"
 #include "errsep/version.hpp"
 
@@ -27,6 +28,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> formats, table_params;
   double table_step = 0;
   bool no_plots = false, no_tables = false, pdf = false;
+  service::PdfOptions pdf_print;
   app.add_option("dir", dir, "result directory (motion.csv, reference.csv, lcurve.csv, ...)")
       ->required()
       ->check(CLI::ExistingDirectory);
@@ -80,7 +82,7 @@ int main(int argc, char** argv) {
   app.add_flag("--pdf", pdf,
                "also print the report to report.pdf with headless Chromium (skipped, with the "
                "reason, when Chromium is absent)");
-  app.add_option("--chromium", o.pdf_print.chromium, "Chromium program for --pdf")
+  app.add_option("--chromium", pdf_print.chromium, "Chromium program for --pdf")
       ->capture_default_str();
   app.add_option("--subdir", o.output_subdir,
                  "write the outputs into DIR/SUBDIR (errsep-scan writes OUT/report/) instead of "
@@ -96,7 +98,7 @@ int main(int argc, char** argv) {
       o.tables_export = from_config.tables_export;
       o.particulars = from_config.particulars;
     }
-    o.pdf = pdf;
+    o.pdf_printer = pdf ? service::chromium_pdf_printer(pdf_print) : nullptr;
     if (!axis.empty()) o.axis = axis[0];
     if (!direction.empty()) o.direction = direction[0];
     o.local_reference = *core::parse_reference_line(local_ref);

@@ -6,7 +6,7 @@
 // residuals.csv, summary.txt; displacement: displacement.csv with u, displacement_residuals.csv,
 // service/displacement_pipeline.hpp).  --refine (or [refine] enabled = true in the config) also
 // runs the refine step of errsep-refine on the four-sensor scan and writes its files to OUT/refine/
-// (io/refine_run.hpp). --verify-with TABLE: the scan after a compensation table was loaded
+// (service/refine_run.hpp). --verify-with TABLE: the scan after a compensation table was loaded
 // (the embedded simulator applies it itself), compared with the first scan and the residual the
 // table predicts (OUT/verification.txt, .csv; io/verification_report.hpp).  OUT is one result
 // set (io/staged_directory.hpp): written beside it and
@@ -407,7 +407,8 @@ int main(int argc, char** argv) {
     if (report_due && !no_report) {
       const io::ScanReportOptions ro = service::result_report_options(cfg, !no_pdf);
       std::cout << "report: evaluating " << out.string() << " into " << (out / "report").string()
-                << "/ (figures, HTML" << (ro.pdf ? ", PDF" : "") << ", compensation tables)\n";
+                << "/ (figures, HTML" << (ro.pdf_printer ? ", PDF" : "")
+                << ", compensation tables)\n";
       try {
         service::print_report_outcome(io::write_scan_report(out, ro), out, std::cout, std::cerr);
       } catch (const std::exception& e) {

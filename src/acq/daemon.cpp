@@ -152,15 +152,15 @@ ScanContext::ScanContext(std::uint64_t scan_id, const std::atomic<bool>& abort)
 
 void ScanContext::begin(io::RawFourSensorScan layout) {
   std::lock_guard<std::mutex> lock(mu_);
-  raw_ = std::move(layout);
-  const std::size_t p = raw_.x_mm.size();
-  for (auto& col : raw_.m_um)
+  const std::size_t p = layout.x_mm.size();
+  for (auto& col : layout.m_um)
     col.assign(p, std::numeric_limits<double>::quiet_NaN());
   std::array<std::vector<double>, 4> t;
   for (auto& col : t)
     col.assign(p, std::numeric_limits<double>::quiet_NaN());
-  raw_.t_s = t;
-  raw_.complete = false;
+  layout.t_s = t;
+  layout.complete = false;
+  raw_ = std::move(layout);
   total_.store(static_cast<std::uint32_t>(4 * p));
   done_.store(0);
   heartbeat();
@@ -176,7 +176,7 @@ void ScanContext::begin(io::RawDisplacementScan layout) {
   layout.t_scan1_s.emplace(k, kNaN);
   layout.t_scan2_s.emplace(k, kNaN);
   layout.complete = false;
-  disp_ = std::move(layout);
+  raw_ = std::move(layout);
   total_.store(static_cast<std::uint32_t>(4 * k));
   done_.store(0);
   heartbeat();
@@ -185,17 +185,18 @@ void ScanContext::begin(io::RawDisplacementScan layout) {
 void ScanContext::record(int config, std::size_t n, double m_um, double t_s) {
   {
     std::lock_guard<std::mutex> lock(mu_);
-    if (disp_) {
-      if (config < 0 || config > 3 || n >= disp_->x_mm.size()) return;
+    if (auto* disp = std::get_if<io::RawDisplacementScan>(&raw_)) {
+      if (config < 0 || config > 3 || n >= disp->x_mm.size()) return;
       // acq::ScanHooks::cell's columns: s1 and s2 of scan 1, then of scan 2.
-      std::vector<double>* cols[4] = {&disp_->s1_scan1_um, &disp_->s2_scan1_um, &disp_->s1_scan2_um,
-                                      &disp_->s2_scan2_um};
+      std::vector<double>* cols[4] = {&disp->s1_scan1_um, &disp->s2_scan1_um, &disp->s1_scan2_um,
+                                      &disp->s2_scan2_um};
       (*cols[config])[n] = m_um;
-      (*(config < 2 ? disp_->t_scan1_s : disp_->t_scan2_s))[n] = t_s;
+      (*(config < 2 ? disp->t_scan1_s : disp->t_scan2_s))[n] = t_s;
     } else {
-      if (config < 0 || config > 3 || n >= raw_.x_mm.size()) return;
-      raw_.m_um[static_cast<std::size_t>(config)][n] = m_um;
-      (*raw_.t_s)[static_cast<std::size_t>(config)][n] = t_s;
+      auto& raw = std::get<io::RawFourSensorScan>(raw_);
+      if (config < 0 || config > 3 || n >= raw.x_mm.size() || !raw.t_s) return;
+      raw.m_um[static_cast<std::size_t>(config)][n] = m_um;
+      (*raw.t_s)[static_cast<std::size_t>(config)][n] = t_s;
     }
   }
   done_.fetch_add(1);
@@ -208,29 +209,21 @@ void ScanContext::heartbeat() noexcept {
 
 void ScanContext::finish(io::RawFourSensorScan raw) {
   std::lock_guard<std::mutex> lock(mu_);
-  if (raw.x_mm.size() != raw_.x_mm.size()) return;
+  const auto* layout = std::get_if<io::RawFourSensorScan>(&raw_);
+  if (!layout || raw.x_mm.size() != layout->x_mm.size()) return;
   raw_ = std::move(raw);
 }
 
 void ScanContext::finish(io::RawDisplacementScan raw) {
   std::lock_guard<std::mutex> lock(mu_);
-  if (!disp_ || raw.x_mm.size() != disp_->x_mm.size()) return;
-  disp_ = std::move(raw);
+  const auto* layout = std::get_if<io::RawDisplacementScan>(&raw_);
+  if (!layout || raw.x_mm.size() != layout->x_mm.size()) return;
+  raw_ = std::move(raw);
 }
 
-io::RawFourSensorScan ScanContext::snapshot() const {
+RawScan ScanContext::snapshot() const {
   std::lock_guard<std::mutex> lock(mu_);
   return raw_;
-}
-
-bool ScanContext::displacement() const {
-  std::lock_guard<std::mutex> lock(mu_);
-  return disp_.has_value();
-}
-
-io::RawDisplacementScan ScanContext::displacement_snapshot() const {
-  std::lock_guard<std::mutex> lock(mu_);
-  return disp_ ? *disp_ : io::RawDisplacementScan{};
 }
 
 // --- options ---------------------------------------------------------------------------------
@@ -579,8 +572,8 @@ void Daemon::write_checkpoint() {
     return std::optional<io::CsvTable>(io::to_csv_table(raw));
   };
   std::size_t measured = 0;
-  const auto table = ctx_->displacement() ? checkpoint_of(ctx_->displacement_snapshot(), &measured)
-                                          : checkpoint_of(ctx_->snapshot(), &measured);
+  const auto table = std::visit([&](auto raw) { return checkpoint_of(std::move(raw), &measured); },
+                                ctx_->snapshot());
   if (!table) return;
   try {
     store_.write(scan_stem_, "raw-incomplete", io::format_csv(*table, 12));
@@ -882,10 +875,7 @@ void Daemon::finish_scan(bool stopping) {
   if (stopping && end.outcome == ScanOutcome::complete &&
       ctx_->points_done() < ctx_->points_total())
     end.outcome = ScanOutcome::stopped;
-  if (ctx_->displacement())
-    write_scan_files(ctx_->displacement_snapshot(), end);
-  else
-    write_scan_files(ctx_->snapshot(), end);
+  std::visit([&](const auto& raw) { write_scan_files(raw, end); }, ctx_->snapshot());
   const std::uint64_t id = ctx_->scan_id();
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -1106,10 +1096,7 @@ int Daemon::run() {
                     "from the daemon: the hung worker holds the devices)");
       set_lamp(false);
       const ScanEnd stopped{ScanOutcome::stopped, "SIGTERM; worker did not stop in time"};
-      if (ctx_->displacement())
-        write_scan_files(ctx_->displacement_snapshot(), stopped);
-      else
-        write_scan_files(ctx_->snapshot(), stopped);
+      std::visit([&](const auto& raw) { write_scan_files(raw, stopped); }, ctx_->snapshot());
       worker_.detach();
       worker_left_behind_ = true;
       backend_free = false;

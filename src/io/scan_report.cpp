@@ -249,8 +249,6 @@ std::string format_value_with_uncertainty(double value, double u) {
 ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions& opts) {
   std::string why;
   if (!opts.is_valid(&why)) throw std::invalid_argument("ScanReportOptions: " + why);
-  if (opts.pdf && !opts.pdf_print.is_valid(&why))
-    throw std::invalid_argument("ScanReportOptions: pdf_print: " + why);
   if (!fs::is_directory(dir))
     throw std::runtime_error(dir.string() + ": not a directory (expected a result directory)");
   ScanReportResult res;
@@ -985,10 +983,9 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     write_file_atomic(path, content);
     res.written.push_back(path);
   }
-  if (opts.pdf) {
+  if (opts.pdf_printer) {
     // Printed in the staging folder, so that the PDF joins the set with the rest.
-    const PdfOutcome pdf =
-        print_html_to_pdf(out / "report.html", out / "report.pdf", opts.pdf_print);
+    const PdfOutcome pdf = opts.pdf_printer(out / "report.html", out / "report.pdf");
     if (pdf.written) {
       res.written.push_back(out / "report.pdf");
       res.pdf = dir / (out / "report.pdf").lexically_relative(stage.dir());

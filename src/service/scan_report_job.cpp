@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "errsep/io/staged_directory.hpp"
+#include "errsep/service/pdf_print.hpp"
 
 namespace errsep::service {
 
@@ -21,14 +22,14 @@ io::ScanReportOptions report_options_from_config(const io::MachineConfig& cfg) {
   if (!o.particulars.straightness_tolerance_um && cfg.mqtt &&
       cfg.mqtt->straightness_tolerance_um > 0)
     o.particulars.straightness_tolerance_um = cfg.mqtt->straightness_tolerance_um;
-  o.pdf = r.pdf;
+  if (r.pdf) o.pdf_printer = chromium_pdf_printer();
   return o;
 }
 
 io::ScanReportOptions result_report_options(const io::MachineConfig& cfg, bool pdf) {
   io::ScanReportOptions o = report_options_from_config(cfg);
   o.output_subdir = kResultReportSubdir;
-  o.pdf = o.pdf && pdf;
+  if (!pdf) o.pdf_printer = nullptr;
   return o;
 }
 

@@ -1,6 +1,6 @@
 // errsep-scan --refine: after the scan and its separation, the refine step runs on the raw file
 // and writes its report and refined results to OUT/refine/, the same files errsep-refine writes
-// from that raw file (one library call, io::run_refine, behind both).
+// from that raw file (one library call, service::run_refine, behind both).
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cstdio>

@@ -88,6 +88,18 @@ TEST_CASE("reversed traverses: the drift is identified, S within the stated u_S 
   // The refined S against the truth within the run's own stated u_S.
   CHECK(outside_4u(tmp, "reversed", t.column("S_after_um", "f"), t.column("u_S_after_um", "f")) ==
         0);
+  // The refine folder's motion.csv is that refined fit of every traverse (as the scan's own
+  // motion.csv), not the single-scan refine of m1..m4.
+  const auto motion = io::read_csv(tmp / "reversed_refined" / "motion.csv");
+  CHECK(motion.meta("estimator") == std::optional<std::string>("scan_sequence_fit"));
+  CHECK(motion.meta("scan_plan") == std::optional<std::string>("reversed"));
+  CHECK_THAT(motion.meta("uncertainty_model").value_or(""),
+             Catch::Contains("least-squares fit of every traverse"));
+  const auto S = motion.column("S_um", "motion.csv"), S_after = t.column("S_after_um", "f");
+  REQUIRE(S.size() == S_after.size());
+  for (std::size_t n = 0; n < S.size(); ++n)
+    CHECK(S[n] == Approx(S_after[n]).margin(1e-6));
+  CHECK(outside_4u(tmp, "reversed", S, motion.column("u_S_um", "motion.csv")) == 0);
   // The report prints the findings.
   std::string out;
   REQUIRE(test::run_command(test::app_path("report").string() + " " +
@@ -117,6 +129,10 @@ TEST_CASE("single plan: the drift is detected, said not identifiable, not applie
     CHECK(ua[n] >= ub[n]);
   }
   CHECK(outside_4u(tmp, "single", Sa, ua) == 0);  // the widened u covers what the drift did
+  // A single plan's result is the separation of m1..m4 (as the scan's files): the refine
+  // folder's motion.csv is the single-scan refine.
+  CHECK(io::read_csv(tmp / "single_refined" / "motion.csv").meta("estimator") !=
+        std::optional<std::string>("scan_sequence_fit"));
 }
 
 // Issue 16 item 2: the result of a scan sequence is its fit of every traverse.  errsep-separate
@@ -247,6 +263,15 @@ TEST_CASE("errsep-scan with [scan] plan = reversed and a drifting sensor: the dr
   CHECK(raw.sequence->traverses.size() == 8);
   const auto s = io::read_csv(out / "refine" / "sequence_refine.csv");
   const auto f = findings(s);
+  // refine/ holds the result the scan's files hold (the sequence's refined fit, refined once),
+  // with its metadata, not the single-scan refine of m1..m4.
+  const auto top = io::read_csv(out / "motion.csv");
+  const auto refined = io::read_csv(out / "refine" / "motion.csv");
+  CHECK(refined.meta("estimator") == std::optional<std::string>("scan_sequence_fit"));
+  CHECK(refined.meta("uncertainty_model") == top.meta("uncertainty_model"));
+  CHECK(refined.meta("separation") == top.meta("separation"));
+  CHECK(refined.column("S_um", "refine/motion.csv") == top.column("S_um", "motion.csv"));
+  CHECK(refined.column("u_S_um", "refine/motion.csv") == top.column("u_S_um", "motion.csv"));
   // The drift is found: identified and applied in 4 of 6 runs by hand; in the others reported
   // as not separable from a non-repeating traverse (nothing applied).  The devsim's timing and
   // noise are not seeded, so the test asserts what every run shows: a finding that names the

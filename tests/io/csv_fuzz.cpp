@@ -18,10 +18,10 @@
 #include "errsep/io/atomic_file.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/displacement_csv.hpp"
+#include "errsep/io/four_sensor_inputs.hpp"
 #include "errsep/io/plausibility.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
 #include "errsep/io/reference_csv.hpp"
-#include "errsep/io/refine_run.hpp"
 #include "errsep/io/staged_directory.hpp"
 #include "support/support.hpp"
 

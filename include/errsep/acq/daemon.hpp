@@ -54,6 +54,7 @@
 #include <string>
 #include <thread>
 #include <utility>
+#include <variant>
 #include <vector>
 
 #include "errsep/acq/digital_io.hpp"
@@ -100,6 +101,10 @@ const char* to_string(TriggerSource s) noexcept;
 const char* to_string(TriggerReply r) noexcept;
 const char* to_string(ScanOutcome o) noexcept;
 
+/// A scan's raw record: the four-sensor method's or the displacement method's, as the scan's
+/// begin() chose; the daemon writes either through the same overloads (std::visit).
+using RawScan = std::variant<io::RawFourSensorScan, io::RawDisplacementScan>;
+
 /// What a scan worker and the main loop share.  Thread-safe.
 class ScanContext {
  public:
@@ -121,15 +126,13 @@ class ScanContext {
   void heartbeat() noexcept;
   /// Backend: the scan's own record once it has ended (acq::run_scan's raw scan, with the
   /// sampler's counters in its metadata), replacing the points recorded one by one.  Ignored when
-  /// its positions differ from begin()'s layout.
+  /// it is of the other method or its positions differ from begin()'s layout.
   void finish(io::RawFourSensorScan raw);
   void finish(io::RawDisplacementScan raw);
 
-  /// True after begin(RawDisplacementScan).
-  bool displacement() const;
-  /// The raw data measured so far (complete = false).
-  io::RawFourSensorScan snapshot() const;
-  io::RawDisplacementScan displacement_snapshot() const;
+  /// The raw data measured so far (complete = false), of the method begin() chose (an empty
+  /// four-sensor record before begin()).
+  RawScan snapshot() const;
   std::uint32_t points_done() const noexcept { return done_.load(); }
   std::uint32_t points_total() const noexcept { return total_.load(); }
   /// CLOCK_MONOTONIC ns of the last record() or heartbeat().
@@ -139,8 +142,7 @@ class ScanContext {
   std::uint64_t id_;
   const std::atomic<bool>& abort_;
   mutable std::mutex mu_;
-  io::RawFourSensorScan raw_;
-  std::optional<io::RawDisplacementScan> disp_;  ///< a displacement scan's record
+  RawScan raw_;
   std::atomic<std::uint32_t> done_{0}, total_{0};
   std::atomic<std::int64_t> progress_ns_{0};
 };

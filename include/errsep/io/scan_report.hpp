@@ -29,6 +29,7 @@
 // the set, which is committed anew whole (outputs of an earlier report are replaced, never mixed
 // with these).
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -37,7 +38,6 @@
 #include "errsep/core/iso230.hpp"
 #include "errsep/core/machine_axes.hpp"
 #include "errsep/io/cnc/compensation_export.hpp"
-#include "errsep/io/pdf_print.hpp"
 #include "errsep/io/plots.hpp"
 
 namespace errsep::io {
@@ -52,6 +52,18 @@ struct ReportParticulars {
   std::optional<double> straightness_tolerance_um;
   bool is_valid(std::string* why) const;
 };
+
+/// What printing report.html to a PDF gave.
+struct PdfOutcome {
+  bool written = false;
+  std::string why_not;  ///< when not written: what is missing or what failed, and what to do
+};
+
+/// Prints the local file `html` to `pdf`; never throws for a missing or failing printer (the
+/// outcome says why).  The printer runs a program, which is not a file format: the service layer
+/// gives one (service/pdf_print.hpp, headless Chromium).
+using PdfPrinter =
+    std::function<PdfOutcome(const std::filesystem::path& html, const std::filesystem::path& pdf)>;
 
 struct ScanReportOptions {
   core::EvaluationOptions evaluation;
@@ -81,10 +93,10 @@ struct ScanReportOptions {
   /// DIR itself (errsep-report's default).
   std::string output_subdir;
   ReportParticulars particulars;
-  /// Also print report.html to report.pdf (headless Chromium, io/pdf_print.hpp); when Chromium
-  /// is absent or fails, the HTML stands alone and ScanReportResult::pdf_skipped says why.
-  bool pdf = false;
-  PdfOptions pdf_print;
+  /// Also print report.html to report.pdf with this printer (service::chromium_pdf_printer),
+  /// in the staging folder so that the PDF joins the set; when it could not, the HTML stands
+  /// alone and ScanReportResult::pdf_skipped says why.  Empty: no PDF.
+  PdfPrinter pdf_printer;
   bool is_valid(std::string* why) const;
 };
 

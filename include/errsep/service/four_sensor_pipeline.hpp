@@ -10,9 +10,12 @@
 //   lcurve.csv              the λ search
 //   residuals.csv           the residuals of the redundant equations
 //   summary.txt             λ, σ̂, straightness, the rule that chose λ
-//   refine/                 with refine on: the refine step's set of its own (io/refine_run);
-//                           with a raw scan that records a scan sequence (io/raw_scan_csv.hpp)
-//                           also refine/sequence_refine.csv (core/sequence_refine.hpp)
+//   refine/                 with refine on: the refine step's set of its own
+//                           (service/refine_run.hpp); with a raw scan that records a scan
+//                           sequence (io/raw_scan_csv.hpp) also refine/sequence_refine.csv
+//                           (core/sequence_refine.hpp), and when the sequence fit is the result
+//                           refine/motion.csv and the rest are that fit too, the one refine of
+//                           the sequence made here taken by the refine step
 //
 // A raw scan that records a scan sequence (more than one traverse of a configuration, or a plan
 // other than single: io/raw_scan_csv.hpp) is separated from all its traverses: motion.csv,
@@ -68,6 +71,9 @@ struct FourSensorPipelineResult {
   /// With a recorded scan sequence: its fit and refine (the result's source); its findings are
   /// also in `warnings`.
   std::optional<core::SequenceRefineResult> sequence_refine;
+  /// How many times the recorded sequence was refined in this job: 1 with a sequence (the
+  /// refine step takes the pipeline's), 0 without.
+  int sequence_refines = 0;
   std::vector<std::string> files;     ///< written, relative to the folder ("refine/" for the set)
   std::vector<std::string> warnings;  ///< for the user (λ fallbacks, an incomplete refined model)
   std::string error;                  ///< why the separation failed (write_result_set only)

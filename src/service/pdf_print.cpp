@@ -1,13 +1,14 @@
-#include "errsep/io/pdf_print.hpp"
+#include "errsep/service/pdf_print.hpp"
 
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
+#include <stdexcept>
 #include <system_error>
 
 #include "errsep/io/child_process.hpp"
 
-namespace errsep::io {
+namespace errsep::service {
 namespace fs = std::filesystem;
 
 bool PdfOptions::is_valid(std::string* why) const {
@@ -22,8 +23,9 @@ bool PdfOptions::is_valid(std::string* why) const {
   return true;
 }
 
-PdfOutcome print_html_to_pdf(const fs::path& html, const fs::path& pdf, const PdfOptions& opts) {
-  PdfOutcome out;
+io::PdfOutcome print_html_to_pdf(const fs::path& html, const fs::path& pdf,
+                                 const PdfOptions& opts) {
+  io::PdfOutcome out;
   std::string why;
   if (!opts.is_valid(&why)) {
     out.why_not = "PdfOptions: " + why;
@@ -38,7 +40,7 @@ PdfOutcome print_html_to_pdf(const fs::path& html, const fs::path& pdf, const Pd
   }
   const fs::path profile = tmpl;
   const fs::path log = profile / "chromium.log";
-  ChildRun run;
+  io::ChildRun run;
   run.argv = {opts.chromium,
               "--headless",
               "--no-sandbox",
@@ -56,7 +58,7 @@ PdfOutcome print_html_to_pdf(const fs::path& html, const fs::path& pdf, const Pd
   run.timeout_s = opts.timeout_s;
   std::error_code ec;
   fs::remove(pdf, ec);
-  const int rc = run_child(run, &why);
+  const int rc = io::run_child(run, &why);
   std::string tail;
   {
     std::ifstream in(log);
@@ -82,4 +84,12 @@ PdfOutcome print_html_to_pdf(const fs::path& html, const fs::path& pdf, const Pd
   return out;
 }
 
-}  // namespace errsep::io
+io::PdfPrinter chromium_pdf_printer(const PdfOptions& opts) {
+  std::string why;
+  if (!opts.is_valid(&why)) throw std::invalid_argument("ScanReportOptions: pdf_print: " + why);
+  return [opts](const fs::path& html, const fs::path& pdf) {
+    return print_html_to_pdf(html, pdf, opts);
+  };
+}
+
+}  // namespace errsep::service

@@ -8,7 +8,12 @@
 //                               model, whiteness p-values in the metadata
 //   DIR/motion.csv, reference.csv, lcurve.csv, residuals.csv, summary.txt
 //                               the refined S, γ, f as a result directory
-//                               (four_sensor_result_csv.hpp), "# model: zhao2019-eq1+gain" etc.
+//                               (four_sensor_result_csv.hpp), "# model: zhao2019-eq1+gain" etc.;
+//                               for a recorded sequence whose fit is the scan's result
+//                               (service/sequence_result.hpp) the sequence's refined fit, as the
+//                               scan's own files show it (the steps are then the single-scan
+//                               refine of m1..m4, for comparison)
+//   DIR/sequence_refine.csv     with a recorded sequence: its refine (io/refine_report.hpp)
 //   DIR/reference_comparison.csv  with a reference trace: x_mm, reference, before/after and their
 //                               aligned differences (core/reference_comparison.hpp)
 //
@@ -25,37 +30,19 @@
 #include "errsep/core/reference_comparison.hpp"
 #include "errsep/core/refine.hpp"
 #include "errsep/core/sequence_refine.hpp"
-#include "errsep/io/raw_scan_csv.hpp"
+#include "errsep/io/four_sensor_inputs.hpp"
 
-namespace errsep::io {
-
-/// Geometry and readings of a complete raw four-sensor scan, ready for the core.
-struct FourSensorInputs {
-  core::FourSensorConfig cfg;
-  Eigen::VectorXd x_mm;  ///< P slide positions from the file
-  Eigen::MatrixXd m_um;  ///< P × 4
-  Eigen::MatrixXd t_s;   ///< P × 4 reading times, or empty when the file has none
-  /// A recorded scan sequence (raw_scan_csv.hpp) and its P × T readings; run_refine then also
-  /// runs core::refine_four_sensor_sequence and writes sequence_refine.csv.
-  std::optional<std::pair<core::ScanSequence, Eigen::MatrixXd>> sequence;
-};
-
-/// Geometry overrides (0 = from the file's metadata, Δx from x_mm when there is none).
-struct GeometryOverrides {
-  double dx_mm = 0;
-  int s2 = 0, s3 = 0, s4 = 0;
-};
-
-/// Builds the inputs; `file` names the raw CSV in errors.  Throws CsvError ("file:line:
-/// problem") when rows are off the Δx grid, the spacing does not fit, or values are not finite.
-FourSensorInputs four_sensor_inputs(const RawFourSensorScan& raw, const std::filesystem::path& file,
-                                    const GeometryOverrides& geometry = {});
+namespace errsep::service {
 
 struct RefineRunOptions {
   core::RefineOptions refine;
   std::optional<std::filesystem::path> truth_csv;      ///< read_truth_csv
   std::optional<std::filesystem::path> reference_csv;  ///< read_reference_csv
   std::string source;                                  ///< raw file named in the result metadata
+  /// A recorded sequence's refine the caller has already made of the same readings with
+  /// alpha = refine.alpha (the scan pipeline's): taken instead of being made again, so that one
+  /// job refines a sequence once.  Null: run_refine makes it.  Must outlive the call.
+  const core::SequenceRefineResult* sequence_refine = nullptr;
   bool is_valid(std::string* why = nullptr) const { return refine.is_valid(why); }
 };
 
@@ -72,6 +59,8 @@ struct RefineRunResult {
   /// With a recorded scan sequence: its refine, whose findings (result.report) are appended to
   /// `text` and written to sequence_refine.csv (refine_report.hpp).
   std::optional<core::SequenceRefineResult> sequence;
+  /// The sequence's refine was the caller's (RefineRunOptions::sequence_refine), not made here.
+  bool sequence_taken = false;
   std::optional<ReferenceReport> reference;
   std::string text;                          ///< the readable report written to the text file
   std::vector<std::filesystem::path> files;  ///< written, in DIR
@@ -91,12 +80,12 @@ std::string format_reference_text(const ReferenceReport& r);
 /// Runs the loop on `in` and writes the files above into `out_dir`.  Truth and reference files
 /// are read before anything is written.  Throws CsvError for bad inputs, std::invalid_argument
 /// for bad options, std::runtime_error on I/O failure.
-RefineRunResult run_refine(const FourSensorInputs& in, const std::filesystem::path& out_dir,
+RefineRunResult run_refine(const io::FourSensorInputs& in, const std::filesystem::path& out_dir,
                            const RefineRunOptions& opts);
 
 /// The same from a raw CSV file (read with require_complete).
 RefineRunResult run_refine(const std::filesystem::path& raw_csv,
                            const std::filesystem::path& out_dir, const RefineRunOptions& opts,
-                           const GeometryOverrides& geometry = {});
+                           const io::GeometryOverrides& geometry = {});
 
-}  // namespace errsep::io
+}  // namespace errsep::service

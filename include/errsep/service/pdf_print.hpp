@@ -7,7 +7,9 @@
 #include <filesystem>
 #include <string>
 
-namespace errsep::io {
+#include "errsep/io/scan_report.hpp"
+
+namespace errsep::service {
 
 struct PdfOptions {
   std::string chromium = "chromium";  ///< program name (searched in PATH) or path
@@ -15,14 +17,13 @@ struct PdfOptions {
   bool is_valid(std::string* why) const;
 };
 
-struct PdfOutcome {
-  bool written = false;
-  std::string why_not;  ///< when not written: what is missing or what failed, and what to do
-};
-
 /// Prints `html` (a local file) to `pdf`.  Never throws for a missing or failing Chromium: the
 /// outcome says why no PDF was written (the HTML report stands on its own).
-PdfOutcome print_html_to_pdf(const std::filesystem::path& html, const std::filesystem::path& pdf,
-                             const PdfOptions& opts = {});
+io::PdfOutcome print_html_to_pdf(const std::filesystem::path& html,
+                                 const std::filesystem::path& pdf, const PdfOptions& opts = {});
 
-}  // namespace errsep::io
+/// The report's printer (io::ScanReportOptions::pdf_printer): print_html_to_pdf with `opts`.
+/// Throws std::invalid_argument naming the field when `opts` is not valid.
+io::PdfPrinter chromium_pdf_printer(const PdfOptions& opts = {});
+
+}  // namespace errsep::service

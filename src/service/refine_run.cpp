@@ -1,4 +1,4 @@
-#include "errsep/io/refine_run.hpp"
+#include "errsep/service/refine_run.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -12,74 +12,12 @@
 #include "errsep/io/reference_csv.hpp"
 #include "errsep/io/refine_report.hpp"
 #include "errsep/io/staged_directory.hpp"
+#include "errsep/service/sequence_result.hpp"
 #include "errsep/version.hpp"
 
-namespace errsep::io {
+namespace errsep::service {
 
 namespace fs = std::filesystem;
-
-FourSensorInputs four_sensor_inputs(const RawFourSensorScan& raw, const fs::path& file,
-                                    const GeometryOverrides& geometry) {
-  FourSensorInputs in;
-  core::FourSensorConfig& cfg = in.cfg;
-  if (raw.geometry) cfg = *raw.geometry;
-  if (geometry.s2 > 0) cfg.s2 = geometry.s2;
-  if (geometry.s3 > 0) cfg.s3 = geometry.s3;
-  if (geometry.s4 > 0) cfg.s4 = geometry.s4;
-  const auto P = static_cast<int>(raw.positions());
-  if (P < 2) throw CsvError(file, 0, "need at least 2 slide positions, got " + std::to_string(P));
-  if (geometry.dx_mm > 0)
-    cfg.dx_mm = geometry.dx_mm;
-  else if (!raw.geometry)
-    cfg.dx_mm = raw.x_mm[1] - raw.x_mm[0];
-  // The rows must lie on the Δx grid: x_n = x_0 + n·Δx (Eq. 5).
-  for (int n = 0; n < P; ++n) {
-    const double x = raw.x_mm[static_cast<std::size_t>(n)];
-    const double expect = raw.x_mm[0] + n * cfg.dx_mm;
-    if (!(std::abs(x - expect) <= 1e-6 * std::max(1.0, cfg.dx_mm)))
-      throw CsvError(file, 0,
-                     "x_mm of data row " + std::to_string(n + 1) + " is " + std::to_string(x) +
-                         ", expected " + std::to_string(expect) +
-                         " (rows must be on the dx = " + std::to_string(cfg.dx_mm) + " mm grid)");
-  }
-  cfg.N = P + cfg.s2 + cfg.s3 + cfg.s4;
-  std::string why;
-  if (!cfg.is_valid(&why))
-    throw CsvError(file, 0, std::to_string(P) + " rows do not fit the spacing: " + why);
-  in.x_mm.resize(P);
-  in.m_um.resize(P, 4);
-  for (int n = 0; n < P; ++n) {
-    in.x_mm(n) = raw.x_mm[static_cast<std::size_t>(n)];
-    for (int j = 0; j < 4; ++j) {
-      const double v = raw.m_um[static_cast<std::size_t>(j)][static_cast<std::size_t>(n)];
-      if (!std::isfinite(v))
-        throw CsvError(file, 0,
-                       "m" + std::to_string(j + 1) + "_um of data row " + std::to_string(n + 1) +
-                           " is not a finite number");
-      in.m_um(n, j) = v;
-    }
-  }
-  if (raw.t_s) {
-    in.t_s.resize(P, 4);
-    for (int n = 0; n < P; ++n)
-      for (int j = 0; j < 4; ++j) {
-        const double v = (*raw.t_s)[static_cast<std::size_t>(j)][static_cast<std::size_t>(n)];
-        if (!std::isfinite(v))
-          throw CsvError(file, 0,
-                         "t" + std::to_string(j + 1) + "_s of data row " + std::to_string(n + 1) +
-                             " is not a finite number");
-        in.t_s(n, j) = v;
-      }
-  }
-  if (raw.sequence) {
-    RawFourSensorScan r = raw;
-    r.geometry = cfg;
-    in.sequence = scan_sequence_of(r);
-    if (!in.sequence->second.allFinite())
-      throw CsvError(file, 0, "a traverse column (kK_um) holds a value that is not finite");
-  }
-  return in;
-}
 
 namespace {
 
@@ -87,7 +25,7 @@ Eigen::VectorXd vec(const std::vector<double>& v) {
   return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()));
 }
 
-void add_comparison(CsvTable& t, double code, const core::ReferenceComparison& b,
+void add_comparison(io::CsvTable& t, double code, const core::ReferenceComparison& b,
                     const core::ReferenceComparison& a) {
   for (Eigen::Index n = 0; n < b.x_mm.size(); ++n)
     t.rows.push_back({code, b.x_mm(n), b.reference(n), b.measured(n), a.measured(n),
@@ -100,7 +38,7 @@ ReferenceReport compare_with_reference(const core::FourSensorResult& before,
                                        const core::FourSensorResult& after,
                                        const Eigen::VectorXd& x_mm, double dx_mm,
                                        const fs::path& reference_csv) {
-  const ReferenceTrace tr = read_reference_csv(reference_csv);
+  const io::ReferenceTrace tr = io::read_reference_csv(reference_csv);
   ReferenceReport rep;
   rep.file = reference_csv.string();
   const Eigen::VectorXd xr = vec(tr.x_mm);
@@ -111,7 +49,7 @@ ReferenceReport compare_with_reference(const core::FourSensorResult& before,
     try {
       return core::compare_with_reference(x, v, xr, ref, o);
     } catch (const std::invalid_argument& e) {
-      throw CsvError(reference_csv, 0, e.what());
+      throw io::CsvError(reference_csv, 0, e.what());
     }
   };
   if (tr.S_um) {
@@ -157,14 +95,18 @@ std::string format_reference_text(const ReferenceReport& r) {
   return out;
 }
 
-RefineRunResult run_refine(const FourSensorInputs& in, const fs::path& out_dir,
+RefineRunResult run_refine(const io::FourSensorInputs& in, const fs::path& out_dir,
                            const RefineRunOptions& opts) {
   std::string why;
   if (!opts.is_valid(&why)) throw std::invalid_argument("refine options: " + why);
+  if (opts.sequence_refine &&
+      (!in.sequence || opts.sequence_refine->after.residual_um.cols() != in.sequence->first.size()))
+    throw std::invalid_argument(
+        "refine options: sequence_refine is not a refine of this scan's recorded sequence");
   // Inputs first: nothing is written unless every file given reads.
   std::optional<core::RefineTruth> truth;
-  if (opts.truth_csv) truth = read_truth_csv(*opts.truth_csv, in.cfg, in.x_mm(0));
-  if (opts.reference_csv) (void)read_reference_csv(*opts.reference_csv);
+  if (opts.truth_csv) truth = io::read_truth_csv(*opts.truth_csv, in.cfg, in.x_mm(0));
+  if (opts.reference_csv) (void)io::read_reference_csv(*opts.reference_csv);
 
   RefineRunResult out;
   core::RefineOptions ro = opts.refine;
@@ -184,10 +126,15 @@ RefineRunResult run_refine(const FourSensorInputs& in, const fs::path& out_dir,
     // The redundant traverses (issue 16 items 2, 3): a knocked sensor the repeated traverses
     // name, drift, thermal drift and a non-repeating traverse, applied only where the plan
     // identifies them, said where it does not.
-    core::SequenceRefineOptions so;
-    so.alpha = opts.refine.alpha;
-    out.sequence =
-        core::refine_four_sensor_sequence(in.cfg, in.sequence->first, in.sequence->second, so);
+    if (opts.sequence_refine) {
+      out.sequence = *opts.sequence_refine;
+      out.sequence_taken = true;
+    } else {
+      core::SequenceRefineOptions so;
+      so.alpha = opts.refine.alpha;
+      out.sequence =
+          core::refine_four_sensor_sequence(in.cfg, in.sequence->first, in.sequence->second, so);
+    }
     // m1..m4 are each configuration's first traverse: a knock the sequence named in one of them
     // is a step there, attributed by the repeats (gross_errors.hpp) for the single refine too.
     const core::SequenceKnock& kn = out.sequence->knock;
@@ -207,7 +154,7 @@ RefineRunResult run_refine(const FourSensorInputs& in, const fs::path& out_dir,
   if (opts.reference_csv)
     out.reference =
         compare_with_reference(r.before, r.after, in.x_mm, in.cfg.dx_mm, *opts.reference_csv);
-  out.text = format_refine_text(r);
+  out.text = io::format_refine_text(r);
   if (out.reference) out.text += format_reference_text(*out.reference);
   if (out.sequence) {
     out.text += "\nScan sequence (plan: " + out.sequence->plan + ", " +
@@ -218,35 +165,54 @@ RefineRunResult run_refine(const FourSensorInputs& in, const fs::path& out_dir,
       out.text +=
           "  nothing detected: no knocked sensor, drift, thermal drift or non-repeating "
           "traverse\n";
+    if (sequence_is_the_result(in.sequence->first))
+      out.text +=
+          "  motion.csv, reference.csv, residuals.csv and summary.txt hold this refined fit of "
+          "every traverse (the scan's result); the steps above are the single-scan refine of "
+          "each configuration's first traverse (m1..m4), for comparison\n";
   }
   // One result set: the files appear in DIR only when all are written, replacing an earlier
   // refine result whole (io/staged_directory.hpp).
-  StagedDirectory stage(out_dir, {"refine", std::string("errsep-refine ") + kVersion, false, {}});
+  io::StagedDirectory stage(out_dir,
+                            {"refine", std::string("errsep-refine ") + kVersion, false, {}});
   out.swept = stage.swept();
-  CsvTable steps = refine_csv(r);
+  io::CsvTable steps = io::refine_csv(r);
   steps.set_meta("source", opts.source);
   steps.set_meta("run_id", stage.run_id());
-  write_csv(stage.dir() / "refine_steps.csv", steps);
-  write_file_atomic(stage.dir() / "refine_report.txt", out.text);
+  io::write_csv(stage.dir() / "refine_steps.csv", steps);
+  io::write_file_atomic(stage.dir() / "refine_report.txt", out.text);
   if (out.sequence) {
     std::vector<double> x(in.x_mm.data(), in.x_mm.data() + in.x_mm.size());
-    CsvTable sq = sequence_refine_csv(*out.sequence, x);
+    io::CsvTable sq = io::sequence_refine_csv(*out.sequence, x);
     sq.set_meta("source", opts.source);
     sq.set_meta("run_id", stage.run_id());
-    write_csv(stage.dir() / "sequence_refine.csv", sq);
+    io::write_csv(stage.dir() / "sequence_refine.csv", sq);
   }
-  ResultWriteInfo info{opts.source, "X", "Y", {}};
-  info.extra_metadata = {{"run_id", stage.run_id()},
-                         {"model", r.model_name},
-                         {"refine_residual_white", r.residual_white() ? "true" : "false"},
-                         {"refine_stop_reason", r.stop_reason}};
-  write_four_sensor_result(stage.dir(), r.after, info);
+  io::ResultWriteInfo info{opts.source, "X", "Y", {}};
+  if (out.sequence && sequence_is_the_result(in.sequence->first)) {
+    // The sequence's refined fit is the result of such a scan (service/four_sensor_pipeline.hpp):
+    // the refined files say the same, not the weaker single-scan refine of m1..m4.
+    info.extra_metadata = {{"run_id", stage.run_id()}};
+    describe_sequence_result(in.cfg, in.sequence->first, *out.sequence, in.x_mm, info);
+    info.summary_notes.push_back(
+        "refine_steps.csv and refine_report.txt: the single-scan refine of each configuration's "
+        "first traverse (m1..m4, model " +
+        r.model_name + "), for comparison");
+    io::write_four_sensor_result(
+        stage.dir(), sequence_as_result(r.before, in.sequence->first, *out.sequence), info);
+  } else {
+    info.extra_metadata = {{"run_id", stage.run_id()},
+                           {"model", r.model_name},
+                           {"refine_residual_white", r.residual_white() ? "true" : "false"},
+                           {"refine_stop_reason", r.stop_reason}};
+    io::write_four_sensor_result(stage.dir(), r.after, info);
+  }
   {
     // The residual of every reading under the final model (least squares, Eq. 1 plus the added
     // effects), with its time: what the whiteness tests looked at.
     const core::ResidualAnalysis& ra = r.residual;
     const core::WhitenessTest& w = ra.whiteness;
-    CsvTable t;
+    io::CsvTable t;
     t.set_meta("format", "errsep refine residual");
     t.set_meta("source", opts.source);
     t.set_meta("run_id", stage.run_id());
@@ -265,11 +231,11 @@ RefineRunResult run_refine(const FourSensorInputs& in, const fs::path& out_dir,
       for (Eigen::Index i = 0; i < 4; ++i)
         t.rows.push_back(
             {in.x_mm(n), static_cast<double>(i + 1), r.t_s(n, i), ra.residual_um(n, i)});
-    write_csv(stage.dir() / "refine_residual.csv", t);
+    io::write_csv(stage.dir() / "refine_residual.csv", t);
   }
   if (out.reference) {
     const ReferenceReport& rep = *out.reference;
-    CsvTable t;
+    io::CsvTable t;
     t.set_meta("format", "errsep reference comparison");
     t.set_meta("run_id", stage.run_id());
     t.set_meta("reference", rep.file);
@@ -282,19 +248,19 @@ RefineRunResult run_refine(const FourSensorInputs& in, const fs::path& out_dir,
     if (rep.S_before) add_comparison(t, 0, *rep.S_before, *rep.S_after);
     if (rep.gamma_before) add_comparison(t, 1, *rep.gamma_before, *rep.gamma_after);
     if (rep.f_before) add_comparison(t, 2, *rep.f_before, *rep.f_after);
-    write_csv(stage.dir() / "reference_comparison.csv", t);
+    io::write_csv(stage.dir() / "reference_comparison.csv", t);
   }
   out.files = stage.commit();
   return out;
 }
 
 RefineRunResult run_refine(const fs::path& raw_csv, const fs::path& out_dir,
-                           const RefineRunOptions& opts, const GeometryOverrides& geometry) {
-  const RawFourSensorScan raw = read_raw_four_sensor_csv(raw_csv);
-  const FourSensorInputs in = four_sensor_inputs(raw, raw_csv, geometry);
+                           const RefineRunOptions& opts, const io::GeometryOverrides& geometry) {
+  const io::RawFourSensorScan raw = io::read_raw_four_sensor_csv(raw_csv);
+  const io::FourSensorInputs in = io::four_sensor_inputs(raw, raw_csv, geometry);
   RefineRunOptions o = opts;
   if (o.source.empty()) o.source = raw_csv.string();
   return run_refine(in, out_dir, o);
 }
 
-}  // namespace errsep::io
+}  // namespace errsep::service

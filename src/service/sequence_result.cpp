@@ -1,0 +1,114 @@
+#include "errsep/service/sequence_result.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <utility>
+
+#include "errsep/core/iso230.hpp"
+#include "errsep/io/csv.hpp"
+
+namespace errsep::service {
+
+bool sequence_is_the_result(const core::ScanSequence& seq) {
+  return seq.redundant() || seq.name != core::to_string(core::ScanSequenceKind::single);
+}
+
+core::FourSensorResult sequence_as_result(const core::FourSensorResult& single,
+                                          const core::ScanSequence& seq,
+                                          const core::SequenceRefineResult& sr) {
+  const core::SequenceFit& fit = sr.after;
+  core::FourSensorResult r;
+  r.config = single.config;
+  r.x_mm = single.x_mm;
+  r.f_x_mm = single.f_x_mm;
+  r.S_um = fit.S_um;
+  r.gamma_rad = fit.gamma_rad;
+  r.f_um = fit.f_um;
+  r.u_S_um = fit.u_S_in_gauge_um();
+  r.u_gamma_rad = fit.u_gamma_rad;
+  r.u_f_um = fit.u_f_um;
+  r.sensor_residual_um.resize(fit.residual_um.rows(), 4);
+  for (int c = 0; c < 4; ++c)
+    for (int k = 0; k < seq.size(); ++k)
+      if (seq.traverses[static_cast<std::size_t>(k)].configuration == c) {
+        r.sensor_residual_um.col(c) = fit.residual_um.col(k);
+        r.e_um(c) = fit.e_um(k);
+        break;
+      }
+  r.lambda = 0.0;
+  r.rule = core::LambdaRule::least_squares;
+  r.estimator = single.estimator;
+  r.penalty = core::Penalty::none;
+  r.gauge = core::CurvatureGauge::reference_without_curvature;
+  r.sigma_um = fit.sigma_um;
+  r.redundancy_dof = fit.dof;
+  r.edf = static_cast<double>(fit.residual_um.size() - fit.dof);
+  r.residual_norm = std::sqrt(fit.rss_um2);
+  return r;
+}
+
+void describe_sequence_result(const core::FourSensorConfig& cfg, const core::ScanSequence& seq,
+                              const core::SequenceRefineResult& sr, const Eigen::VectorXd& x_mm,
+                              io::ResultWriteInfo& info) {
+  std::string added;
+  for (const auto& a : sr.added)
+    added += (added.empty() ? "" : ", ") + std::string(core::to_string(a.kind));
+  const std::string what =
+      "scan sequence fit (plan: " + seq.name + ", " + std::to_string(seq.size()) +
+      " traverses, least squares), effects applied: " + (added.empty() ? "none" : added);
+  {
+    // summary.txt's first line names the fit (brief_report() would say "least_squares").
+    const core::FourSensorConfig& g = cfg;
+    char title[512];
+    std::snprintf(title, sizeof title,
+                  "four-sensor scan sequence fit N=%d P=%d s=(%d,%d,%d) dx=%.4g mm: plan %s, "
+                  "%d traverses, every reading in one unregularised least-squares fit (Eq. 1 "
+                  "per traverse, own zero adjustment each), effects applied: %s%s, "
+                  "sigma_hat=%.3g um (dof %d)",
+                  g.N, g.positions(), g.s2, g.s3, g.s4, g.dx_mm, seq.name.c_str(), seq.size(),
+                  added.empty() ? "none" : added.c_str(),
+                  sr.knock.fitted && sr.knock.applied ? ", knocked sensor removed" : "",
+                  sr.after.sigma_um, sr.after.dof);
+    info.title = title;
+    // residuals.csv: every traverse, with its direction and time.
+    io::ResultWriteInfo::TraverseResiduals tr;
+    tr.residual_um = sr.after.residual_um;
+    tr.t_s = seq.times_s(g);
+    for (const auto& t : seq.traverses) {
+      tr.configuration.push_back(t.configuration + 1);
+      tr.direction.push_back(t.direction == core::TraverseDirection::forward ? 1 : -1);
+    }
+    info.traverses = std::move(tr);
+  }
+  info.estimator = "scan_sequence_fit";
+  info.uncertainty_model =
+      "covariance of the unregularised least-squares fit of every traverse (no prior, no "
+      "shrinkage), sigma from its residual; applied effects' parameters and tau included, "
+      "widened by what effects detected but not identifiable from the plan could do to S";
+  info.extra_metadata.emplace_back("scan_plan", seq.name);
+  info.extra_metadata.emplace_back("separation", what);
+  info.summary_notes.push_back("result: " + what + "; sigma_hat " +
+                               io::format_number(sr.after.sigma_um) + " um (" +
+                               std::to_string(sr.after.dof) + " dof)");
+  if (sr.u_S_widening_um.size() && sr.u_S_widening_um.maxCoeff() > 0)
+    info.summary_notes.push_back(
+        "u_S includes what effects detected but not identifiable from this plan could do to "
+        "S (see the findings)");
+  for (const auto& line : sr.report)
+    info.summary_notes.push_back("finding: " + line);
+  // ISO 230-1 straightness with U from the fit's covariance (as the separation writes its
+  // own from its posterior covariance).
+  for (const auto ref : {core::ReferenceLine::end_points, core::ReferenceLine::least_squares,
+                         core::ReferenceLine::minimum_zone}) {
+    const auto e = core::sequence_straightness(sr.after, x_mm, ref);
+    const std::string key = std::string("straightness_") + core::to_string(ref);
+    info.motion_metadata.emplace_back(key + "_um", io::format_number(e.straightness_um));
+    info.motion_metadata.emplace_back(key + "_U_um", io::format_number(e.expanded_um));
+    info.motion_metadata.emplace_back(key + "_bias_um", io::format_number(e.bias_um));
+    info.motion_metadata.emplace_back(key + "_of_estimate_um",
+                                      io::format_number(e.zone.straightness_um));
+  }
+}
+
+}  // namespace errsep::service
