@@ -157,6 +157,81 @@ std::string thermal_name(double tau_s) {
   return buf;
 }
 
+/// An effect not taken that the taken ones' columns reproduce: the parameter shift that moves
+/// the fit from the taken explanation to it along the shared direction N = (n_T, n_C) of the
+/// joint columns' null space (X_T n_T + X_C n_C = 0), for the chosen parameters the applied
+/// ones only (what the result contains).
+struct ConfoundedAlternative {
+  const DisplacementEffect* effect = nullptr;
+  std::string taken_name;  ///< the taken effect (group) that explains it instead
+  Eigen::VectorXd shift_taken, shift_candidate;          ///< z·n_T (applied only), z·n_C
+  Eigen::VectorXd direction_taken, direction_candidate;  ///< n_T (applied only), n_C
+  double shift_variance = 0;                             ///< var(z)
+};
+
+std::vector<ConfoundedAlternative> confounded_alternatives(
+    const Eigen::MatrixXd& X, const Eigen::VectorXd& beta, const Eigen::MatrixXd& cov,
+    const std::vector<bool>& applied, const std::vector<DisplacementEffect>& chosen,
+    const DisplacementEffectLibrary& lib, const Eigen::VectorXd& wt, double tolerance) {
+  std::vector<ConfoundedAlternative> out;
+  const auto K = X.cols();
+  for (const auto& e : lib.effects) {
+    if (!e.identifiable) continue;
+    if (std::any_of(chosen.begin(), chosen.end(),
+                    [&](const DisplacementEffect& c) { return c.family == e.family; }))
+      continue;
+    const auto kc = e.residual_columns.cols();
+    Eigen::MatrixXd Z(X.rows(), K + kc);
+    Z << X, wt.asDiagonal() * e.residual_columns;
+    Eigen::VectorXd scale(K + kc);
+    for (Eigen::Index j = 0; j < K + kc; ++j) {
+      const double n = Z.col(j).norm();
+      scale(j) = n > 0 ? 1.0 / n : 0.0;
+    }
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(Z * scale.asDiagonal(), Eigen::ComputeThinV);
+    const Eigen::VectorXd& sv = svd.singularValues();
+    for (Eigen::Index i = 0; i < sv.size(); ++i) {
+      if (!(sv(i) < tolerance)) continue;
+      const Eigen::VectorXd v = svd.matrixV().col(i);
+      // Only a direction shared by the taken columns and the candidate's (a null direction of
+      // the taken columns alone is their own business, already in cov as a pseudo-inverse).
+      if (v.head(K).norm() < 0.1 || v.tail(kc).norm() < 0.1) continue;
+      const Eigen::VectorXd N = scale.cwiseProduct(v);
+      const Eigen::VectorXd nT = N.head(K);
+      const double nn = nT.squaredNorm();
+      // z: the shift along N that leaves no taken parameter along n_T (the candidate explains it).
+      const double z = -nT.dot(beta) / nn;
+      ConfoundedAlternative a;
+      a.effect = &e;
+      a.direction_taken = nT;
+      for (Eigen::Index j = 0; j < K; ++j)
+        if (!applied[static_cast<std::size_t>(j)]) a.direction_taken(j) = 0;
+      a.direction_candidate = N.tail(kc);
+      a.shift_taken = z * a.direction_taken;
+      a.shift_candidate = z * a.direction_candidate;
+      a.shift_variance = std::max(0.0, nT.dot(cov * nT)) / (nn * nn);
+      // Name the taken parameters the direction runs through.
+      Eigen::Index c0 = 0, best = 0;
+      double best_w = -1;
+      for (Eigen::Index j = 0; j < K; ++j)
+        if (std::abs(nT(j)) / scale(j) > best_w) {
+          best_w = std::abs(nT(j)) / scale(j);
+          best = j;
+        }
+      for (const auto& c : chosen) {
+        const auto k = c.residual_columns.cols();
+        if (best < c0 + k) {
+          a.taken_name = c.family + " (" + c.parameters[static_cast<std::size_t>(best - c0)] + ")";
+          break;
+        }
+        c0 += k;
+      }
+      out.push_back(std::move(a));
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 bool DisplacementRefineOptions::is_valid(std::string* why) const {
@@ -528,8 +603,30 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
     // refined_uncertainty with the roles swapped adds diag(D_L C_LL D_Lᵀ) (no bias term).
     return refined_uncertainty(u, D, cov, no_bias, left_out);
   };
-  const Eigen::VectorXd uw = widened(out.refined.u_w_um, Dw);
-  const Eigen::VectorXd um = widened(out.refined.u_m_w_um, Dm);
+  Eigen::VectorXd uw = widened(out.refined.u_w_um, Dw);
+  Eigen::VectorXd um = widened(out.refined.u_m_w_um, Dm);
+  // An effect not taken whose columns the taken ones reproduce exactly explains the same
+  // residual: the selection kept one explanation, the data cannot choose.  Its w is carried in u.
+  for (const auto& alt : confounded_alternatives(X, fit.beta, cov, applied, chosen, lib, wt,
+                                                 o.identifiable_tolerance)) {
+    const Eigen::VectorXd dw = Dw * alt.shift_taken + alt.effect->d_w[rot] * alt.shift_candidate;
+    const Eigen::VectorXd dm = Dm * alt.shift_taken + alt.effect->d_m_w[rot] * alt.shift_candidate;
+    const Eigen::VectorXd sw =
+        Dw * alt.direction_taken + alt.effect->d_w[rot] * alt.direction_candidate;
+    const Eigen::VectorXd sm =
+        Dm * alt.direction_taken + alt.effect->d_m_w[rot] * alt.direction_candidate;
+    uw = (uw.array().square() + dw.array().square() + alt.shift_variance * sw.array().square())
+             .sqrt();
+    um = (um.array().square() + dm.array().square() + alt.shift_variance * sm.array().square())
+             .sqrt();
+    char buf[320];
+    std::snprintf(buf, sizeof buf,
+                  "%s and %s: not separable on this plan (the data fit both alike); taken as %s, "
+                  "as %s w would differ by %.3g um rms (carried in u)",
+                  alt.taken_name.c_str(), alt.effect->family.c_str(), alt.taken_name.c_str(),
+                  alt.effect->family.c_str(), std::sqrt(dw.array().square().mean()));
+    out.not_identifiable.push_back(buf);
+  }
   out.refined.u_w_um = Eigen::Map<const Eigen::MatrixXd>(uw.data(), lib.nx, lib.ny);
   out.refined.u_m_w_um = Eigen::Map<const Eigen::MatrixXd>(um.data(), lib.nx, lib.ny);
   return out;
