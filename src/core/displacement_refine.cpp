@@ -506,6 +506,7 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
   // decision's covariance, not a step: a τ̂ at the edge of its bracket can leave dtau_s far from
   // 0, and amplitudes conditioned on it would not match the readings corrected at τ̂).
   Eigen::VectorXd applied_value = fit.beta;
+  double rss_applied = fit.rss;  // of the fit the applied values come from
   {
     std::vector<Eigen::Index> keep;
     Eigen::Index c = 0;
@@ -519,6 +520,7 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
       for (std::size_t j = 0; j < keep.size(); ++j)
         X0.col(static_cast<Eigen::Index>(j)) = X.col(keep[j]);
       const detail::LsFit f0 = detail::least_squares(X0, y);
+      rss_applied = f0.rss;
       applied_value.setZero();
       for (std::size_t j = 0; j < keep.size(); ++j)
         applied_value(keep[j]) = f0.beta(static_cast<Eigen::Index>(j));
@@ -605,6 +607,48 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
   };
   Eigen::VectorXd uw = widened(out.refined.u_w_um, Dw);
   Eigen::VectorXd um = widened(out.refined.u_m_w_um, Dm);
+  // τ is not a linear parameter: the Gauss–Newton column carries its scatter only near τ̂, and
+  // a first-order drift that settles within a scan leaves the residual nearly flat in τ over a
+  // wide range, where the amplitudes (and what they do to w) change fast.  Every τ of the
+  // library's grid that the data do not reject (profile likelihood, 95 %: the residual sum of
+  // squares within χ²₁ = 3.84 σ̂² of the one at τ̂) is refitted with the other chosen effects,
+  // and the largest change of the thermal correction's w over that set is carried in u.
+  {
+    Eigen::Index off = 0;
+    for (std::size_t t = 0; t < chosen.size(); ++t) {
+      const auto& e = chosen[t];
+      if (e.family != "thermal") {
+        off += e.residual_columns.cols();
+        continue;
+      }
+      const Eigen::VectorXd w_hat = e.d_w[rot].leftCols(5) * applied_value.segment(off, 5);
+      const Eigen::VectorXd m_hat = e.d_m_w[rot].leftCols(5) * applied_value.segment(off, 5);
+      Eigen::VectorXd spread_w = Eigen::VectorXd::Zero(N), spread_m = Eigen::VectorXd::Zero(N);
+      double tau_lo = e.tau_s, tau_hi = e.tau_s;
+      for (const auto& f : lib.effects) {
+        if (f.family != "thermal") continue;
+        auto fx = pointers(chosen);
+        fx[t] = &f;
+        const detail::LsFit ff = detail::least_squares(columns(fx), y);
+        if (ff.rss - rss_applied > 3.84 * out.sigma_scale) continue;
+        tau_lo = std::min(tau_lo, f.tau_s);
+        tau_hi = std::max(tau_hi, f.tau_s);
+        spread_w = spread_w.cwiseMax(
+            (f.d_w[rot].leftCols(5) * ff.beta.segment(off, 5) - w_hat).cwiseAbs());
+        spread_m = spread_m.cwiseMax(
+            (f.d_m_w[rot].leftCols(5) * ff.beta.segment(off, 5) - m_hat).cwiseAbs());
+      }
+      uw = (uw.array().square() + spread_w.array().square()).sqrt();
+      um = (um.array().square() + spread_m.array().square()).sqrt();
+      char buf[240];
+      std::snprintf(buf, sizeof buf,
+                    "thermal tau %.0f s fitted; %.0f-%.0f s not rejected by the data (95 %%): its "
+                    "w differs by up to %.3g um rms over that range (carried in u)",
+                    e.tau_s, tau_lo, tau_hi, std::sqrt(spread_w.array().square().mean()));
+      out.not_identifiable.push_back(buf);
+      off += e.residual_columns.cols();
+    }
+  }
   // An effect not taken whose columns the taken ones reproduce exactly explains the same
   // residual: the selection kept one explanation, the data cannot choose.  Its w is carried in u.
   for (const auto& alt : confounded_alternatives(X, fit.beta, cov, applied, chosen, lib, wt,
