@@ -157,6 +157,81 @@ std::string thermal_name(double tau_s) {
   return buf;
 }
 
+/// An effect not taken that the taken ones' columns reproduce: the parameter shift that moves
+/// the fit from the taken explanation to it along the shared direction N = (n_T, n_C) of the
+/// joint columns' null space (X_T n_T + X_C n_C = 0), for the chosen parameters the applied
+/// ones only (what the result contains).
+struct ConfoundedAlternative {
+  const DisplacementEffect* effect = nullptr;
+  std::string taken_name;  ///< the taken effect (group) that explains it instead
+  Eigen::VectorXd shift_taken, shift_candidate;          ///< z·n_T (applied only), z·n_C
+  Eigen::VectorXd direction_taken, direction_candidate;  ///< n_T (applied only), n_C
+  double shift_variance = 0;                             ///< var(z)
+};
+
+std::vector<ConfoundedAlternative> confounded_alternatives(
+    const Eigen::MatrixXd& X, const Eigen::VectorXd& beta, const Eigen::MatrixXd& cov,
+    const std::vector<bool>& applied, const std::vector<DisplacementEffect>& chosen,
+    const DisplacementEffectLibrary& lib, const Eigen::VectorXd& wt, double tolerance) {
+  std::vector<ConfoundedAlternative> out;
+  const auto K = X.cols();
+  for (const auto& e : lib.effects) {
+    if (!e.identifiable) continue;
+    if (std::any_of(chosen.begin(), chosen.end(),
+                    [&](const DisplacementEffect& c) { return c.family == e.family; }))
+      continue;
+    const auto kc = e.residual_columns.cols();
+    Eigen::MatrixXd Z(X.rows(), K + kc);
+    Z << X, wt.asDiagonal() * e.residual_columns;
+    Eigen::VectorXd scale(K + kc);
+    for (Eigen::Index j = 0; j < K + kc; ++j) {
+      const double n = Z.col(j).norm();
+      scale(j) = n > 0 ? 1.0 / n : 0.0;
+    }
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(Z * scale.asDiagonal(), Eigen::ComputeThinV);
+    const Eigen::VectorXd& sv = svd.singularValues();
+    for (Eigen::Index i = 0; i < sv.size(); ++i) {
+      if (!(sv(i) < tolerance)) continue;
+      const Eigen::VectorXd v = svd.matrixV().col(i);
+      // Only a direction shared by the taken columns and the candidate's (a null direction of
+      // the taken columns alone is their own business, already in cov as a pseudo-inverse).
+      if (v.head(K).norm() < 0.1 || v.tail(kc).norm() < 0.1) continue;
+      const Eigen::VectorXd N = scale.cwiseProduct(v);
+      const Eigen::VectorXd nT = N.head(K);
+      const double nn = nT.squaredNorm();
+      // z: the shift along N that leaves no taken parameter along n_T (the candidate explains it).
+      const double z = -nT.dot(beta) / nn;
+      ConfoundedAlternative a;
+      a.effect = &e;
+      a.direction_taken = nT;
+      for (Eigen::Index j = 0; j < K; ++j)
+        if (!applied[static_cast<std::size_t>(j)]) a.direction_taken(j) = 0;
+      a.direction_candidate = N.tail(kc);
+      a.shift_taken = z * a.direction_taken;
+      a.shift_candidate = z * a.direction_candidate;
+      a.shift_variance = std::max(0.0, nT.dot(cov * nT)) / (nn * nn);
+      // Name the taken parameters the direction runs through.
+      Eigen::Index c0 = 0, best = 0;
+      double best_w = -1;
+      for (Eigen::Index j = 0; j < K; ++j)
+        if (std::abs(nT(j)) / scale(j) > best_w) {
+          best_w = std::abs(nT(j)) / scale(j);
+          best = j;
+        }
+      for (const auto& c : chosen) {
+        const auto k = c.residual_columns.cols();
+        if (best < c0 + k) {
+          a.taken_name = c.family + " (" + c.parameters[static_cast<std::size_t>(best - c0)] + ")";
+          break;
+        }
+        c0 += k;
+      }
+      out.push_back(std::move(a));
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 bool DisplacementRefineOptions::is_valid(std::string* why) const {
@@ -431,6 +506,7 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
   // decision's covariance, not a step: a τ̂ at the edge of its bracket can leave dtau_s far from
   // 0, and amplitudes conditioned on it would not match the readings corrected at τ̂).
   Eigen::VectorXd applied_value = fit.beta;
+  double rss_applied = fit.rss;  // of the fit the applied values come from
   {
     std::vector<Eigen::Index> keep;
     Eigen::Index c = 0;
@@ -444,6 +520,7 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
       for (std::size_t j = 0; j < keep.size(); ++j)
         X0.col(static_cast<Eigen::Index>(j)) = X.col(keep[j]);
       const detail::LsFit f0 = detail::least_squares(X0, y);
+      rss_applied = f0.rss;
       applied_value.setZero();
       for (std::size_t j = 0; j < keep.size(); ++j)
         applied_value(keep[j]) = f0.beta(static_cast<Eigen::Index>(j));
@@ -528,8 +605,72 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
     // refined_uncertainty with the roles swapped adds diag(D_L C_LL D_Lᵀ) (no bias term).
     return refined_uncertainty(u, D, cov, no_bias, left_out);
   };
-  const Eigen::VectorXd uw = widened(out.refined.u_w_um, Dw);
-  const Eigen::VectorXd um = widened(out.refined.u_m_w_um, Dm);
+  Eigen::VectorXd uw = widened(out.refined.u_w_um, Dw);
+  Eigen::VectorXd um = widened(out.refined.u_m_w_um, Dm);
+  // τ is not a linear parameter: the Gauss–Newton column carries its scatter only near τ̂, and
+  // a first-order drift that settles within a scan leaves the residual nearly flat in τ over a
+  // wide range, where the amplitudes (and what they do to w) change fast.  Every τ of the
+  // library's grid that the data do not reject (profile likelihood, 95 %: the residual sum of
+  // squares within χ²₁ = 3.84 σ̂² of the one at τ̂) is refitted with the other chosen effects,
+  // and the largest change of the thermal correction's w over that set is carried in u.
+  {
+    Eigen::Index off = 0;
+    for (std::size_t t = 0; t < chosen.size(); ++t) {
+      const auto& e = chosen[t];
+      if (e.family != "thermal") {
+        off += e.residual_columns.cols();
+        continue;
+      }
+      const Eigen::VectorXd w_hat = e.d_w[rot].leftCols(5) * applied_value.segment(off, 5);
+      const Eigen::VectorXd m_hat = e.d_m_w[rot].leftCols(5) * applied_value.segment(off, 5);
+      Eigen::VectorXd spread_w = Eigen::VectorXd::Zero(N), spread_m = Eigen::VectorXd::Zero(N);
+      double tau_lo = e.tau_s, tau_hi = e.tau_s;
+      for (const auto& f : lib.effects) {
+        if (f.family != "thermal") continue;
+        auto fx = pointers(chosen);
+        fx[t] = &f;
+        const detail::LsFit ff = detail::least_squares(columns(fx), y);
+        if (ff.rss - rss_applied > 3.84 * out.sigma_scale) continue;
+        tau_lo = std::min(tau_lo, f.tau_s);
+        tau_hi = std::max(tau_hi, f.tau_s);
+        spread_w = spread_w.cwiseMax(
+            (f.d_w[rot].leftCols(5) * ff.beta.segment(off, 5) - w_hat).cwiseAbs());
+        spread_m = spread_m.cwiseMax(
+            (f.d_m_w[rot].leftCols(5) * ff.beta.segment(off, 5) - m_hat).cwiseAbs());
+      }
+      uw = (uw.array().square() + spread_w.array().square()).sqrt();
+      um = (um.array().square() + spread_m.array().square()).sqrt();
+      char buf[240];
+      std::snprintf(buf, sizeof buf,
+                    "thermal tau %.0f s fitted; %.0f-%.0f s not rejected by the data (95 %%): its "
+                    "w differs by up to %.3g um rms over that range (carried in u)",
+                    e.tau_s, tau_lo, tau_hi, std::sqrt(spread_w.array().square().mean()));
+      out.not_identifiable.push_back(buf);
+      off += e.residual_columns.cols();
+    }
+  }
+  // An effect not taken whose columns the taken ones reproduce exactly explains the same
+  // residual: the selection kept one explanation, the data cannot choose.  Its w is carried in u.
+  for (const auto& alt : confounded_alternatives(X, fit.beta, cov, applied, chosen, lib, wt,
+                                                 o.identifiable_tolerance)) {
+    const Eigen::VectorXd dw = Dw * alt.shift_taken + alt.effect->d_w[rot] * alt.shift_candidate;
+    const Eigen::VectorXd dm = Dm * alt.shift_taken + alt.effect->d_m_w[rot] * alt.shift_candidate;
+    const Eigen::VectorXd sw =
+        Dw * alt.direction_taken + alt.effect->d_w[rot] * alt.direction_candidate;
+    const Eigen::VectorXd sm =
+        Dm * alt.direction_taken + alt.effect->d_m_w[rot] * alt.direction_candidate;
+    uw = (uw.array().square() + dw.array().square() + alt.shift_variance * sw.array().square())
+             .sqrt();
+    um = (um.array().square() + dm.array().square() + alt.shift_variance * sm.array().square())
+             .sqrt();
+    char buf[320];
+    std::snprintf(buf, sizeof buf,
+                  "%s and %s: not separable on this plan (the data fit both alike); taken as %s, "
+                  "as %s w would differ by %.3g um rms (carried in u)",
+                  alt.taken_name.c_str(), alt.effect->family.c_str(), alt.taken_name.c_str(),
+                  alt.effect->family.c_str(), std::sqrt(dw.array().square().mean()));
+    out.not_identifiable.push_back(buf);
+  }
   out.refined.u_w_um = Eigen::Map<const Eigen::MatrixXd>(uw.data(), lib.nx, lib.ny);
   out.refined.u_m_w_um = Eigen::Map<const Eigen::MatrixXd>(um.data(), lib.nx, lib.ny);
   return out;

@@ -90,6 +90,9 @@ HtmlTable displacement_refine_table(const CsvTable& t, const std::filesystem::pa
     }
     out.rows.push_back({*effect, *decision, size.empty() ? "-" : size, fp, c, ww, a});
   }
+  if (count == 0)
+    out.rows.push_back({"nothing taken: the redundant readings show no effect of the library", "-",
+                        "-", "-", "-", "-", "-"});
   for (int i = 1;; ++i) {
     const auto note = t.meta("note" + std::to_string(i));
     if (!note) break;

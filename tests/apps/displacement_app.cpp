@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <random>
 #include <sstream>
 
 #include "errsep/core/displacement_simulation.hpp"
@@ -695,24 +696,27 @@ TEST_CASE("errsep-budget prints and writes the paper budget, and fails cleanly o
 // paper's order the account says the drift is not identifiable from this plan.
 TEST_CASE("two-axis --refine: a sensor drift is taken on the plan that identifies it") {
   TempDir dir;
-  auto run_plan = [&](bool backward_y_fastest, const std::string& name, double drift = 1.0) {
+  auto run_plan = [&](bool backward_y_fastest, const std::string& name, double drift = 1.0,
+                      std::uint64_t seed = 21) {
     core::TwoAxisSimOptions so;
     so.nx = 15;
     so.ny = 15;
     so.eddy_sensor.noise_sigma_um = 0.1;
     so.contact_sensor.noise_sigma_um = 0.18;
     so.record_s0_scan2 = true;
-    so.seed = 21;
+    so.seed = seed;
     so.timing.sample_period_s = 1.0;
     so.timing.pause_between_scans_s = 60.0;
     so.reverse_scan2 = backward_y_fastest;
     so.y_fastest_scan2 = backward_y_fastest;
     // About 0.005 σ per s on each sensor: core/displacement_refine's drift cells (0.002 σ per s on
     // 25 x 25) scaled to this shorter scan.
+    // Seed 21 keeps the signs it always had; other seeds draw a random sign per sensor.
     so.disturbance.drift_um_per_s = {0.0004, -0.0006, 0.0005, 0.00045, -0.00055};
+    std::mt19937_64 rng(seed);
     for (auto& v : so.disturbance.drift_um_per_s)
-      v *= drift;
-    const auto sim = core::simulate_two_axis(test::random_two_axis_truth(21, 0.0), so);
+      v *= drift * (seed == 21 || rng() % 2 ? 1.0 : -1.0);
+    const auto sim = core::simulate_two_axis(test::random_two_axis_truth(seed, 0.0), so);
     write_two_axis(dir / (name + ".csv"), sim.scan);
     std::string out;
     const std::string plan = backward_y_fastest ? " --scan2-order backward --scan2-y-fastest" : "";
@@ -744,30 +748,45 @@ TEST_CASE("two-axis --refine: a sensor drift is taken on the plan that identifie
     return std::sqrt(s);
   };
 
-  const auto sim = run_plan(true, "bw");
-  const auto t = io::read_csv(dir / "bw_w.refine.csv", {.allow_non_finite = true, .min_rows = 0});
-  CHECK(t.meta("plan").value_or("") != "");
-  bool drift_taken = false;
-  for (int s = 1; s <= std::stoi(t.meta("steps").value_or("0")); ++s)
-    drift_taken =
-        drift_taken ||
-        t.meta("step" + std::to_string(s) + "_effect").value_or("").rfind("drift", 0) == 0;
-  CHECK(drift_taken);
-  const auto before = shape_error(io::read_csv(dir / "bw_w.csv").column("w_um"), sim.w_um);
-  const auto refined = io::read_csv(dir / "bw_w.refined.csv");
-  const auto after = shape_error(refined.column("w_um"), sim.w_um);
-  const auto u = refined.column("u_w_um");
-  std::printf(
-      "two-axis, drift on every sensor, scan 2 y fastest backwards: w error %.3f -> %.3f um "
-      "rms (applied: %s)\n",
-      rms(before), rms(after), t.meta("applied_any").value_or("?").c_str());
-  CHECK(rms(after) <= 0.5 * rms(before));  // halved
-  // The same grid and noise without the drift, for scale (printed).
-  const auto clean_sim = run_plan(true, "clean", 0.0);
-  std::printf("  the same scan without the drift: w error %.3f um rms\n",
-              rms(shape_error(io::read_csv(dir / "clean_w.csv").column("w_um"), clean_sim.w_um)));
-  for (std::size_t k = 0; k < after.size(); ++k)
-    CHECK(std::abs(after[k]) <= 4 * u[k]);
+  // Five seeds (random stage, noise and drift signs; ~0.4 s each).
+  int halved = 0;
+  for (std::uint64_t seed = 21; seed <= 25; ++seed) {
+    const std::string name = "bw" + std::to_string(seed);
+    const auto sim = run_plan(true, name, 1.0, seed);
+    const auto t =
+        io::read_csv(dir / (name + "_w.refine.csv"), {.allow_non_finite = true, .min_rows = 0});
+    CHECK(t.meta("plan").value_or("") != "");
+    bool drift_taken = false;
+    for (int s = 1; s <= std::stoi(t.meta("steps").value_or("0")); ++s)
+      drift_taken =
+          drift_taken ||
+          t.meta("step" + std::to_string(s) + "_effect").value_or("").rfind("drift", 0) == 0;
+    CHECK(drift_taken);
+    const auto before = shape_error(io::read_csv(dir / (name + "_w.csv")).column("w_um"), sim.w_um);
+    const auto refined = io::read_csv(dir / (name + "_w.refined.csv"));
+    const auto after = shape_error(refined.column("w_um"), sim.w_um);
+    const auto u = refined.column("u_w_um");
+    // The same grid and noise without the drift, for scale (printed).
+    const auto clean_sim = run_plan(true, "clean" + std::to_string(seed), 0.0, seed);
+    int within = 0;
+    for (std::size_t k = 0; k < after.size(); ++k)
+      within += std::abs(after[k]) <= 4 * u[k];
+    std::printf(
+        "two-axis, seed %llu, drift on every sensor, scan 2 y fastest backwards: w error %.3f -> "
+        "%.3f um rms (applied: %s; without the drift %.3f); within 4u at %d/%zu points\n",
+        static_cast<unsigned long long>(seed), rms(before), rms(after),
+        t.meta("applied_any").value_or("?").c_str(),
+        rms(shape_error(
+            io::read_csv(dir / ("clean" + std::to_string(seed) + "_w.csv")).column("w_um"),
+            clean_sim.w_um)),
+        within, after.size());
+    halved += rms(after) <= 0.5 * rms(before);
+    CHECK(within == static_cast<int>(after.size()));
+  }
+  // Halved in >= 80 % of the runs (issue 16).  Seed 22 draws signs whose drift moves w by only
+  // 1.67 um and is not halved (1.655 um after), though within 4u everywhere.
+  std::printf("  halved in %d/5 seeds\n", halved);
+  CHECK(halved >= 4);
 
   (void)run_plan(false, "paper");
   // Nothing may be taken there: the account may have no rows.

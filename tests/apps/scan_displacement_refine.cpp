@@ -327,3 +327,57 @@ TEST_CASE(
   CHECK(covered);
   (void)check("forward");
 }
+
+TEST_CASE(
+    "scan --method displacement --refine without drift, five simulator seeds, both scan 2 "
+    "orders: coverage of the refined u(w)") {
+  // The simulated machine's noise only (no drift): nothing should be applied, and the refined
+  // u(w) (the separation's when nothing is taken) should cover the machine's w at about 95 % of
+  // the points within 2u.  Five seeds x two orders, ~1.2 s a scan (~12 s).  Coverage is printed,
+  // not asserted: the simulator's readings depend on when they are sampled (jitter, missed
+  // periods under load), so a seed does not fix the noise, and a scan's 25 points share one σ̂
+  // (24 dof) and the random walk of Eq. (9): one scan covers 25/25 or 10/25 (the paper order's
+  // seed 3 gave 10, 25 and — pooled with the others — 110, 125 and 118 of 125 in three runs).
+  // Clean runs where a correction is applied are asserted at most 1 of 10 (issue 16: <= 5 %).
+  TempDir dir;
+  int applied_total = 0;
+  for (const char* order : {"forward", "backward"}) {
+    long within = 0, points = 0;
+    int applied = 0;
+    for (int seed = 1; seed <= 5; ++seed) {
+      std::string cfg = test::quick_simulator_config();
+      cfg =
+          std::regex_replace(cfg, std::regex("drift_um_per_s = [-0-9.e]+"), "drift_um_per_s = 0.0");
+      cfg = std::regex_replace(cfg, std::regex("\nseed = [0-9]+"),
+                               "\nseed = " + std::to_string(seed));
+      const fs::path cfg_path = dir / ("machine" + std::to_string(seed) + ".toml");
+      std::ofstream(cfg_path) << cfg;
+      REQUIRE_THAT(test::read_file(cfg_path), Catch::Contains("seed = " + std::to_string(seed)));
+      const auto mc = io::load_machine_config(cfg_path);
+      const fs::path out = dir / (std::string(order) + std::to_string(seed));
+      std::string output;
+      const int rc =
+          run_command(scan_cmd(cfg_path, out) + " --scan2-order " + std::string(order), &output);
+      INFO(output);
+      REQUIRE(rc == 0);
+      const auto t = io::read_csv(out / "refine" / "displacement.csv");
+      // No rows when nothing is taken and the plan identifies every effect (backwards).
+      const auto account = io::read_csv(out / "refine" / "displacement_refine.csv",
+                                        {.allow_non_finite = true, .min_rows = 0});
+      applied += account.meta("applied_any") == std::optional<std::string>("true");
+      const auto x = t.column("x_mm"), w = t.column("w_um"), u = t.column("u_w_um");
+      const double gauge = mc.simulator.r_um.eval(x.front());  // r(x_1) = 0 (Eq. 9)
+      int in = 0;
+      for (std::size_t k = 0; k < x.size(); ++k)
+        in += std::abs(w[k] - mc.simulator.w_um.eval(x[k]) + gauge) <= 2 * u[k];
+      std::printf("clean, scan 2 %s, seed %d: refined w within 2u at %d/%zu points\n", order, seed,
+                  in, x.size());
+      within += in;
+      points += static_cast<long>(x.size());
+    }
+    std::printf("clean, scan 2 %s: within 2u at %ld/%ld points, applied in %d/5\n", order, within,
+                points, applied);
+    applied_total += applied;
+  }
+  CHECK(applied_total <= 1);
+}

@@ -42,6 +42,28 @@
 // groups (columns) are read within n_x samples, so a drift of sensors 3-4 is seen only through
 // its fast part, while what it does to w comes from its slow part (the column means, absorbed by
 // r_y): in the backward plan sensors 1-2 drift rates are determined ~25x better than 3-4's.
+//
+// What the data cannot separate (carried in u, said in not_identifiable).  On every plan but the
+// paper's, the time between a point's two sensor-0 readings is affine in the grid indices, so
+// sensor 0's drift is one direction of a table tilt (only sensor 0's repeat sees either): when
+// one is taken, the other explanation of the same residual (the shift along the joint columns'
+// null direction) moves w by what it would have done, and that goes into u.  A thermal drift's τ
+// is not linear: every τ of the grid within the 95 % profile-likelihood set is refitted and the
+// largest change of the thermal correction's w goes into u (the Gauss–Newton column alone left
+// y fastest backwards covering 0.93 at σ 0.2, one run 0.08).
+//
+// Why thermal drift is rarely halved on the two-scan plans (measured on scan 2 y fastest
+// backwards, 20 seeds at σ 0.05/0.1/0.2: given the true τ and every group applied, 11/14/9 halved;
+// with the drift on sensors 0-2 only, 15/16/16; on sensors 0, 3, 4 only, 1/6/4): a reference
+// piece's redundancy compares its readings along one axis, and scan 1 (x fastest, the paper)
+// spreads a column (what sensors 3-4 compare) over only n_x samples, so sensors 3-4 see only scan
+// 2's time variation, while a drift with τ below about one scan has mostly settled by then.  Their
+// amplitudes stay determined to 2-5 µm per µm of noise (group_u_w_per_sigma) while the drift
+// moves w by ~5x the clean error: the correction cannot halve it.  By the same reasoning (not
+// built, not measured) swapping which scan runs y fastest moves the blind spot to sensors 1-2;
+// what should make it identifiable is a scan 1 whose reading times vary along rows and columns
+// alike (a third scan y fastest early, or an order other than a raster) or a warm-up of a few τ
+// before scan 1.
 #include <Eigen/Core>
 #include <string>
 #include <vector>
@@ -120,7 +142,9 @@ struct DisplacementRefineResult {
   TwoAxisResult base;     ///< the separation of the readings as measured
   TwoAxisResult refined;  ///< of the corrected readings; u_w_um, u_m_w_um the refined ones
   std::vector<DisplacementRefineStep> steps;  ///< effects taken (applied or detected)
-  std::vector<std::string> not_identifiable;  ///< the library's, said once
+  /// The library's lines (what the plan cannot identify, said once), then this run's: two effects
+  /// the data cannot separate, the range of thermal τ the data do not reject (both carried in u).
+  std::vector<std::string> not_identifiable;
   double sigma_scale = 1;  ///< residual variance after the fit over σ̂² (≈ 1 when the model fits)
   bool applied_any() const;
   std::string brief_report() const;
