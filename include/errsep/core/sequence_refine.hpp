@@ -194,6 +194,32 @@ struct SequenceCandidate {
   double u_S_added_um = 0;
 };
 
+/// A sensor non-linearity m = u + c₂·(u − mid)² (u the linear reading) found by the trace's
+/// reading-level test (residual_trace.hpp; not in the effect library).  On one pass per
+/// configuration most of c₂·(u − mid)² is absorbed by f, S, γ and e; a plan that reads
+/// configurations again with the sensor re-zeroed by Δ (ScanSequence::rezeroed) adds the
+/// difference 2·c₂·Δ·(u − mid) + const between the passes, which none of them absorbs, so c₂ is
+/// determined and the readings can be corrected: the fit with the column (û − mid)² at the
+/// fitted readings û (one Gauss–Newton step from c₂ = 0; c₂·σ is negligible), c₂ carried in u_S
+/// by the joint fit.  Applied only when the plan re-zeroes and the column's F test is
+/// significant; otherwise reported with its fitted size (what it could do to S is not bounded
+/// by the trace on a plan without re-zeroing).
+struct SequenceNonlinearity {
+  bool detected = false;      ///< the trace's quadratic reading-level test significant
+  bool identifiable = false;  ///< the plan re-zeroes (ScanSequence::rezeroed)
+  bool applied = false;       ///< the result is the fit with c₂
+  double c2_per_um = 0, u_c2_per_um = 0, mid_um = 0;
+  double F = 0, p_value = 1;  ///< of the c₂ column in the sequence fit
+  std::string finding;        ///< one line when detected, else empty
+};
+
+/// The sequence fit with the non-linearity column of SequenceNonlinearity at before's fitted
+/// readings; the figures go to `nl`.  `alpha`: the F test's level.  Throws as
+/// fit_four_sensor_sequence.
+SequenceFit fit_sequence_nonlinearity(const FourSensorConfig& cfg, const ScanSequence& seq,
+                                      const Eigen::MatrixXd& m_um, const SequenceFit& before,
+                                      SequenceNonlinearity* nl, double alpha = 0.01);
+
 struct SequenceRefineResult {
   std::string plan;                            ///< "single", "closing pass", … or "custom"
   SequenceFit before, after;                   ///< without effects; with the added ones
@@ -214,6 +240,8 @@ struct SequenceRefineResult {
   std::vector<SequenceIdentifiability> plan_identifiability;  ///< drift, thermal, traverse
   /// A knocked sensor named by the repeated traverses, fitted before the effects.
   SequenceKnock knock;
+  /// A sensor non-linearity the trace found; corrected when the plan re-zeroes.
+  SequenceNonlinearity nonlinearity;
   /// The residual of every traverse under the final fit traced against time, position, reading
   /// level and direction (trace_sequence_residual); its findings are also in `report`.
   ResidualTrace trace;
