@@ -546,7 +546,8 @@ TEST_CASE("must-show at sigma 0.05 and 0.2 um: single and reversed plans") {
 // during a random traverse at a random position in the middle three fifths, and the sensor stays
 // knocked for every later traverse.  Asserted per σ: the knocked configuration and place named in
 // >= 80 % of runs; in every run S lies within 4 u_S of the truth at every point (bow removed from
-// both, as u_S); on clean scans of the same seeds (σ 0.1) a knock is fitted in at most 1 of 20.
+// both, as u_S); on clean scans of the same seeds a knock is fitted in at most 1 of 20 per σ.
+// 20 seeds per σ (the issue's cell size; ~35 s of the suite's time on a loaded machine).
 // Printed: the same runs with the knock search off (the sequence fit before this change).
 TEST_CASE("a knock in one traverse of a reversed plan is named and S ends within 4 u_S") {
   const FourSensorConfig cfg;
@@ -555,7 +556,7 @@ TEST_CASE("a knock in one traverse of a reversed plan is named and S ends within
   off.find_knocks = false;
   SequenceModel model(cfg, seq), model_off(cfg, seq, off);
   const int P = cfg.positions(), T = seq.size();
-  for (const auto& [sigma, seeds] : {std::pair{0.05, 10}, std::pair{0.1, 20}, std::pair{0.2, 10}}) {
+  for (const auto& [sigma, seeds] : {std::pair{0.05, 20}, std::pair{0.1, 20}, std::pair{0.2, 20}}) {
     int named = 0, within = 0, within_off = 0, applied = 0, clean_fitted = 0, clean_runs = 0;
     double covered = 0, points = 0;
     std::vector<double> before, after, worst_z;
@@ -608,10 +609,8 @@ TEST_CASE("a knock in one traverse of a reversed plan is named and S ends within
             sigma, static_cast<int>(seed), ci + 1, K + 1, first, a, r.knock.scan.configuration + 1,
             r.knock.scan.position, r.knock.scan.p_value, r.knock.scan.attributed ? 1 : 0,
             r.knock.finding.empty() ? "(nothing)" : r.knock.finding.c_str(), z);
-      if (sigma == 0.1) {
-        ++clean_runs;
-        clean_fitted += model.refine(d.m_um).knock.fitted ? 1 : 0;
-      }
+      ++clean_runs;
+      clean_fitted += model.refine(d.m_um).knock.fitted ? 1 : 0;
     }
     std::printf(
         "knock, reversed plan, s %.2f: named %d/%d, removed %d, S within 4 u_S %d/%d (knock "

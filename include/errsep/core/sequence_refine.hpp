@@ -194,18 +194,21 @@ struct SequenceCandidate {
   double u_S_added_um = 0;
 };
 
-/// A sensor non-linearity m = u + c₂·(u − mid)² (u the linear reading) found by the trace's
-/// reading-level test (residual_trace.hpp; not in the effect library).  On one pass per
-/// configuration most of c₂·(u − mid)² is absorbed by f, S, γ and e; a plan that reads
-/// configurations again with the sensor re-zeroed by Δ (ScanSequence::rezeroed) adds the
-/// difference 2·c₂·Δ·(u − mid) + const between the passes, which none of them absorbs, so c₂ is
-/// determined and the readings can be corrected: the fit with the column (û − mid)² at the
-/// fitted readings û (one Gauss–Newton step from c₂ = 0; c₂·σ is negligible), c₂ carried in u_S
-/// by the joint fit.  Applied only when the plan re-zeroes and the column's F test is
-/// significant; otherwise reported with its fitted size (what it could do to S is not bounded
-/// by the trace on a plan without re-zeroing).
+/// A sensor non-linearity m = u + c₂·(u − mid)² (u the linear reading; not in the effect
+/// library).  On one pass per configuration most of c₂·(u − mid)² is absorbed by f, S, γ and e,
+/// and only the trace's reading-level test (residual_trace.hpp) can find it: reported, not
+/// corrected.  A plan that reads configurations again with the sensor re-zeroed by Δ
+/// (ScanSequence::rezeroed) adds the difference 2·c₂·Δ·(u − mid) + const between the passes,
+/// which none of them absorbs, so c₂ is determined: the refine first fits the base model with
+/// the column (û − mid)² at the base fit's fitted readings û (one Gauss–Newton step from c₂ = 0;
+/// iterating it at the fit's linear part was tried and made S worse), and when its F test is
+/// significant keeps the column in the base design for the knock search and the effects, c₂
+/// carried in u_S by the joint fit.  Measured (tests/core/sequence_refine, 50σ·(2-4 %) of the
+/// half range, Δ = the first pass's range, 20 random profiles per σ 0.05/0.1/0.2): found 60/60,
+/// S error halved in 47 of the 51 runs where it doubled it, never worse, coverage 0.978.
 struct SequenceNonlinearity {
-  bool detected = false;      ///< the trace's quadratic reading-level test significant
+  /// Rezeroed plan: the column's F test in the base fit; else the trace's quadratic test.
+  bool detected = false;
   bool identifiable = false;  ///< the plan re-zeroes (ScanSequence::rezeroed)
   bool applied = false;       ///< the result is the fit with c₂
   double c2_per_um = 0, u_c2_per_um = 0, mid_um = 0;
