@@ -66,21 +66,13 @@ struct Base {
   int nonlinearity_column = -1;  // a sensor non-linearity's column (SequenceNonlinearity), or -1
 };
 
-// The base design with a sensor non-linearity's column appended (SequenceNonlinearity).
-Base with_nonlinearity(Base b, const Eigen::VectorXd& column) {
+// The base design with one more column appended (after f, S, γ, e: their indices stay), its
+// index kept in `which` (a knocked sensor's, a non-linearity's); b unchanged for an empty one.
+Base with_column(Base b, const Eigen::VectorXd& column, int Base::*which) {
   if (column.size() == 0) return b;
   b.X.conservativeResize(Eigen::NoChange, b.X.cols() + 1);
   b.X.col(b.X.cols() - 1) = column;
-  b.nonlinearity_column = static_cast<int>(b.X.cols() - 1);
-  return b;
-}
-
-// The base design with a knocked sensor's column appended (after f, S, γ, e: their indices stay).
-Base with_knock(Base b, const Eigen::VectorXd& column) {
-  if (column.size() == 0) return b;
-  b.X.conservativeResize(Eigen::NoChange, b.X.cols() + 1);
-  b.X.col(b.X.cols() - 1) = column;
-  b.knock_column = static_cast<int>(b.X.cols() - 1);
+  b.*which = static_cast<int>(b.X.cols() - 1);
   return b;
 }
 
@@ -401,6 +393,7 @@ struct SequenceModel::Impl {
   std::vector<SequenceIdentifiability> ids;
 
   Eigen::VectorXd nl_col;  // the non-linearity's column in b, or empty
+  double nl_c2 = 0;        // its coefficient in the base fit that found it
 
   // `knock`: a knocked sensor's column in the base design (SequenceKnock), or empty;
   // `nonlinearity`: a sensor non-linearity's (SequenceNonlinearity), or empty.
@@ -409,7 +402,8 @@ struct SequenceModel::Impl {
       : cfg(c),
         seq(s),
         o(opt),
-        b(with_knock(with_nonlinearity(base_design(c, s), nonlinearity), knock)),
+        b(with_column(with_column(base_design(c, s), nonlinearity, &Base::nonlinearity_column),
+                      knock, &Base::knock_column)),
         nl_col(nonlinearity) {
     std::string why;
     if (!o.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
@@ -822,6 +816,7 @@ SequenceRefineResult SequenceModel::Impl::refine(const Eigen::MatrixXd& m_um) {
     fit_nonlinearity(b, seq, m_um, before, nl);
     if (nl.p_value < o.alpha) {
       Impl with(cfg, seq, o, {}, nonlinearity_column(m_um, before, nl.mid_um));
+      with.nl_c2 = nl.c2_per_um;
       SequenceRefineResult res = with.refine(m_um);
       res.before = before;
       nl.detected = nl.applied = true;
@@ -838,7 +833,13 @@ SequenceRefineResult SequenceModel::Impl::refine(const Eigen::MatrixXd& m_um) {
     }
   }
   if (!o.find_knocks || b.knock_column >= 0) return refine_effects(m_um);
-  const RepeatStepScan rs = find_repeat_steps(cfg, seq, m_um, o.repeat_steps);
+  // The knock search compares a configuration's traverses: on readings without the
+  // non-linearity, whose difference between re-zeroed passes is no step but looks like one.
+  Eigen::MatrixXd m_steps = m_um;
+  if (nl_col.size() == m_um.size())
+    for (int k = 0; k < b.T; ++k)
+      m_steps.col(k) -= nl_c2 * nl_col.segment(static_cast<Eigen::Index>(k) * b.P, b.P);
+  const RepeatStepScan rs = find_repeat_steps(cfg, seq, m_steps, o.repeat_steps);
   if (rs.found && rs.attributed) return refine_with_knock(m_um, rs);
   SequenceRefineResult res = refine_effects(m_um);
   res.knock.scan = rs;
