@@ -149,6 +149,7 @@ int main(int argc, char** argv) {
   std::string plan = "single";
   std::vector<double> drift_um_per_s, thermal_um;
   double thermal_tau_s = 40.0;
+  double rezero_offset_um = 20.0, nonlinearity_c2_per_um = 0.0, nonlinearity_mid_um = 0.0;
   std::string method = "four_sensor", scan2_order = "forward";
   bool refine = false;
   errsep::core::FourSensorConfig cfg;
@@ -200,6 +201,16 @@ int main(int argc, char** argv) {
       ->expected(2, 4);
   app.add_option("--thermal-tau-s", thermal_tau_s, "time constant of --thermal-um, s")
       ->capture_default_str();
+  app.add_option("--rezero-offset-um", rezero_offset_um,
+                 "--plan rezeroed: the offset the sensor is re-zeroed by for the second pass, um")
+      ->capture_default_str();
+  app.add_option("--nonlinearity-c2-per-um", nonlinearity_c2_per_um,
+                 "undeclared sensor non-linearity: it reads u + c2 * (u - mid)^2, u its linear "
+                 "reading with the zero shift (records the scan as a sequence), 1/um")
+      ->capture_default_str();
+  app.add_option("--nonlinearity-mid-um", nonlinearity_mid_um,
+                 "mid of --nonlinearity-c2-per-um, um")
+      ->capture_default_str();
   app.add_option("--dx-mm", cfg.dx_mm, "sampling interval, mm")->capture_default_str();
   app.add_option("--N", cfg.N, "number of reference points")->capture_default_str();
   app.add_option("--s2", cfg.s2)->capture_default_str();
@@ -244,14 +255,15 @@ int main(int argc, char** argv) {
     // traverse (m1..m4), the refine step of errsep-separate/errsep-scan the whole sequence.
     const auto kind = errsep::core::scan_sequence_kind_from_string(plan);
     const bool sequence = kind != errsep::core::ScanSequenceKind::single ||
-                          !drift_um_per_s.empty() || !thermal_um.empty();
+                          !drift_um_per_s.empty() || !thermal_um.empty() ||
+                          nonlinearity_c2_per_um != 0.0;
     if (sequence && (combined || pe1 || pe2))
       throw std::invalid_argument(
           "--plan/--drift-um-per-s/--thermal-um simulate the sensors' noise and no PE1/PE2: "
           "drop --noise-on combined, --pe1, --pe2");
     std::optional<errsep::core::SequenceSimData> seq_sim;
     if (sequence) {
-      const auto seq = errsep::core::ScanSequence::make(kind, cfg);
+      const auto seq = errsep::core::ScanSequence::make(kind, cfg, 10.0, 2.0, rezero_offset_um);
       errsep::core::SequenceSimOptions qo;
       qo.sigma_um = sigma;
       qo.seed = seed;
@@ -260,6 +272,8 @@ int main(int argc, char** argv) {
       for (std::size_t c = 0; c < thermal_um.size(); ++c)
         qo.effects.thermal_um[c] = thermal_um[c];
       qo.effects.thermal_tau_s = thermal_tau_s;
+      qo.effects.nonlinearity_c2_per_um = nonlinearity_c2_per_um;
+      qo.effects.nonlinearity_mid_um = nonlinearity_mid_um;
       seq_sim = errsep::core::simulate_four_sensor_sequence(cfg, truth, seq, qo);
       errsep::io::set_sequence(raw, seq, seq_sim->m_um, seq_sim->t_s);
       for (int j = 0; j < 4; ++j)

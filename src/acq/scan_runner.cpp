@@ -531,6 +531,14 @@ bool ScanOptions::is_valid(std::string* why) const {
     return false;
   };
   if (kind == ScanKind::four_sensor && !geometry.is_valid(why)) return false;
+  // The rezeroed plan's second pass needs the sensor moved in its holder by a stated offset: a
+  // step by hand that no stage here performs, and the runner has no pause for an operator.
+  if (kind == ScanKind::four_sensor && plan == core::ScanSequenceKind::rezeroed)
+    return fail(
+        "scan.plan = rezeroed: the second pass needs the sensor re-zeroed by hand (moved in its "
+        "holder by a stated offset), which the scan runner cannot do or pause for; measure it "
+        "as two scans (plan single) and join them with the offset recorded, or simulate it "
+        "(errsep-simulate --plan rezeroed)");
   if (averages < 1) return fail("scan.averages = " + std::to_string(averages) + ": must be >= 1");
   if (settle_ms < 0)
     return fail("scan.settle_ms = " + std::to_string(settle_ms) + ": must be >= 0");

@@ -17,6 +17,9 @@ SequenceSimData simulate_four_sensor_sequence(const FourSensorConfig& cfg,
   if (!truth.f_um || !truth.S_um || !truth.gamma_rad)
     throw std::invalid_argument("simulation truth needs f, S and gamma functions");
   if (!(opts.effects.thermal_tau_s > 0)) throw std::invalid_argument("thermal_tau_s must be > 0");
+  if (!std::isfinite(opts.effects.nonlinearity_c2_per_um) ||
+      !std::isfinite(opts.effects.nonlinearity_mid_um))
+    throw std::invalid_argument("the non-linearity's c2 and mid must be finite");
   const int P = cfg.positions(), T = seq.size();
   const auto O = cfg.offsets_mm();
   const auto& fx = opts.effects;
@@ -36,16 +39,20 @@ SequenceSimData simulate_four_sensor_sequence(const FourSensorConfig& cfg,
     d.gamma_rad(n) = truth.gamma_rad(x);
   }
   for (int k = 0; k < T; ++k) {
-    const std::size_t c =
-        static_cast<std::size_t>(seq.traverses[static_cast<std::size_t>(k)].configuration);
+    const Traverse& tr = seq.traverses[static_cast<std::size_t>(k)];
+    const auto c = static_cast<std::size_t>(tr.configuration);
     for (int n = 0; n < P; ++n) {
       const double x = n * cfg.dx_mm, t = d.t_s(n, k);
-      // Eq. (1) plus noise; the effects on top of the same noisy reading.
-      const double clean = four_sensor_reading_um(truth, x, O[c]) + truth.e_um[c];
+      // Eq. (1) at the traverse's zero plus noise; the effects on top of the same noisy reading.
+      const double clean =
+          four_sensor_reading_um(truth, x, O[c]) + truth.e_um[c] + tr.zero_shift_um;
       d.m_clean_um(n, k) = clean + opts.sigma_um * noise(rng);
       double extra =
           fx.drift_um_per_s[c] * t + fx.thermal_um[c] * (1.0 - std::exp(-t / fx.thermal_tau_s));
       if (fx.S_change_um) extra += fx.S_change_um(k, x);
+      // The non-linearity acts on what the sensor reads, its zero shift included.
+      extra += fx.nonlinearity_c2_per_um * (clean - fx.nonlinearity_mid_um) *
+               (clean - fx.nonlinearity_mid_um);
       d.m_um(n, k) = d.m_clean_um(n, k) + extra;
     }
   }

@@ -1,6 +1,7 @@
 #include "errsep/core/scan_sequence.hpp"
 
 #include <array>
+#include <cmath>
 #include <stdexcept>
 
 namespace errsep::core {
@@ -15,12 +16,14 @@ const char* to_string(ScanSequenceKind k) {
       return "reversed";
     case ScanSequenceKind::interleaved:
       return "interleaved";
+    case ScanSequenceKind::rezeroed:
+      return "rezeroed";
   }
   return "unknown";
 }
 
 const char* scan_sequence_kind_names() {
-  return "single, closing, reversed, interleaved";
+  return "single, closing, reversed, interleaved, rezeroed";
 }
 
 ScanSequenceKind scan_sequence_kind_from_string(const std::string& name) {
@@ -28,6 +31,7 @@ ScanSequenceKind scan_sequence_kind_from_string(const std::string& name) {
   if (name == "closing" || name == "closing pass") return ScanSequenceKind::closing_pass;
   if (name == "reversed") return ScanSequenceKind::reversed;
   if (name == "interleaved") return ScanSequenceKind::interleaved;
+  if (name == "rezeroed" || name == "re-zeroed") return ScanSequenceKind::rezeroed;
   throw std::invalid_argument("unknown scan plan '" + name + "': one of " +
                               scan_sequence_kind_names());
 }
@@ -46,6 +50,12 @@ Eigen::MatrixXd ScanSequence::times_s(const FourSensorConfig& cfg) const {
   return t;
 }
 
+bool ScanSequence::rezeroed() const {
+  for (const Traverse& tr : traverses)
+    if (tr.zero_shift_um != 0.0) return true;
+  return false;
+}
+
 bool ScanSequence::is_valid(std::string* why) const {
   auto fail = [&](const std::string& m) {
     if (why) *why = m;
@@ -55,6 +65,8 @@ bool ScanSequence::is_valid(std::string* why) const {
     return fail("speed_mm_per_s = " + std::to_string(speed_mm_per_s) + ": must be > 0");
   if (traverses.empty() || traverses.front().configuration != 0)
     return fail("traverse 1 must measure configuration 1 (the zero-adjustment reference)");
+  if (traverses.front().zero_shift_um != 0.0)
+    return fail("traverse 1 defines the sensor's zero: its zero shift must be 0");
   std::array<bool, 4> seen{};
   for (std::size_t k = 0; k < traverses.size(); ++k) {
     const int c = traverses[k].configuration;
@@ -62,6 +74,8 @@ bool ScanSequence::is_valid(std::string* why) const {
       return fail("traverse " + std::to_string(k + 1) + ": configuration " + std::to_string(c) +
                   " not in 0..3");
     seen[static_cast<std::size_t>(c)] = true;
+    if (!std::isfinite(traverses[k].zero_shift_um))
+      return fail("traverse " + std::to_string(k + 1) + ": zero shift must be finite");
     if (k > 0 && traverses[k].start_s < traverses[k - 1].start_s)
       return fail("traverse " + std::to_string(k + 1) + " starts before traverse " +
                   std::to_string(k));
@@ -72,9 +86,13 @@ bool ScanSequence::is_valid(std::string* why) const {
 }
 
 ScanSequence ScanSequence::make(ScanSequenceKind kind, const FourSensorConfig& cfg,
-                                double speed_mm_per_s, double turnaround_s) {
+                                double speed_mm_per_s, double turnaround_s,
+                                double rezero_offset_um) {
   if (!(speed_mm_per_s > 0) || !(turnaround_s >= 0))
     throw std::invalid_argument("scan sequence: speed must be > 0 and turnaround >= 0");
+  if (kind == ScanSequenceKind::rezeroed &&
+      !(std::isfinite(rezero_offset_um) && rezero_offset_um != 0.0))
+    throw std::invalid_argument("scan sequence: the rezeroed plan needs a finite, non-zero offset");
   using D = TraverseDirection;
   std::vector<std::pair<int, D>> order;
   switch (kind) {
@@ -94,14 +112,20 @@ ScanSequence ScanSequence::make(ScanSequenceKind kind, const FourSensorConfig& c
       for (int c : {0, 1, 2, 3, 3, 2, 1, 0})
         order.push_back({c, D::forward});
       break;
+    case ScanSequenceKind::rezeroed:
+      for (int c : {0, 1, 2, 3, 0, 1, 2, 3})
+        order.push_back({c, D::forward});
+      break;
   }
   ScanSequence s;
   s.speed_mm_per_s = speed_mm_per_s;
   s.name = to_string(kind);
   const double duration = (cfg.positions() - 1) * cfg.dx_mm / speed_mm_per_s;
   double t = 0.0;
-  for (const auto& [c, d] : order) {
-    s.traverses.push_back({c, d, t});
+  for (std::size_t k = 0; k < order.size(); ++k) {
+    // The rezeroed plan's second pass (traverses 5..8) reads with the sensor shifted by Δ.
+    const double shift = kind == ScanSequenceKind::rezeroed && k >= 4 ? rezero_offset_um : 0.0;
+    s.traverses.push_back({order[k].first, order[k].second, t, shift});
     t += duration + turnaround_s;
   }
   return s;

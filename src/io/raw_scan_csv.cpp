@@ -101,7 +101,9 @@ int parse_int_meta(const CsvTable& t, const std::string& key, const std::filesys
 }
 
 // The sequence of the header's file comment: "traverses: T", one "traverse_K: configuration c,
-// forward|backward, start_s t" line and the columns kK_um, kK_t_s for each.
+// forward|backward, start_s t[, zero_shift_um Δ]" line and the columns kK_um, kK_t_s for each
+// (zero_shift_um: the traverse read with the sensor re-zeroed by Δ, the rezeroed plan of
+// core/scan_sequence.hpp; written only when non-zero, absent = 0).
 RawSequence read_sequence(const CsvTable& t, const std::filesystem::path& file, bool complete) {
   RawSequence q;
   q.plan = t.meta("plan").value_or("custom");
@@ -118,11 +120,26 @@ RawSequence read_sequence(const CsvTable& t, const std::filesystem::path& file, 
     char dir[16] = {0};
     int c = 0;
     double start = 0;
-    if (std::sscanf(v->c_str(), "configuration %d, %15[a-z], start_s %lf", &c, dir, &start) != 3 ||
+    int used = 0;
+    if (std::sscanf(v->c_str(), "configuration %d, %15[a-z], start_s %lf%n", &c, dir, &start,
+                    &used) != 3 ||
         c < 1 || c > 4 || (std::string(dir) != "forward" && std::string(dir) != "backward"))
       throw CsvError(file, 0,
                      "metadata '" + key + ": " + *v +
-                         "': expected 'configuration 1..4, forward|backward, start_s <s>'");
+                         "': expected 'configuration 1..4, forward|backward, start_s <s>[, "
+                         "zero_shift_um <um>]'");
+    // A re-zeroed traverse (the rezeroed plan) states its zero shift; absent = 0.
+    const std::string rest = v->substr(static_cast<std::size_t>(used));
+    if (!rest.empty()) {
+      int used2 = 0;
+      if (std::sscanf(rest.c_str(), ", zero_shift_um %lf%n", &tr.zero_shift_um, &used2) != 1 ||
+          static_cast<std::size_t>(used2) != rest.size() || !std::isfinite(tr.zero_shift_um))
+        throw CsvError(file, 0,
+                       "metadata '" + key + ": " + *v +
+                           "': after start_s expected nothing or "
+                           "', zero_shift_um <um>' (a finite number), got '" +
+                           rest + "'");
+    }
     tr.configuration = c - 1;
     tr.direction = std::string(dir) == "forward" ? core::TraverseDirection::forward
                                                  : core::TraverseDirection::backward;
@@ -191,7 +208,8 @@ CsvTable to_csv_table(const RawFourSensorScan& scan) {
       t.set_meta("traverse_" + K,
                  "configuration " + std::to_string(tr.configuration + 1) + ", " +
                      (tr.direction == core::TraverseDirection::forward ? "forward" : "backward") +
-                     ", start_s " + fmt(tr.start_s));
+                     ", start_s " + fmt(tr.start_s) +
+                     (tr.zero_shift_um != 0.0 ? ", zero_shift_um " + fmt(tr.zero_shift_um) : ""));
       check_len(q.m_um[k], n, "k" + K + "_um");
       check_len(q.t_s[k], n, "k" + K + "_t_s");
       t.add_column("k" + K + "_um", q.m_um[k]);

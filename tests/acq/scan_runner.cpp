@@ -500,3 +500,18 @@ TEST_CASE("a plan other than single is refused for four fixed sensors") {
   o.plan = core::ScanSequenceKind::closing_pass;
   CHECK_THROWS_WITH(run_scan(m.devices(), o, {}), Catch::Contains("needs one sensor"));
 }
+
+// Issue 16 item 2: the rezeroed plan needs the sensor moved in its holder between its passes, a
+// step no stage here performs: refused before anything moves, saying why and what to do instead.
+TEST_CASE("the rezeroed plan is refused: its re-zeroing is a step by hand") {
+  FakeMachine m;
+  m.add_single();
+  auto o = m.options();
+  o.plan = core::ScanSequenceKind::rezeroed;
+  std::string why;
+  CHECK_FALSE(o.is_valid(&why));
+  CHECK_THAT(why, Catch::Contains("rezeroed") && Catch::Contains("by hand"));
+  CHECK_THROWS_WITH(run_scan(m.devices(), o, {}),
+                    Catch::Contains("re-zeroed by hand") && Catch::Contains("simulate it"));
+  CHECK(m.slide.moves() == 0);
+}

@@ -326,3 +326,48 @@ TEST_CASE(
               &out) == 0);
   CHECK_THAT(test::read_file(ref / "report" / "report.html"), Catch::Contains("knocked sensor"));
 }
+
+// Issue 16 items 2-3 end to end: errsep-simulate --plan rezeroed measures every configuration
+// again with the sensor re-zeroed by 40 um (raw.csv states it per traverse); the sensor reads
+// u + c2*(u - 18 um)^2 with c2 = 0.002/um (about 3 um at the ends of the readings' range).
+// errsep-refine determines c2 from the re-zeroed traverses, corrects the readings, says so in
+// sequence_refine.csv, and S ends within 4 u_S of the truth.
+TEST_CASE(
+    "rezeroed plan: a sensor non-linearity determined, corrected and named by errsep-refine") {
+  TempDir tmp;
+  const std::string sim = (tmp / "rezeroed").string(), ref = (tmp / "rezeroed_refined").string();
+  std::string log;
+  REQUIRE(test::run_command(test::app_path("simulate").string() + " --out " + sim +
+                                " --plan rezeroed --rezero-offset-um 40 --nonlinearity-c2-per-um "
+                                "0.002 --nonlinearity-mid-um 18 --seed 7 2>&1",
+                            &log) == 0);
+  INFO(log);
+  const auto raw = io::read_raw_four_sensor_csv(tmp / "rezeroed" / "raw.csv");
+  REQUIRE(raw.sequence);
+  REQUIRE(raw.sequence->traverses.size() == 8);
+  CHECK(raw.sequence->traverses[4].zero_shift_um == 40.0);
+  CHECK(raw.sequence->traverses[3].zero_shift_um == 0.0);
+  std::string out;
+  REQUIRE(test::run_command(
+              test::app_path("refine").string() + " " + sim + "/raw.csv --out " + ref + " 2>&1",
+              &out) == 0);
+  INFO(out);
+  const auto t = io::read_csv(tmp / "rezeroed_refined" / "sequence_refine.csv");
+  const auto f = findings(t);
+  REQUIRE_FALSE(f.empty());
+  CHECK_THAT(f.front(), Catch::StartsWith("sensor non-linearity (not in the effect library)") &&
+                            Catch::Contains("the readings corrected"));
+  CHECK_FALSE(any_starts(f, "a knocked sensor"));  // the passes' difference is no step
+  const auto Sb = t.column("S_before_um", "f"), Sa = t.column("S_after_um", "f");
+  CHECK(outside_4u(tmp, "rezeroed", Sa, t.column("u_S_after_um", "f")) == 0);
+  const auto truth =
+      io::read_truth_csv(tmp / "rezeroed" / "truth.csv", *raw.geometry, raw.x_mm.front());
+  auto err = [&](const std::vector<double>& S) {
+    Eigen::VectorXd d(truth.S_um.size());
+    for (Eigen::Index n = 0; n < d.size(); ++n)
+      d(n) = S[static_cast<std::size_t>(n)] - truth.S_um(n);
+    return core::remove_polynomial(d, 2).norm() / std::sqrt(static_cast<double>(d.size()));
+  };
+  std::printf("rezeroed plan, c2 0.002/um: S error %.3f -> %.3f um RMS\n", err(Sb), err(Sa));
+  CHECK(err(Sa) <= 0.5 * err(Sb));
+}

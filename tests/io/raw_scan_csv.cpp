@@ -4,6 +4,7 @@
 #include <cmath>
 #include <fstream>
 #include <limits>
+#include <tuple>
 
 #include "support/support.hpp"
 
@@ -304,6 +305,63 @@ TEST_CASE("a bad traverse line is refused with file and what is wrong") {
     const std::string w = e.what();
     CHECK(w.find("bad.csv") != std::string::npos);
     CHECK(w.find("traverse_3") != std::string::npos);
+  }
+}
+
+// Issue 16 item 2: the rezeroed plan's traverses carry their stated zero shift; the file records
+// it on the traverse line (only where it is not 0), reads it back, and refuses a malformed one
+// naming the file and the line's key.
+TEST_CASE("a rezeroed plan's zero shifts round-trip, and a bad one is refused") {
+  TempDir dir;
+  auto s = sample_scan(true);
+  const auto seq = errsep::core::ScanSequence::make(errsep::core::ScanSequenceKind::rezeroed,
+                                                    *s.geometry, 4.0, 1.5, 37.25);
+  Eigen::MatrixXd m(9, seq.size());
+  for (Eigen::Index k = 0; k < m.cols(); ++k)
+    for (Eigen::Index n = 0; n < 9; ++n)
+      m(n, k) = (k >= 4 ? 37.25 : 0.0) + 1e-3 * static_cast<double>(n * n + k);
+  set_sequence(s, seq, m, seq.times_s(*s.geometry));
+  const auto file = dir / "rz.csv";
+  write_raw_four_sensor_csv(file, s);
+  const std::string text = errsep::test::read_file(file);
+  CHECK_THAT(text, Catch::Contains("# plan: rezeroed"));
+  CHECK_THAT(text, Catch::Contains("# traverse_5: configuration 1, forward, start_s"));
+  CHECK_THAT(text, Catch::Contains(", zero_shift_um 37.25"));
+  {
+    const auto at = text.find("# traverse_4:");
+    REQUIRE(at != std::string::npos);
+    CHECK(text.substr(at, text.find('\n', at) - at).find("zero_shift") == std::string::npos);
+  }
+  const auto r = read_raw_four_sensor_csv(file);
+  REQUIRE(r.sequence);
+  REQUIRE(r.sequence->traverses.size() == 8);
+  for (std::size_t k = 0; k < 8; ++k)
+    CHECK(r.sequence->traverses[k].zero_shift_um == (k >= 4 ? 37.25 : 0.0));
+  const auto [rseq, rm] = scan_sequence_of(r);
+  CHECK(rseq.rezeroed());
+  CHECK(rseq.name == "rezeroed");
+  CHECK((rm - m).cwiseAbs().maxCoeff() < 1e-9);
+  // Malformed: a word for the shift, a trailing field, and a shift on traverse 1 (its zero is
+  // the reference).
+  for (const auto& [key, line, what] :
+       {std::tuple<std::string, std::string, std::string>{
+            "traverse_6", "configuration 2, forward, start_s 40, zero_shift_um lots",
+            "zero_shift_um"},
+        {"traverse_7", "configuration 3, forward, start_s 60, zero_shift_um 3, tilt 1",
+         "zero_shift_um"},
+        {"traverse_1", "configuration 1, forward, start_s 0, zero_shift_um 5", "traverse 1"}}) {
+    auto t = to_csv_table(s);
+    t.set_meta(key, line);
+    errsep::io::write_csv(dir / "bad.csv", t);
+    try {
+      read_raw_four_sensor_csv(dir / "bad.csv");
+      FAIL("accepted '" + line + "'");
+    } catch (const CsvError& e) {
+      const std::string w = e.what();
+      CHECK(w.rfind((dir / "bad.csv").string(), 0) == 0);
+      CHECK(w.find(what) != std::string::npos);
+      if (key != "traverse_1") CHECK(w.find(key) != std::string::npos);
+    }
   }
 }
 

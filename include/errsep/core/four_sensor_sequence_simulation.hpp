@@ -5,6 +5,9 @@
 //   linear drift      m += a_c·t                      (rate a_c of the sensor in configuration c)
 //   thermal drift     m += A_c·(1 − exp(−t/τ))        (warm-up from the start of the scan)
 //   non-repeating S   m += ΔS(k, x)                   (the slide bends differently on traverse k)
+// and a re-zeroed traverse (Traverse::zero_shift_um = Δ) reads u = (Eq. 1) + Δ.  A sensor
+// non-linearity acts on the whole reading, offset included: m = u + c₂·(u − mid)² (not in the
+// effect library; what the rezeroed plan makes show, scan_sequence.hpp).
 // The truth S is the first traverse's (ΔS(0, x) should be 0: the scan refers to its first pass).
 #include <Eigen/Core>
 #include <array>
@@ -23,6 +26,10 @@ struct SequenceEffects {
   double thermal_tau_s = 40.0;
   /// ΔS(k, x_mm) in µm for traverse k (0-based); empty = S repeats.
   std::function<double(int traverse, double x_mm)> S_change_um;
+  /// The sensor's non-linearity: it reads u + c₂·(u − mid)², u its linear reading (Eq. 1, the
+  /// zero adjustment and the traverse's zero shift included); 0 = linear.
+  double nonlinearity_c2_per_um = 0.0;
+  double nonlinearity_mid_um = 0.0;
 };
 
 struct SequenceSimOptions {

@@ -15,6 +15,12 @@
 //                 between the two directions that no zero-adjustment value can absorb)
 //   interleaved   1, 2, 3, 4, 4, 3, 2, 1 (each configuration at two times symmetric about the
 //                 middle of the scan)
+//   rezeroed      1, 2, 3, 4, then 1, 2, 3, 4 again with the sensor re-zeroed by a stated offset
+//                 Δ (moved in its holder): the same surface points read at a reading shifted by
+//                 Δ.  S, f, γ repeat; a sensor non-linearity m = r + c₂·(r − mid)² does not: the
+//                 two passes of a configuration differ by 2·c₂·Δ·r + const, a gain on the whole
+//                 traverse that no zero adjustment absorbs (residual_trace.hpp).  The repeated
+//                 traverses also show what the closing pass shows.
 // Every traverse carries its start time and direction, so the reading times t(n, k) (P × T,
 // column k = traverse k) follow from the slide speed, and time-dependent effects are modelled on
 // them.
@@ -32,14 +38,19 @@ struct Traverse {
   int configuration = 0;  ///< 0..3: configuration 1..4 of Eq. (1)
   TraverseDirection direction = TraverseDirection::forward;
   double start_s = 0.0;  ///< time of its first reading, from the start of the scan
+  /// The sensor re-zeroed before this traverse: its readings shifted by this stated offset (µm)
+  /// from traverse 1's zero (0: not re-zeroed).  The offset is what the user set, not a measured
+  /// value: the fit gives such a traverse its own zero-adjustment unknown (repeat_keeps_zero
+  /// notwithstanding); the reading level it reads at is what a non-linearity depends on.
+  double zero_shift_um = 0.0;
 };
 
-enum class ScanSequenceKind { single, closing_pass, reversed, interleaved };
+enum class ScanSequenceKind { single, closing_pass, reversed, interleaved, rezeroed };
 const char* to_string(ScanSequenceKind k);
 /// The plan names a config or command line gives: "single", "closing" (or "closing pass"),
-/// "reversed", "interleaved".  Throws std::invalid_argument naming the accepted names.
+/// "reversed", "interleaved", "rezeroed".  Throws std::invalid_argument naming the accepted names.
 ScanSequenceKind scan_sequence_kind_from_string(const std::string& name);
-/// "single, closing, reversed, interleaved" (for help texts and error messages).
+/// "single, closing, reversed, interleaved, rezeroed" (for help texts and error messages).
 const char* scan_sequence_kind_names();
 
 struct ScanSequence {
@@ -60,6 +71,8 @@ struct ScanSequence {
   int size() const { return static_cast<int>(traverses.size()); }
   /// More traverses than configurations: some configuration is measured more than once.
   bool redundant() const { return size() > 4; }
+  /// Some traverse is read with the sensor re-zeroed (Traverse::zero_shift_um != 0).
+  bool rezeroed() const;
   /// Reading times t(n, k) in s, P × T: recorded_times_s when it has that shape, else traverse k
   /// reads x_n at start_s + (distance travelled since its first reading)/speed.
   Eigen::MatrixXd times_s(const FourSensorConfig& cfg) const;
@@ -68,9 +81,12 @@ struct ScanSequence {
   bool is_valid(std::string* why = nullptr) const;
 
   /// The plans of the file comment; consecutive traverses follow each other after
-  /// `turnaround_s` (moving the sensor stage, reversing the slide).
+  /// `turnaround_s` (moving the sensor stage, reversing the slide).  `rezero_offset_um`: the
+  /// rezeroed plan's Δ (ignored by the others); it should be at least the readings' range
+  /// so that the repeated pass reads at levels the first did not.
   static ScanSequence make(ScanSequenceKind kind, const FourSensorConfig& cfg,
-                           double speed_mm_per_s = 10.0, double turnaround_s = 2.0);
+                           double speed_mm_per_s = 10.0, double turnaround_s = 2.0,
+                           double rezero_offset_um = 20.0);
 };
 
 }  // namespace errsep::core
