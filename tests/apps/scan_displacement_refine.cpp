@@ -35,6 +35,23 @@ namespace fs = std::filesystem;
 
 namespace {
 
+/// The account's steps and notes, so that a failure says what the refine found.
+std::string account_steps(const io::CsvTable& account) {
+  std::string steps;
+  for (const auto& [k, v] : account.metadata)
+    if (k.rfind("step", 0) == 0 || k.rfind("note", 0) == 0) steps += k + ": " + v + "\n";
+  return steps;
+}
+
+/// The device simulator drifts its sensors linearly in its own time; the readings' recorded times
+/// carry the loaded machine's scheduling jitter, and on a scan of a few seconds the library's
+/// first-order thermal drift (one parameter more, counted by AIC) can then fit sensor 1's drift as
+/// well (seen in CI under load: the same in apps/daemon_displacement).  Either form is the drift of
+/// sensor 1; which of the two is not what these cases are about.
+bool is_drift_of_sensor_1(const std::string& effect) {
+  return effect == "drift of sensor 1" || effect.rfind("thermal drift of sensor 1 (", 0) == 0;
+}
+
 /// The embedded default config with faster stages; `drift` µm/s on every simulated sensor.
 fs::path write_test_config(const TempDir& dir, double drift) {
   std::string cfg = test::quick_simulator_config();
@@ -77,7 +94,8 @@ io::CsvTable scan_and_check(const TempDir& dir, double drift) {
     CHECK(t.find_column(c));
   }
   CHECK(t.meta("source") == std::optional<std::string>((out / "raw_displacement.csv").string()));
-  CHECK(t.meta("step1_effect") == std::optional<std::string>("drift of sensor 1"));
+  INFO(account_steps(t));
+  CHECK(is_drift_of_sensor_1(t.meta("step1_effect").value_or("(none)")));
   CHECK(t.meta("step1_decision") == std::optional<std::string>("not identifiable"));
   CHECK_THAT(t.meta("step1_line").value_or(""), Catch::Contains("run scan 2 backwards"));
 
@@ -322,7 +340,8 @@ TEST_CASE(
         io::read_csv(out / "refine" / "displacement_refine.csv", {.allow_non_finite = true})};
   };
   const auto [covered, account] = check("backward");
-  CHECK(account.meta("step1_effect") == std::optional<std::string>("drift of sensor 1"));
+  INFO(account_steps(account));
+  CHECK(is_drift_of_sensor_1(account.meta("step1_effect").value_or("(none)")));
   CHECK(account.meta("step1_decision") != std::optional<std::string>("not identifiable"));
   CHECK(covered);
   (void)check("forward");
