@@ -204,8 +204,12 @@ std::string FourSensorResult::brief_report() const {
                 : lambda_fallback == LambdaFallback::collapse_least_squares
                     ? ", COLLAPSE: the prior swallowed f; unregularised separation reported"
                     : "",
-                lambda_at_edge ? ", at the edge of the range" : "", edf_f, residual_norm,
-                solution_norm, sigma_um, redundancy_dof, solver_stats.factorizations, total_s);
+                lambda_at_refused_edge
+                    ? ", minimum not bracketed: the lambda beyond it were refused"
+                : lambda_at_edge ? ", at the edge of the range"
+                                 : "",
+                edf_f, residual_norm, solution_norm, sigma_um, redundancy_dof,
+                solver_stats.factorizations, total_s);
   std::string out = buf;
   if (!lambda_rejected.empty())
     out += " (" + std::to_string(lambda_rejected.size()) +

@@ -969,6 +969,7 @@ FourSensorResult separate_posterior(const FourSensorConfig& cfg, const Eigen::Ma
                   res.lambda_rejected.size());
     res.determination_note += note + res.lambda_rejected.front() + ")";
   }
+  res.lambda_at_refused_edge = refused_edge;
   if (refused_edge) {
     // Not bracketed (issue 15): the λ beyond the rule's best were refused, so the criterion's
     // minimum may lie there; lambda_at_edge is set.

@@ -167,6 +167,7 @@ TEST_CASE("a REML minimum next to refused lambda is not bracketed: at the edge (
   if (finite_above || !refused_above) {
     // The converse: a minimum bracketed on the grid is not called unbracketed.
     CHECK_FALSE(said);
+    CHECK(r.brief_report().find("minimum not bracketed") == std::string::npos);
     std::printf(
         "SKIPPED: in this build REML's grid minimum (lambda %.3g) has %s above it (round-off "
         "decides which lambda are refused); the case at depth is not reproduced\n",
@@ -174,7 +175,11 @@ TEST_CASE("a REML minimum next to refused lambda is not bracketed: at the edge (
     return;
   }
   CHECK(r.lambda_at_edge);
+  CHECK(r.lambda_at_refused_edge);
   CHECK(said);
+  // The brief report says the same as the note: not bracketed, not "at the edge of the range".
+  CHECK(r.brief_report().find("minimum not bracketed") != std::string::npos);
+  CHECK(r.brief_report().find("edge of the range") == std::string::npos);
   double noted = 0.0;
   const auto at = r.determination_note.find("the search's lambda ");
   REQUIRE(at != std::string::npos);

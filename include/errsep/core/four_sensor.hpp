@@ -147,6 +147,9 @@ struct FourSensorResult {
   double edf_f = std::numeric_limits<double>::quiet_NaN();
   /// Rules reml and gcv: the λ of the search was at an end of its range or next to refused λ.
   bool lambda_at_edge = false;
+  /// lambda_at_edge because the λ beyond the search's best were refused (the factor lost
+  /// precision there), not because it is an end of the range: the minimum is not bracketed.
+  bool lambda_at_refused_edge = false;
   /// What the data could not determine, in words (empty when nothing is to be said): the
   /// gauge, and after a collapse the level at which S is undetermined.
   std::string determination_note;

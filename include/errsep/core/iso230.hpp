@@ -122,14 +122,17 @@ StraightnessResult evaluate_straightness(const std::vector<double>& x_mm,
 /// fitted line, a convex function of the profile: noise in the profile biases it upward, the
 /// more the larger the noise is against the profile's own shape.  That bias is estimated by
 /// Monte Carlo (JCGM 101: the mean change of the figure over draws of the profile's error) and
-/// removed; U is k·u from the covariance of the points that fix the zone (u² = cᵀVc, c the
-/// sensitivity).  Measured on random profiles (tests/core/four_sensor_coverage.cpp), the
-/// corrected figure lies within U of the truth's in 90–98 % of runs at every scan length, where
-/// the uncorrected one with the same U was off in up to 13 % and a pure Monte Carlo interval,
-/// which needs the error model's shape to be exact, in up to 100 %.
+/// removed; the corrected figure is clipped at 0 (a zone width is never negative).  U is k·u,
+/// u² the larger of cᵀVc (c the sensitivity at the points that fix the zone) and the variance of
+/// the draws' figures (larger where the noise chooses those points: cᵀVc alone understated u up
+/// to 2.6× at N = 5000; issue 15), plus the bias's Monte Carlo error var/draws.  Measured on
+/// random profiles (tests/core/four_sensor_coverage.cpp), the corrected figure lies within U of
+/// the truth's in 90–99 % of runs at every scan length, where the uncorrected one with the same
+/// U was off in up to 13 % and a pure Monte Carlo interval, which needs the error model's shape
+/// to be exact, in up to 100 %.
 struct StraightnessEstimate {
   StraightnessResult zone;     ///< of the estimated profile (reference line, active points)
-  double straightness_um = 0;  ///< zone.straightness_um − bias_um
+  double straightness_um = 0;  ///< max(0, zone.straightness_um − bias_um)
   double bias_um = 0;          ///< Monte Carlo mean of T(s + draw) − T(s)
   double u_um = 0;             ///< standard uncertainty sqrt(cᵀVc)
   double expanded_um = 0;      ///< U = k·u
