@@ -57,6 +57,10 @@ int main(int argc, char** argv) {
   app.add_option("--apply-unidentifiable", refine.apply_unidentifiable,
                  "apply the determined part of an effect this plan cannot identify (refine.hpp)")
       ->capture_default_str();
+  app.add_option("--apply-requires-identifiable", refine.apply_requires_identifiable,
+                 "apply a correction only where effect_identifiability says the plan lets it "
+                 "halve the errors (refine.hpp)")
+      ->capture_default_str();
   std::vector<std::string> declared;
   app.add_option("--declare", declared,
                  "declared bounds (Type B) as effect=bound, e.g. drift=0.03,thermal=5: every "

@@ -21,6 +21,14 @@ namespace errsep::core {
 // bias_z = 1 let a fit to clean noise through (worst gamma error 10.6 -> 24 urad).  The price:
 // fewer halvings (gain 0.25 -> 0.15 of the runs at 0.05 um, PE1 0.10 -> 0.05 at 0.1 um) and none of
 // a thermal drift on all configurations (0.35 at 0.05 um), which one scan cannot identify.
+// Issue 16, stop 27 (errsep-refine-sweep, same 720 runs): gating a correction on
+// effect_identifiability (RefineOptions::apply_requires_identifiable) stops the PE2 run above
+// (its least-squares minimum is the global one, so more starts would not help) but also 12
+// halvings elsewhere and the low-noise corrections of core/refine_effects: off by default.
+// Coverage where the plan cannot see the effect: in the runs where nothing is added the effect's
+// candidate scores like noise (p 0.06-0.95 for gain, 0.35-0.93 for a drift of one configuration,
+// residual white), so no data-driven widening (sigma-hat already scales u: a Birge ratio is in it)
+// can tell them from clean runs; RefineOptions::declared carries a declared bound instead.
 StepDecisionOptions refine_step_decision() {
   StepDecisionOptions o;
   o.bias_z = 2.0;
@@ -780,6 +788,17 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
     if (d.apply && unidentifiable && !opts.apply_unidentifiable) {
       d.apply = false;
       d.reason = "not identifiable from this plan, so not applied (" + d.reason + ")";
+    }
+    if (d.apply && opts.apply_requires_identifiable) {
+      RefineOptions o = opts;
+      o.apply_requires_identifiable = false;  // effect_identifiability reports a model too
+      const EffectIdentifiability id =
+          effect_identifiability(cfg, m_raw, base_ctx.t_s, *M.effects[e], o);
+      if (!id.identifiable) {
+        d.apply = false;
+        d.reason = "not applied, the plan does not let it halve the error (" + id.brief() + "; " +
+                   d.reason + ")";
+      }
     }
     if (d.apply) {
       carried.block(c0, c0, k, k) = Ce;
