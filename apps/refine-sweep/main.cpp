@@ -4,6 +4,7 @@
 // the refined u_S.  A benchmark that prints figures, not a test (tests/core/refine_undeclared.cpp
 // asserts a smaller sweep).
 //   errsep-refine-sweep [--seeds 20] [--sigma 0.05,0.1,0.2] [--effects all|name,...]
+//                       [--declare effect=bound,...]
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cstdio>
@@ -56,6 +57,16 @@ int main(int argc, char** argv) {
   app.add_option("--apply-unidentifiable", refine.apply_unidentifiable,
                  "apply the determined part of an effect this plan cannot identify (refine.hpp)")
       ->capture_default_str();
+  app.add_option("--apply-requires-identifiable", refine.apply_requires_identifiable,
+                 "apply a correction only where effect_identifiability says the plan lets it "
+                 "halve the errors (refine.hpp)")
+      ->capture_default_str();
+  std::vector<std::string> declared;
+  app.add_option("--declare", declared,
+                 "declared bounds (Type B) as effect=bound, e.g. drift=0.03,thermal=5: every "
+                 "parameter of the effect within +-bound in its units (refine.hpp "
+                 "DeclaredEffectBound)")
+      ->delimiter(',');
   CLI11_PARSE(app, argc, argv);
 
   try {
@@ -68,6 +79,19 @@ int main(int argc, char** argv) {
         if (!k) throw std::invalid_argument("--effects: unknown effect '" + e + "'");
         list.push_back(*k);
       }
+    }
+    for (const auto& d : declared) {
+      const auto eq = d.find('=');
+      std::size_t used = 0;
+      double b = 0;
+      try {
+        if (eq != std::string::npos) b = std::stod(d.substr(eq + 1), &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (eq == std::string::npos || used == 0 || eq + 1 + used != d.size())
+        throw std::invalid_argument("--declare: '" + d + "' is not effect=bound");
+      refine.declared.push_back({d.substr(0, eq), b});
     }
     errsep::core::UndeclaredCaseOptions base;
     base.size = size;

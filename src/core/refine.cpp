@@ -21,6 +21,14 @@ namespace errsep::core {
 // bias_z = 1 let a fit to clean noise through (worst gamma error 10.6 -> 24 urad).  The price:
 // fewer halvings (gain 0.25 -> 0.15 of the runs at 0.05 um, PE1 0.10 -> 0.05 at 0.1 um) and none of
 // a thermal drift on all configurations (0.35 at 0.05 um), which one scan cannot identify.
+// Issue 16, stop 27 (errsep-refine-sweep, same 720 runs): gating a correction on
+// effect_identifiability (RefineOptions::apply_requires_identifiable) stops the PE2 run above
+// (its least-squares minimum is the global one, so more starts would not help) but also 12
+// halvings elsewhere and the low-noise corrections of core/refine_effects: off by default.
+// Coverage where the plan cannot see the effect: in the runs where nothing is added the effect's
+// candidate scores like noise (p 0.06-0.95 for gain, 0.35-0.93 for a drift of one configuration,
+// residual white), so no data-driven widening (sigma-hat already scales u: a Birge ratio is in it)
+// can tell them from clean runs; RefineOptions::declared carries a declared bound instead.
 StepDecisionOptions refine_step_decision() {
   StepDecisionOptions o;
   o.bias_z = 2.0;
@@ -41,6 +49,20 @@ bool RefineOptions::is_valid(std::string* why) const {
   if (!(identifiability_tol > 0 && identifiability_tol < 1))
     return fail("identifiability_tol must be in (0, 1)");
   if (!(speed_mm_per_s > 0)) return fail("speed_mm_per_s must be > 0");
+  for (const auto& d : declared) {
+    if (!(d.bound > 0 && std::isfinite(d.bound)))
+      return fail("declared bound of '" + d.effect + "' = " + std::to_string(d.bound) +
+                  ": must be finite and > 0");
+    bool known = false;
+    std::string names;
+    for (const auto& e : default_effect_library()) {
+      known = known || e->name() == d.effect;
+      names += (names.empty() ? "" : ", ") + e->name();
+    }
+    if (!known)
+      return fail("declared bound for unknown effect '" + d.effect + "' (the library has " + names +
+                  ")");
+  }
   if (!solve.is_valid(why)) return false;
   if (!decision.is_valid(why)) return false;
   if (!trace.is_valid(why)) return false;
@@ -646,6 +668,38 @@ LinearAtZero linear_at_zero(const ShiftedBase& sb, const Model& M, const EffectC
   return {pf.dp, s2 * pf.cov_unit};
 }
 
+// The change of S (µm), γ (µrad) and f (µm) per unit of each column of J (4P × k, J = −∂m_c/∂p):
+// the separation at `lin` (linear in the readings) of the readings' change −J (the correction is
+// subtracted).  Full: the gauge directions are not removed here.
+struct Sensitivities {
+  Eigen::MatrixXd S, g, f;
+};
+Sensitivities sensitivities(const FourSensorConfig& cfg, const Eigen::MatrixXd& J,
+                            const FourSensorOptions& lin) {
+  const int P = cfg.positions(), N = cfg.N;
+  const Eigen::Index K = J.cols();
+  Sensitivities out{Eigen::MatrixXd(P, K), Eigen::MatrixXd(P, K), Eigen::MatrixXd(N, K)};
+  for (Eigen::Index j = 0; j < K; ++j) {
+    Eigen::MatrixXd c(P, 4);
+    for (int n = 0; n < P; ++n)
+      for (int i = 0; i < 4; ++i)
+        c(n, i) = -J(4 * n + i, j);
+    const FourSensorResult s = separate_four_sensor(cfg, c, lin);
+    out.S.col(j) = s.S_um;
+    out.g.col(j) = 1e6 * s.gamma_rad;
+    out.f.col(j) = s.f_um;
+  }
+  return out;
+}
+
+// The declared bound of an effect (RefineOptions::declared), 0 when none.
+double declared_bound(const RefineOptions& opts, const std::string& effect) {
+  double b = 0.0;
+  for (const auto& d : opts.declared)
+    if (d.effect == effect) b = std::max(b, d.bound);
+  return b;
+}
+
 Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw, const Model& M,
                       const Solved& cur, const FourSensorResult& before, const RefineOptions& opts,
                       const ShiftedBase& sb, const EffectContext& base_ctx) {
@@ -657,19 +711,10 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
   // Sensitivities of S (µm), γ (µrad), f (µm) to every parameter: the separation at before's λ
   // of the readings' change −∂c/∂p (the correction is subtracted), with the gauge directions
   // removed: a step keeps before's constant, line and bow of S and constant and line of γ.
-  const Eigen::MatrixXd J = model_jacobian(M, cur.ctx);
-  const FourSensorOptions lin = linear_options(before, opts.solve);
-  Eigen::MatrixXd D_S(P, K), D_g(P, K), D_f(N, K);
-  for (int j = 0; j < K; ++j) {
-    Eigen::MatrixXd c(P, 4);
-    for (int n = 0; n < P; ++n)
-      for (int i = 0; i < 4; ++i)
-        c(n, i) = -J(4 * n + i, j);
-    const FourSensorResult s = separate_four_sensor(cfg, c, lin);
-    D_S.col(j) = s.S_um;
-    D_g.col(j) = 1e6 * s.gamma_rad;
-    D_f.col(j) = s.f_um;
-  }
+  const Sensitivities sens =
+      sensitivities(cfg, model_jacobian(M, cur.ctx), linear_options(before, opts.solve));
+  Eigen::MatrixXd D_S = sens.S, D_g = sens.g;
+  const Eigen::MatrixXd& D_f = sens.f;
   // The part of those changes in the gauge directions (constant, line and bow of S; constant
   // and line of γ): the step keeps the raw separation's, so whatever the effect did to them
   // stays in the result, applied or not (carried into u below).
@@ -733,11 +778,27 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
       }
       s2_und = pe.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(1, W.cols()));
       und = std::sqrt(s2_und * (D_S.middleCols(c0, k) * Z).squaredNorm() / P);
+      // A declared bound sizes what the data cannot (Type B, rectangular: bound²/3 per
+      // combination) when it says more than the guess from the determined part; the verdict's
+      // "not identifiable" stays the data's (und above).
+      const double b = declared_bound(opts, M.effects[e]->name());
+      s2_und = std::max(s2_und, b * b / 3.0);
     }
     const bool unidentifiable = k0 > 0 && und > 0.1 * d.quantity("S")->rms_u_base;
     if (d.apply && unidentifiable && !opts.apply_unidentifiable) {
       d.apply = false;
       d.reason = "not identifiable from this plan, so not applied (" + d.reason + ")";
+    }
+    if (d.apply && opts.apply_requires_identifiable) {
+      RefineOptions o = opts;
+      o.apply_requires_identifiable = false;  // effect_identifiability reports a model too
+      const EffectIdentifiability id =
+          effect_identifiability(cfg, m_raw, base_ctx.t_s, *M.effects[e], o);
+      if (!id.identifiable) {
+        d.apply = false;
+        d.reason = "not applied, the plan does not let it halve the error (" + id.brief() + "; " +
+                   d.reason + ")";
+      }
     }
     if (d.apply) {
       carried.block(c0, c0, k, k) = Ce;
@@ -800,6 +861,94 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
   if (after.covariance) after.covariance->add_low_rank(GS, 1e-6 * Gg, Gf, G);
   rep.sep = std::move(after);
   return rep;
+}
+
+// The declared bounds of effects not in the final model (RefineOptions::declared): a Type B term.
+// With the rectangular prior p ~ (0, b²/3·I) and the final model's residual r (reduced, its
+// columns projected out, noise s²), the posterior of the effect's parameters is
+//   C = (JᵣᵀJᵣ/s² + 3/b²·I)⁻¹,  μ = C·Jᵣᵀr/s²
+// (Jᵣ the effect's reduced columns without what the model already spans): what the data
+// determine is bounded by them, the rest by the bound alone.  Nothing of it is corrected, so its
+// whole expected square E[ppᵀ | data] = C + μμᵀ reaches S, γ and f through their full
+// sensitivities (the gauge directions too: the refined result keeps the raw separation's).  An
+// effect with a structural choice (thermal τ, a period) is averaged over its variants (the
+// choice uniform over the effect's own grid).  Returns the sensitivities and that second moment,
+// stacked over the effects and variants, for u and the covariance.
+struct DeclaredTerm {
+  Eigen::MatrixXd GS, Gg, Gf, K;
+  std::vector<std::string> notes;
+};
+DeclaredTerm declared_term(const FourSensorConfig& cfg, const Model& M, const Solved& cur,
+                           const FourSensorResult& before, const RefineOptions& opts,
+                           const std::vector<std::unique_ptr<ModelEffect>>& library) {
+  DeclaredTerm out;
+  const int P = cfg.positions(), N = cfg.N;
+  std::vector<Eigen::MatrixXd> S, g, f, G;
+  const FourSensorOptions lin = linear_options(before, opts.solve);
+  const Eigen::VectorXd r = cur.space.project_out(reduce_readings(cfg, cur.m_c));
+  const double s2 = std::max(cur.s2, 1e-300);
+  for (const auto& d : opts.declared) {
+    const bool in_model = std::any_of(M.effects.begin(), M.effects.end(),
+                                      [&](const auto& e) { return e->name() == d.effect; });
+    if (in_model) {
+      char buf[200];
+      std::snprintf(buf, sizeof buf,
+                    "%s declared within +-%.3g per parameter (Type B): in the model, it sizes "
+                    "the combinations this plan cannot determine",
+                    d.effect.c_str(), d.bound);
+      out.notes.push_back(buf);
+      continue;
+    }
+    const ModelEffect* proto = nullptr;
+    for (const auto& e : library)
+      if (e->name() == d.effect) proto = e.get();
+    if (!proto) {
+      out.notes.push_back(d.effect + " declared, but not in the library used: not carried");
+      continue;
+    }
+    const auto variants = proto->variants(cur.ctx);
+    const double w = 1.0 / static_cast<double>(std::max<std::size_t>(1, variants.size()));
+    double var_S = 0.0;
+    for (const auto& v : variants) {
+      const Eigen::Index k = v->parameter_count();
+      const Eigen::MatrixXd J = v->jacobian(Eigen::VectorXd::Zero(k), cur.ctx);
+      const Eigen::MatrixXd Jr = cur.space.project_out(reduce_columns(cfg, J));
+      Eigen::MatrixXd A = Jr.transpose() * Jr / s2;
+      A.diagonal().array() += 3.0 / (d.bound * d.bound);
+      const Eigen::LDLT<Eigen::MatrixXd> ldlt(A);
+      const Eigen::MatrixXd C = ldlt.solve(Eigen::MatrixXd::Identity(k, k));
+      const Eigen::VectorXd mu = C * (Jr.transpose() * r) / s2;
+      const Sensitivities sv = sensitivities(cfg, J, lin);
+      S.push_back(sv.S);
+      g.push_back(sv.g);
+      f.push_back(sv.f);
+      G.push_back(w * (C + mu * mu.transpose()));
+      var_S += ((sv.S * G.back()).cwiseProduct(sv.S)).sum() / P;
+    }
+    char buf[300];
+    std::snprintf(buf, sizeof buf,
+                  "%s declared within +-%.3g per parameter (Type B, rectangular; not in the "
+                  "model): adds %.3g um rms to u_S for what this plan cannot rule out",
+                  d.effect.c_str(), d.bound, std::sqrt(std::max(0.0, var_S)));
+    out.notes.push_back(buf);
+  }
+  Eigen::Index K = 0;
+  for (const auto& s : S)
+    K += s.cols();
+  out.GS.resize(P, K);
+  out.Gg.resize(P, K);
+  out.Gf.resize(N, K);
+  out.K = Eigen::MatrixXd::Zero(K, K);
+  Eigen::Index c = 0;
+  for (std::size_t j = 0; j < S.size(); ++j) {
+    const Eigen::Index k = S[j].cols();
+    out.GS.middleCols(c, k) = S[j];
+    out.Gg.middleCols(c, k) = g[j];
+    out.Gf.middleCols(c, k) = f[j];
+    out.K.block(c, c, k, k) = G[j];
+    c += k;
+  }
+  return out;
 }
 
 }  // namespace
@@ -1261,6 +1410,35 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
             res.nonlinearity.c2_per_um *
             (res.m_corrected_um.array() - res.nonlinearity.mid_um).square().matrix();
       res.after = std::move(without);
+    }
+  }
+  res.u_S_declared_um = Eigen::VectorXd::Zero(P);
+  if (!opts.declared.empty()) {
+    const DeclaredTerm dt = declared_term(cfg, M, cur, res.before, opts, library);
+    res.declared_notes = dt.notes;
+    if (dt.K.size() > 0) {
+      // A fresh separation when `after` is still `before`'s (same covariance object): the term
+      // must not reach the raw result.
+      if (res.after.covariance && res.after.covariance == res.before.covariance) {
+        FourSensorResult fresh = separate_four_sensor(cfg, res.m_corrected_um, opts.solve);
+        fresh.S_um = res.after.S_um;
+        fresh.gamma_rad = res.after.gamma_rad;
+        fresh.f_um = res.after.f_um;
+        res.after = std::move(fresh);
+      }
+      auto variance = [&](const Eigen::MatrixXd& D) {
+        return Eigen::VectorXd((D * dt.K).cwiseProduct(D).rowwise().sum().cwiseMax(0.0));
+      };
+      const Eigen::VectorXd vS = variance(dt.GS), vg = variance(1e-6 * dt.Gg), vf = variance(dt.Gf);
+      auto widen = [](Eigen::VectorXd& u, const Eigen::VectorXd& v) {
+        if (u.size() == v.size()) u = (u.array().square() + v.array()).sqrt();
+      };
+      widen(res.after.u_S_um, vS);
+      widen(res.after.u_gamma_rad, vg);
+      widen(res.after.u_f_um, vf);
+      res.u_S_declared_um = vS.cwiseSqrt();
+      if (res.after.covariance)
+        res.after.covariance->add_low_rank(dt.GS, 1e-6 * dt.Gg, dt.Gf, dt.K);
     }
   }
   return res;

@@ -34,6 +34,7 @@ SweepRun evaluate_refine_run(UndeclaredEffect effect, const UndeclaredCaseOption
   run.gamma_before_urad = eb.gamma_urad;
   run.gamma_after_urad = ea.gamma_urad;
   run.u_S_after_um = rms(r.after.u_S_um);
+  run.u_S_before_um = rms(r.before.u_S_um);
   run.u_gamma_after_urad = 1e6 * rms(r.after.u_gamma_rad);
   run.added = !r.effects.empty();
   const std::string lib = library_effect_name(effect);
@@ -148,11 +149,18 @@ std::string coverage_breakdown(const SweepCell& c) {
   const double ca = c.coverage_where([](const SweepRun& r) { return r.applied; }, &na);
   const double cd = c.coverage_where([](const SweepRun& r) { return r.added && !r.applied; }, &nd);
   const double cn = c.coverage_where([](const SweepRun& r) { return !r.added; }, &nn);
-  char buf[300];
+  std::vector<double> ratio;
+  for (const auto& r : c.runs)
+    if (r.u_S_before_um > 0 && r.u_S_after_um > 1.01 * r.u_S_before_um)
+      ratio.push_back(r.u_S_after_um / r.u_S_before_um);
+  std::sort(ratio.begin(), ratio.end());
+  char buf[400];
   std::snprintf(buf, sizeof buf,
                 "%-12s %5.2f coverage within 2 u_S: %.3f; applied %.3f (%d runs), detected not "
-                "applied %.3f (%d), nothing added %.3f (%d)",
-                to_string(c.effect), c.sigma_um, c.coverage(), ca, na, cd, nd, cn, nn);
+                "applied %.3f (%d), nothing added %.3f (%d); u_S widened in %zu (median x%.2f, "
+                "max x%.2f)",
+                to_string(c.effect), c.sigma_um, c.coverage(), ca, na, cd, nd, cn, nn, ratio.size(),
+                ratio.empty() ? 1.0 : ratio[ratio.size() / 2], ratio.empty() ? 1.0 : ratio.back());
   return buf;
 }
 

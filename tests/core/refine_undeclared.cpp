@@ -14,6 +14,10 @@
 //   - halving where the effect is identifiable from the plan used (effect_identifiability:
 //     computed from the design and sigma-hat, not from the truth): counted and printed, and
 //     asserted at >= 80 % over the runs where it holds (see that test case for the figures).
+//   - a declared bound (Type B) on an effect one scan cannot identify: u only, stated, covers
+//     more (drift on all configurations);
+//   - PE2 at sigma 0.2 seed 15 (a far least-squares minimum) is not applied with the
+//     identifiability gate (off by default).
 // Known not to hold in the full table (errsep-refine-sweep, seeds 1-20, not the seeds here): a
 // thermal drift on one configuration taken for a knocked sensor by the gross-error search and
 // removed (seed 12 at 0.05 um: S 0.35 -> 1.89 um, u_S 0.46; core/gross_errors, not the effect
@@ -210,4 +214,112 @@ TEST_CASE("undeclared effects: detected, not applied: reported and carried in u_
     }
   }
   CHECK(found >= 1);
+}
+
+// A declared bound (RefineOptions::declared, a Type B term): what one scan cannot identify of a
+// drift on every configuration (three of its four rates lie in what f, S, gamma and e absorb) no
+// data-driven widening can cover (u_S without it: 0.52-0.59 of the points within 2 u_S in
+// errsep-refine-sweep's drift_all cells, seeds 1-20).  Declared within +-0.03 um/s per rate (a
+// sensor's drift specification), the bound enters u only: S and gamma are unchanged, u_S never
+// narrower (wider wherever the data's own guess of the undetermined part is smaller), the result
+// states the term, and more points are covered.  Measured here (seeds 101-108, sigma 0.1): clean
+// 0.974 -> 1.000 (u_S x7.9: 4.1 um rms for S errors of 0.1-0.4 um), drift on all configurations
+// 0.673 -> 0.891.  Not asserted: 90-99 %.  The rectangular distribution of a bound (GUM 4.3.7,
+// variance b^2/3) understates rates that lie near the bound more often than it assumes (the
+// generator draws |a| in [b/3, b]: mean square 0.48 b^2, not 0.33 b^2), and it overcovers clean
+// data whatever they show.  A closing or reversed plan identifies the drift instead
+// (core/sequence_refine asserts 0.90-0.99 there); the bound is for a single scan.
+TEST_CASE("undeclared effects: a declared drift bound (Type B) covers what one scan cannot see") {
+  RefineOptions plain = test_options();
+  RefineOptions declared = plain;
+  declared.declared = {{"drift", 0.03}};
+  REQUIRE(declared.is_valid());
+  for (auto effect : {UndeclaredEffect::none, UndeclaredEffect::drift_all}) {
+    const SweepCell without = run_sweep_cell(effect, 0.1, 2 * kSeeds, kSeed0, plain);
+    const SweepCell with = run_sweep_cell(effect, 0.1, 2 * kSeeds, kSeed0, declared);
+    print_cell(with);
+    std::printf(
+        "%s, sigma 0.1, drift declared within +-0.03 um/s: coverage %.3f (without the "
+        "bound %.3f)\n",
+        to_string(effect), with.coverage(), without.coverage());
+    REQUIRE(with.runs.size() == without.runs.size());
+    for (std::size_t k = 0; k < with.runs.size(); ++k) {
+      const SweepRun &a = with.runs[k], &b = without.runs[k];
+      INFO(to_string(effect) << " seed " << a.seed << ": u_S " << b.u_S_after_um << " -> "
+                             << a.u_S_after_um);
+      CHECK(a.S_after_um == Approx(b.S_after_um).epsilon(1e-9));
+      CHECK(a.gamma_after_urad == Approx(b.gamma_after_urad).epsilon(1e-9));
+      CHECK(a.u_S_after_um >= b.u_S_after_um * (1 - 1e-12));
+      if (effect == UndeclaredEffect::none) CHECK(a.u_S_after_um > b.u_S_after_um);
+    }
+    CHECK(with.coverage() > without.coverage());
+  }
+  // Stated in the result, and the raw separation untouched.
+  UndeclaredCaseOptions co;
+  co.sigma_um = 0.1;
+  co.seed = kSeed0;
+  const UndeclaredCase c = simulate_undeclared(UndeclaredEffect::none, co);
+  const RefineResult r = refine_four_sensor(c.cfg, c.m_um, c.t_s, declared);
+  const RefineResult r0 = refine_four_sensor(c.cfg, c.m_um, c.t_s, plain);
+  REQUIRE(r.declared_notes.size() == 1);
+  std::printf("%s\n", r.declared_notes.front().c_str());
+  CHECK(r.declared_notes.front().find("drift declared within +-0.03") != std::string::npos);
+  CHECK(r.declared_notes.front().find("Type B") != std::string::npos);
+  REQUIRE(r.u_S_declared_um.size() == r.after.u_S_um.size());
+  CHECK(r.u_S_declared_um.minCoeff() >= 0.0);
+  CHECK(r.u_S_declared_um.maxCoeff() > 0.0);
+  CHECK((r.before.u_S_um - r0.before.u_S_um).cwiseAbs().maxCoeff() <= 1e-12);
+  CHECK(r0.u_S_declared_um.isZero());
+  // u_S² is the plain refined u_S² plus the declared term's, point by point.
+  CHECK(((r.after.u_S_um.array().square() - r0.after.u_S_um.array().square() -
+          r.u_S_declared_um.array().square())
+             .abs() <= 1e-9 * r.after.u_S_um.array().square())
+            .all());
+}
+
+TEST_CASE("undeclared effects: a declared bound must name a library effect and be positive") {
+  RefineOptions o;
+  std::string why;
+  o.declared = {{"sensor_drift", 0.03}};
+  CHECK_FALSE(o.is_valid(&why));
+  CHECK(why.find("unknown effect 'sensor_drift'") != std::string::npos);
+  CHECK(why.find("drift") != std::string::npos);
+  o.declared = {{"drift", 0.0}};
+  CHECK_FALSE(o.is_valid(&why));
+  CHECK(why.find("'drift' = 0") != std::string::npos);
+  o.declared = {{"thermal", 5.0}, {"traverse", 2.0}};
+  CHECK(o.is_valid(&why));
+}
+
+// The last library-effect run made worse beyond its u in errsep-refine-sweep (seeds 1-20): PE2 at
+// sigma 0.2, seed 15.  Its least-squares minimum is far from the truth (c2 = 3094 +- 540 um for a
+// true 795; fit_effects started at the truth ends there too, so no second start helps), and the
+// decision's linearisation there promised V/B = 0.015 while the plan cannot halve the error
+// (effect_identifiability: S 1.16 -> 0.67 um).  With the correction gated on identifiability
+// (RefineOptions::apply_requires_identifiable) it is reported, carried in u, not applied.  The
+// gate is off by default (refine.hpp: it also stops corrections that help), so the default
+// refine still makes this run worse beyond u: printed, not asserted.
+TEST_CASE("undeclared effects: gated on identifiability, PE2 at a far minimum is not applied") {
+  UndeclaredCaseOptions co;
+  co.sigma_um = 0.2;
+  co.seed = 15;
+  RefineOptions o = test_options();
+  const RefineOptions ungated = o;  // the default: the gate stops corrections that help too
+  o.apply_requires_identifiable = true;
+  const SweepRun run = evaluate_refine_run(UndeclaredEffect::pe2, co, o);
+  const SweepRun old = evaluate_refine_run(UndeclaredEffect::pe2, co, ungated);
+  std::printf(
+      "PE2 sigma 0.2 seed 15: S %.3f -> %.3f um (u %.3f), gamma %.1f -> %.1f urad (u %.1f)"
+      "; without the gate S -> %.3f, gamma -> %.1f\n  %s\n  %s\n",
+      run.S_before_um, run.S_after_um, run.u_S_after_um, run.gamma_before_urad,
+      run.gamma_after_urad, run.u_gamma_after_urad, old.S_after_um, old.gamma_after_urad,
+      run.verdicts.c_str(), run.identifiability.c_str());
+  INFO(run.verdicts);
+  CHECK_FALSE(run.worse_beyond_u());
+  CHECK_FALSE(run.applied);
+  CHECK(run.gauge_change_um <= 1e-9 * std::max(1.0, run.S_before_um));
+  if (run.added) {
+    CHECK(run.verdicts.find("the plan does not let it halve the error") != std::string::npos);
+    CHECK(run.u_S_after_um > run.u_S_before_um);
+  }
 }

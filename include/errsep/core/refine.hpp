@@ -52,6 +52,17 @@ namespace errsep::core {
 /// beyond its stated u (errsep-refine-sweep, seeds 1-20; refine.cpp has the figures).
 StepDecisionOptions refine_step_decision();
 
+/// A bound the user declares on an effect of the library (a specification, e.g. a sensor's drift
+/// of at most 0.03 µm/s): every parameter of `effect` lies within ±bound, in its parameter units
+/// (drift µm/s, thermal µm, traverse µm, gain 1, pe1/pe2/periodic as named).  It is a Type B
+/// term (GUM 4.3.7: rectangular, variance bound²/3 per parameter) for what the scan's plan cannot
+/// determine of that effect: one scan absorbs most of a drift, a thermal drift on every
+/// configuration or a non-repeating traverse into f, S, γ and e, and no residual can show it.
+struct DeclaredEffectBound {
+  std::string effect;  ///< ModelEffect::name(): drift, thermal, traverse, gain, pe1, pe2, periodic
+  double bound = 0;    ///< half-width, parameter units, > 0
+};
+
 struct RefineOptions {
   FourSensorOptions solve;               ///< for the reported separations (before and after)
   ResidualAnalysisOptions residual;      ///< whiteness test of each step's residual
@@ -76,6 +87,17 @@ struct RefineOptions {
   /// applied, because its correction is then judged on a part of the effect only (errsep-refine-
   /// sweep: a thermal drift of one configuration, single plan, S 0.64 -> 2.16 um, u_S 0.95).
   bool apply_unidentifiable = false;
+  /// Whether a correction is applied only when effect_identifiability (below) says the plan lets
+  /// it halve the errors of S and γ (the effect refitted alone to the raw readings, at its fit
+  /// and linearised about zero), on top of the decision.  Off by default: it stops PE2 at
+  /// σ = 0.2 µm, seed 15 of errsep-refine-sweep (c2 = 3094 ± 540 µm for a true 795 at the global
+  /// least-squares minimum, V/B = 0.015 while the plan predicts S 1.16 -> 0.67 µm: applied, S
+  /// 0.48 -> 4.0 µm, γ 30 -> 224 µrad, beyond u), but it also stops corrections that help: PE1
+  /// at σ = 0.02 µm (γ 43 -> 6.7 µrad, f 1.15 -> 0.19 µm, S only 0.25 -> 0.16 µm: not "halved"),
+  /// a 5 % gain, a periodic error at 0.1 µm, PE1 with a periodic error (core/refine_effects,
+  /// core/refine_clean fail with it), and in the sweep (seeds 1-20, σ 0.05/0.1/0.2) halved runs
+  /// pe1 8/1/0 -> 5/0/0, gain 3/0/0 -> 1/0/0, periodic 16/5/0 -> 13/2/0.
+  bool apply_requires_identifiable = false;
   /// The final residual traced against the recorded variables (residual_trace.hpp): reported in
   /// RefineResult::trace and its findings; only a non-linearity is acted on (correct_nonlinearity).
   ResidualTraceOptions trace;
@@ -87,6 +109,12 @@ struct RefineOptions {
   /// A sensor non-linearity the trace finds is corrected when decide_step expects S, γ, f to
   /// improve, else carried in u (sensor_nonlinearity.hpp); false: reported only.
   bool correct_nonlinearity = true;
+  /// Declared bounds (Type B, see DeclaredEffectBound); empty: none, u_S carries only what the
+  /// data show.  An effect not in the model enters u_S, u_γ, u_f with its posterior under the
+  /// rectangular prior (covariance plus the square of the posterior mean: what the data leave of
+  /// it is not corrected); for an effect in the model the bound sizes the parameter combinations
+  /// the plan cannot determine (RefineStep::undetermined), when it is larger than the data's guess.
+  std::vector<DeclaredEffectBound> declared;
   bool is_valid(std::string* why = nullptr) const;
 };
 
@@ -218,6 +246,10 @@ struct RefineResult {
   GrossErrorScan gross;
   bool gross_removed = false;     ///< `after` is the separation without the gross errors
   NonlinearityStep nonlinearity;  ///< the trace's non-linearity, corrected or carried in u
+  /// P: what the declared bounds of effects not in the model add to u_S (quadrature; zeros when
+  /// none is declared), and one line per declared bound saying what it added ("Type B").
+  Eigen::VectorXd u_S_declared_um;
+  std::vector<std::string> declared_notes;
   /// True when the final residual passes the whiteness test.  False means the model is still
   /// missing something even if no candidate in the library was significant.
   bool residual_white() const { return residual.whiteness.white; }

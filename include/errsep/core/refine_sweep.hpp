@@ -23,10 +23,11 @@ struct SweepRun {
   double S_clean_um = 0, S_before_um = 0, S_after_um = 0;  ///< RMS errors (profile_errors)
   double gamma_clean_urad = 0, gamma_before_urad = 0, gamma_after_urad = 0;
   double u_S_after_um = 0, u_gamma_after_urad = 0;  ///< RMS over the points of the refined u
-  bool added = false;                               ///< an effect was added to the model
-  bool identified = false;  ///< the library effect that describes the injected one was added
-  bool applied = false;     ///< some correction was applied to the result
-  bool not_white = false;   ///< the final model was reported incomplete (residual not white …)
+  double u_S_before_um = 0;  ///< RMS of the raw separation's u_S (how much the refine widened it)
+  bool added = false;        ///< an effect was added to the model
+  bool identified = false;   ///< the library effect that describes the injected one was added
+  bool applied = false;      ///< some correction was applied to the result
+  bool not_white = false;    ///< the final model was reported incomplete (residual not white …)
   bool not_identifiable_reported = false;  ///< a verdict says "not identifiable from this plan"
   /// The injected effect's library counterpart identifiable from the plan used, computed from
   /// the design and σ̂ without the truth (effect_identifiability, refine.hpp); false for none and
@@ -77,7 +78,8 @@ std::string sweep_header();
 std::string sweep_row(const SweepCell& c);
 /// One line per cell: the coverage of u_S split by what the refine did with the effect
 /// (applied / detected, not applied / nothing added), each with its number of runs: where a cell
-/// undercovers, and why.
+/// undercovers, and why; and in how many runs the refine widened u_S (RMS by more than 1 %),
+/// with the median and largest ratio of the refined to the raw u_S there.
 std::string coverage_breakdown(const SweepCell& c);
 
 }  // namespace errsep::core
