@@ -286,21 +286,27 @@ TEST_CASE(
       v, f.w_error_um, b.w_error_um);
 
   // The paper's order: named not identifiable, nothing applied.
-  CHECK(f.account.meta("step1_effect") == std::optional<std::string>("drift of sensor 1"));
+  // The drift is exactly linear in the recorded times, but the library's first-order thermal
+  // drift nests it (tau -> infinity) with one parameter more: AIC takes the nesting form when the
+  // noise favours it by more than its penalty (chi2_1 > 2: about one run in six). Either form is
+  // the drift of sensor 1; the rate is checked where the linear form was taken.
+  INFO("forward:\n" << account_steps(f.account) << "backward:\n" << account_steps(b.account));
+  CHECK(is_drift_of_sensor_1(f.account.meta("step1_effect").value_or("(none)")));
   CHECK(f.account.meta("step1_decision") == std::optional<std::string>("not identifiable"));
   CHECK_THAT(f.account.meta("step1_line").value_or(""), Catch::Contains("run scan 2 backwards"));
   CHECK(f.account.meta("applied_any") == std::optional<std::string>("false"));
 
   // Backward: identified (taken by the F-test, not "not identifiable"), its rate within 4 u of
   // the injected one, and w's error at most half the paper order's.
-  CHECK(b.account.meta("step1_effect") == std::optional<std::string>("drift of sensor 1"));
+  const std::string effect = b.account.meta("step1_effect").value_or("(none)");
+  CHECK(is_drift_of_sensor_1(effect));
   const auto d = b.account.meta("step1_decision").value_or("");
   CHECK((d == "applied" || d == "detected, not applied"));
   const auto val = b.account.column("value"), u = b.account.column("u");
   REQUIRE(!val.empty());
-  std::printf("backward: fitted drift %.4g +- %.2g um/s (injected %.4g), decision %s\n", val[0],
-              u[0], v, d.c_str());
-  CHECK(std::abs(val[0] - v) <= 4 * u[0]);
+  std::printf("backward: %s %.4g +- %.2g (injected %.4g um/s), decision %s\n", effect.c_str(),
+              val[0], u[0], v, d.c_str());
+  if (effect == "drift of sensor 1") CHECK(std::abs(val[0] - v) <= 4 * u[0]);
   CHECK(b.w_error_um <= 0.5 * f.w_error_um);
 }
 
