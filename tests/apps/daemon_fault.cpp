@@ -205,14 +205,37 @@ TEST_CASE("devices that stop answering do not hold SIGTERM past the bound, idle 
   // the response timeout, the way a machine whose controller hangs behaves.  Every stop command
   // and close then costs timeouts; the daemon must still exit within --stop-timeout-ms (plus
   // the writing of the scan's files and the process's own start of exit).
+  // The devices' response timeout is raised to 1.5 s (3 s a request with daemon_machine.toml's
+  // one retry), so that a daemon which waited for even one frozen request would exit >= 3.3 s after
+  // SIGTERM: the margin below (for writing the scan's files and the process's exit on a loaded
+  // CI machine, where 0.35 s was once crossed) stays far from that failure.
   constexpr int kStopMs = 300;
 #if defined(__SANITIZE_ADDRESS__)
-  constexpr double kMarginS = 1.0;  // the sanitizer's leak check at exit and slower writes
+  constexpr double kMarginS = 1.5;  // the sanitizer's leak check at exit and slower writes
 #else
-  constexpr double kMarginS = 0.35;
+  constexpr double kMarginS = 1.0;
 #endif
+  constexpr double kOneFrozenRequestS = 3.0;
+  static_assert(kStopMs / 1000.0 + kMarginS < kOneFrozenRequestS);
+  const auto slow_devices_config = [](DaemonRig& rig) {
+    const auto cfg = rig.tmp / "machine-slow-timeout.toml";
+    std::ifstream in(rig.config);
+    std::ofstream out(cfg);
+    std::string line;
+    int replaced = 0;
+    while (std::getline(in, line)) {
+      if (line.rfind("response_timeout_ms", 0) == 0) {
+        line = "response_timeout_ms = 1500";
+        ++replaced;
+      }
+      out << line << "\n";
+    }
+    REQUIRE(replaced == 2);  // both buses: sensors and motion
+    rig.config = cfg;
+  };
   SECTION("idle") {
     DaemonRig rig;
+    slow_devices_config(rig);
     rig.devsim.start(rig.config, rig.tmp / "devsim.log");
     rig.start_daemon({"--stop-timeout-ms", std::to_string(kStopMs)});
     REQUIRE(rig.notify->wait_for("READY=1", 15s));
@@ -227,6 +250,7 @@ TEST_CASE("devices that stop answering do not hold SIGTERM past the bound, idle 
   }
   SECTION("mid-scan") {
     DaemonRig rig;
+    slow_devices_config(rig);
     rig.devsim.start(rig.config, rig.tmp / "devsim.log");
     rig.start_daemon({"--stop-timeout-ms", std::to_string(kStopMs)});
     REQUIRE(rig.notify->wait_for("READY=1", 15s));
