@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "errsep/core/displacement_refine.hpp"
@@ -241,6 +242,36 @@ Plan make_plan(bool reverse, bool y_fastest = false, bool diagonal = false) {
 }
 
 }  // namespace
+
+TEST_CASE("scan 1 along diagonals reads every point once and every row and column over scan 1") {
+  for (const auto& [nx, ny] : {std::pair{25, 25}, std::pair{7, 4}, std::pair{4, 9}}) {
+    TwoAxisScanOrder o;
+    o.diagonal_scan1 = true;
+    std::vector<int> seen(static_cast<std::size_t>(nx * ny), 0);
+    std::vector<double> row_lo(nx, 1e300), row_hi(nx, -1), col_lo(ny, 1e300), col_hi(ny, -1);
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        const double t = o.time_s(1, i, j, nx, ny);
+        REQUIRE(t >= 0);
+        REQUIRE(t < nx * ny);
+        ++seen[static_cast<std::size_t>(t)];
+        row_lo[i] = std::min(row_lo[i], t);
+        row_hi[i] = std::max(row_hi[i], t);
+        col_lo[j] = std::min(col_lo[j], t);
+        col_hi[j] = std::max(col_hi[j], t);
+      }
+    CHECK(std::count(seen.begin(), seen.end(), 1) == nx * ny);
+    // A raster x fastest reads a column within nx samples; along diagonals each row and column
+    // spans at least (n_other - 1) of its reading's steps of nx samples.
+    for (int i = 0; i < nx; ++i)
+      CHECK(row_hi[i] - row_lo[i] >= (ny - 1) * nx);
+    for (int j = 0; j < ny; ++j)
+      CHECK(col_hi[j] - col_lo[j] >= (std::min(nx, ny) - 1) * nx - nx);
+    // Scan 2 is unchanged by it.
+    TwoAxisScanOrder r;
+    CHECK(o.time_s(2, 1, 2, nx, ny) == r.time_s(2, 1, 2, nx, ny));
+  }
+}
 
 TEST_CASE("which effects each scan plan can identify, computed without data") {
   const Plan same = make_plan(false), rev = make_plan(true), yf = make_plan(false, true),

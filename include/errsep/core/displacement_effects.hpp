@@ -29,7 +29,8 @@
 // through scan 1's time variation along a column, which a raster x fastest compresses into n_x
 // samples.  diagonal_scan1 reads scan 1 along wrapped diagonals: reading k = q·n_x + i is at
 // (i, (q + i) mod n_y), so x still steps by one every reading, but every row and every column is
-// read over the whole of scan 1 (row i at k ≡ i mod n_x, column j at q = (j − i) mod n_y).
+// read over the whole of scan 1 (row i at k ≡ i mod n_x, column j at q = (j − i) mod n_y; with
+// n_x < n_y a column spans ~n_x² samples, still n_x times a raster's).
 #include <Eigen/Core>
 #include <array>
 #include <string>
