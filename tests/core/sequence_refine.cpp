@@ -189,12 +189,20 @@ double worst(const std::vector<double>& v) {
   return v.empty() ? 0.0 : *std::max_element(v.begin(), v.end());
 }
 
-Cell run_cell(Case c, const Plan& plan, double sigma = kSigma) {
+// The cells' seeds are seed_base() + 1 .. + kSeeds: 1000 unless ERRSEP_SEQUENCE_SEED_BASE says
+// otherwise (to check seeds the estimator was not tuned on; the assertions are for the default).
+std::uint64_t seed_base() {
+  const char* e = std::getenv("ERRSEP_SEQUENCE_SEED_BASE");
+  return e ? std::strtoull(e, nullptr, 10) : 1000;
+}
+
+Cell run_cell(Case c, const Plan& plan, double sigma = kSigma,
+              const SequenceRefineOptions& opts = {}) {
   Cell cell;
   const FourSensorConfig cfg;
-  SequenceModel model(cfg, sequence_of(plan, cfg));
+  SequenceModel model(cfg, sequence_of(plan, cfg), opts);
   for (int s = 1; s <= kSeeds; ++s) {
-    const Run r = run_case(c, plan, 1000 + static_cast<std::uint64_t>(s), sigma, model);
+    const Run r = run_case(c, plan, seed_base() + static_cast<std::uint64_t>(s), sigma, model);
     cell.identified += r.identified;
     cell.added += r.any_added;
     cell.ambiguous += r.ambiguous;
@@ -217,6 +225,9 @@ Cell run_cell(Case c, const Plan& plan, double sigma = kSigma) {
       cell.halved_of_doubled += r.err_after <= 0.5 * r.err_before;
     }
     if (!r.added.empty()) std::printf("    seed %d added %s\n", s, r.added.c_str());
+    if (r.err_after > r.err_before + r.u_rms)
+      std::printf("    seed %d worse beyond u: S err %.3f -> %.3f um, u_S RMS %.3f um\n", s,
+                  r.err_before, r.err_after, r.u_rms);
   }
   std::printf(
       "s %.2f %-12s %-22s identified %2d/%d  halved %2d (%2d of %2d doubled)  worse %2d  'not "
@@ -413,14 +424,18 @@ TEST_CASE("identifiability from the plan: what each sequence lets drift and a no
 //     S error halved in >= 80 % (measured 20/20 and 20/20 for both);
 //   - reversed traverses: linear drift (one configuration and all) and thermal drift on all
 //     configurations identified in >= 80 % (measured 20/20 each);
-//   - no run's S error grows by more than the RMS of its refined u_S, except in the reversed
-//     plan's linear-drift cells (see below).
+//   - no run's S error grows by more than the RMS of its refined u_S (each such run's seed is
+//     printed; ERRSEP_SEQUENCE_SEED_BASE=1020, 1040 runs other seeds), except in the reversed
+//     plan's linear-drift cells at the defaults (see below and the test case after the next).
 // What does not hold (figures at seeds 1001-1020, sigma 0.1 um, printed by this test):
 //   - linear drift is not identifiable from a closing pass (its own zero adjustment absorbs the
 //     offset a drift gives the repeated traverse; with the stage's zero kept, 2 of 4 rates are
 //     seen) and is harmless in a reversed plan (forward and back cancel it: S error 0.151 um with
-//     and without the drift), so "halved" cannot happen there; fitting it made S worse beyond u
-//     in 1 of 20 runs (all configurations; S error 2.04 um, the cell's worst before was 0.33 um);
+//     and without the drift), so "halved" cannot happen there; at the defaults fitting it made
+//     S worse beyond u in 1 of 20 runs (seed 1003, all configurations: 0.09 -> 1.90 um, u_S
+//     0.65 um): its line taken for a warm-up at tau 37 s on the unadjusted 1-dof F-test of tau
+//     (F = 6.8, p = 0.009).  SequenceRefineOptions::drift_form_midway (off by default, see its
+//     comment) fixes it; asserted in the test case after the next;
 //   - thermal drift with the reversed plan: identified 13/20 on one configuration (the effect
 //     doubled the clean error in only 3 of 20, all three halved) and 20/20 on all, S error halved
 //     in 11 of the 19 runs where it doubled the clean error (median 0.93 -> 0.35 um); the closing
@@ -492,6 +507,7 @@ void check_redundant_plan(const Plan& plan, double sigma, const std::vector<Case
     if (plan.kind == ScanSequenceKind::reversed) CHECK(cell.reported == 0);
     if (c == Case::traverse) CHECK(cell.identified >= kSeeds * 8 / 10);
     if (!main_table) continue;
+    // The reversed plan's linear drift: see the test case after the next (defaults: seed 1003).
     if (!(plan.kind == ScanSequenceKind::reversed && drift)) CHECK(cell.worse == 0);
     if (c == Case::traverse) CHECK(cell.halved >= kSeeds * 8 / 10);
     if (plan.kind == ScanSequenceKind::reversed && (drift || c == Case::thermal_all))
@@ -527,6 +543,40 @@ TEST_CASE("must-show: closing pass with the stage's zero kept") {
 
 TEST_CASE("must-show: reversed traverses identify drift and a non-repeating traverse") {
   check_redundant_plan(Plan{ScanSequenceKind::reversed}, kSigma, kAllCases);
+}
+
+// Issue 16: a library effect never makes S worse beyond its stated u.  The reversed plan's
+// linear drift with SequenceRefineOptions::drift_form_midway: a thermal form the first round
+// chose is kept only when its tau beats the line on the F-test Sidak-adjusted over the tau grid;
+// otherwise S lies midway between the two forms and their half-difference is in u_S.  Asserted:
+// the run it was made for (seed 1003, all configurations, sigma 0.1: 0.09 -> 1.90 um with u_S
+// 0.65 at the defaults) stays within u, and the drift is still identified in >= 80 % of runs.
+// NOT asserted, because it does not hold: worse == 0 over other seeds.  Seed 1046 (one and all
+// configurations, every sigma) is made worse beyond u with or without the option (0.17 -> 3.26
+// um, u_S 2.0-2.4 at sigma 0.1; the error scales with sigma): the fitted drift puts a poorly
+// determined direction into S while the reversed plan leaves S free of the drift before the
+// step, so a step decision on S (step_decision.hpp) would not take it; the sequence refine has
+// none yet.  The cells' counts are printed (ERRSEP_SEQUENCE_SEED_BASE for other seeds).
+TEST_CASE("reversed plan with linear drift: the drift form midway keeps seed 1003 within u") {
+  SequenceRefineOptions o;
+  o.drift_form_midway = true;
+  const FourSensorConfig cfg;
+  const Plan plan{ScanSequenceKind::reversed};
+  SequenceModel model(cfg, sequence_of(plan, cfg), o), model_default(cfg, sequence_of(plan, cfg));
+  const Run r = run_case(Case::drift_all, plan, 1003, 0.1, model);
+  const Run r0 = run_case(Case::drift_all, plan, 1003, 0.1, model_default);
+  std::printf(
+      "seed 1003 drift_all reversed s 0.10: S err %.3f -> %.3f um, u_S %.3f (defaults: "
+      "%.3f, u_S %.3f)\n",
+      r.err_before, r.err_after, r.u_rms, r0.err_after, r0.u_rms);
+  CHECK(r.identified);
+  CHECK(r.err_after <= r.err_before + r.u_rms);
+  for (double sigma : {0.05, 0.1, 0.2})
+    for (auto c : {Case::drift_one, Case::drift_all}) {
+      const Cell cell = run_cell(c, plan, sigma, o);
+      INFO(name(c) << ", sigma " << sigma);
+      CHECK(cell.identified >= kSeeds * 8 / 10);
+    }
 }
 
 // The issue asks sigma = 0.05, 0.1 and 0.2 um; at the outer two, fewer cells (suite time): the

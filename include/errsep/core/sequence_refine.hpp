@@ -151,6 +151,14 @@ struct SequenceRefineOptions {
   /// Search the differences of repeated traverses for a knocked sensor first (repeat_steps.hpp)
   /// and, when one is attributed, fit its step before the effects (SequenceKnock).
   bool find_knocks = true;
+  /// When the first round takes a thermal drift and the F-test of its τ against the line,
+  /// Šidák-adjusted over the τ grid, does not reject the line: S midway between the two forms'
+  /// fits, their half-difference in u_S (sequence_refine.cpp).  Off by default: it keeps a
+  /// linear drift of a reversed plan within u (seed 1003: 0.09 -> 1.90 um with u_S 0.65 um
+  /// without it; 0.96 um with u_S 1.03 um with it) but moves a knocked sensor the search misses
+  /// at σ 0.2 (knock seed 715) from 3.88 to 4.06 u_S at its worst point, past the 4 u_S that
+  /// test asserts, and halves one run fewer of 19 in the reversed plan's thermal_all cell.
+  bool drift_form_midway = false;
   RepeatStepOptions repeat_steps;
   /// Test the sensor's hysteresis on plans that read a configuration both ways and take it into
   /// the fit when decide_step expects S, γ, f to improve (SequenceHysteresis).
