@@ -1,4 +1,4 @@
 # Starts errsep-devsim and errsep-daemon: build them with the test.
 add_dependencies(${test_target} errsep-daemon errsep-devsim)
-catch_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "apps/daemon_fault: "
+errsep_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "apps/daemon_fault: "
                      PROPERTIES TIMEOUT 90 LABELS apps)

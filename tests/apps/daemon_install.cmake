@@ -7,5 +7,5 @@ target_compile_definitions(${test_target} PRIVATE
   ERRSEP_INSTALLED_APPS="${_install_apps_csv}"
   ERRSEP_INSTALL_BINDIR="${CMAKE_INSTALL_BINDIR}"
   ERRSEP_INSTALL_DATADIR="${CMAKE_INSTALL_DATADIR}")
-catch_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "apps/daemon_install: "
+errsep_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "apps/daemon_install: "
                      PROPERTIES TIMEOUT 120 LABELS apps SKIP_REGULAR_EXPRESSION "SKIPPED:")

@@ -1,5 +1,5 @@
 # A real Mosquitto broker, 8 errsep-devsim + errsep-daemon pairs on loopback (~20-40 s).  Skipped
 # (SKIPPED:) where mosquitto, its clients, openssl or python3-jsonschema are missing.
 add_dependencies(${test_target} errsep-daemon errsep-devsim)
-catch_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "apps/mqtt_fleet: "
+errsep_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "apps/mqtt_fleet: "
                      PROPERTIES TIMEOUT 240 LABELS "apps;mqtt" SKIP_REGULAR_EXPRESSION "SKIPPED:")

@@ -2,5 +2,5 @@
 # simulator (~10 s).  Skipped (SKIPPED:) where mosquitto, its clients, openssl or
 # python3-jsonschema are missing.
 add_dependencies(${test_target} errsep-scan errsep-devsim)
-catch_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "apps/mqtt_scan_app: "
+errsep_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "apps/mqtt_scan_app: "
                      PROPERTIES TIMEOUT 240 LABELS "apps;mqtt" SKIP_REGULAR_EXPRESSION "SKIPPED:")

@@ -355,7 +355,8 @@ TEST_CASE(
 
 TEST_CASE(
     "scan --method displacement --refine without drift, five simulator seeds, both scan 2 "
-    "orders: coverage of the refined u(w)") {
+    "orders: coverage of the refined u(w)",
+    "[sweep]") {
   // The simulated machine's noise only (no drift): nothing should be applied, and the refined
   // u(w) (the separation's when nothing is taken) should cover the machine's w at about 95 % of
   // the points within 2u.  Five seeds x two orders, ~1.2 s a scan (~12 s).  Coverage is printed,

@@ -3,5 +3,5 @@
 # and errsep-report find and print it (all built with the test).
 add_dependencies(${test_target} errsep-simulate errsep-separate errsep-refine errsep-report errsep-scan
                  errsep-devsim)
-catch_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "apps/sequence_app: "
+errsep_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "apps/sequence_app: "
                      PROPERTIES TIMEOUT 180 LABELS "apps;modbus")

@@ -1,5 +1,5 @@
 # Measure - compensate - verify end to end: errsep-scan, errsep-report and errsep-devsim on an
 # ephemeral loopback port, all started by the test.  The apps must be built first.
 add_dependencies(${test_target} errsep-scan errsep-devsim errsep-report)
-catch_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "apps/verify_app: "
+errsep_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "apps/verify_app: "
                      PROPERTIES TIMEOUT 180 LABELS "apps;modbus")

@@ -444,10 +444,12 @@ void run_table(const std::vector<Plan>& plans) {
 
 }  // namespace
 
-TEST_CASE("displacement refine: the closing-the-loop table, sigma 0.05/0.1/0.2 um, 20 seeds") {
+TEST_CASE("displacement refine: the closing-the-loop table, sigma 0.05/0.1/0.2 um, 20 seeds",
+          "[sweep]") {
   run_table({make_plan(false), make_plan(true), make_plan(true, true)});
 }
 
-TEST_CASE("displacement refine: the closing-the-loop table on scan 1 diagonal, 20 seeds") {
+TEST_CASE("displacement refine: the closing-the-loop table on scan 1 diagonal, 20 seeds",
+          "[sweep]") {
   run_table({make_plan(true, true, true)});
 }

@@ -190,7 +190,8 @@ TEST_CASE("one axis: a table that moves during scan 2 is seen by the workpiece r
   CHECK(white_clean >= 9);
 }
 
-TEST_CASE("two axes: sigma_hat of the reference pieces and the workpiece repeat, 40 clean seeds") {
+TEST_CASE("two axes: sigma_hat of the reference pieces and the workpiece repeat, 40 clean seeds",
+          "[sweep]") {
   // Reference pieces: dof 2·25·24 + 2·25·24 = 2400 per seed, one σ for the four eddy-current
   // sensors; workpiece repeat (sensor 0 read in both scans): dof 624.  Each seed's σ̂ in its
   // 99.9 % interval (40 seeds x 2: expected 0.08 outside), whiteness of all families together
@@ -222,7 +223,8 @@ TEST_CASE("two axes: sigma_hat of the reference pieces and the workpiece repeat,
   CHECK(white >= 38);
 }
 
-TEST_CASE("two axes: a thermal drift of the paper's size is found, what cannot be seen is zero") {
+TEST_CASE("two axes: a thermal drift of the paper's size is found, what cannot be seen is zero",
+          "[sweep]") {
   // First-order thermal drift of the eddy-current sensors, δ(t) = A (1 - exp(-t/τ)) from the
   // start of scan 1 (1 s per point, 625 s per scan), A = 0.5 µm, τ = 600 s: the range the paper
   // measured over 10 min (Fig. 14: -0.3 to 0.2 µm).  D_k picks up δ(t + 625 s) - δ(t), which

@@ -114,7 +114,7 @@ Cell run_cell(int N, double sigma, int runs, FourSensorOptions opts, std::uint64
 }  // namespace
 
 TEST_CASE("posterior: u_S, u_gamma and the straightness U cover the truth at every scan length",
-          "[four_sensor][coverage]") {
+          "[sweep][four_sensor][coverage]") {
   FourSensorOptions opts;  // defaults: posterior, second-difference prior, λ by REML
   std::printf("%6s %5s %5s | %8s %8s %9s | %9s %9s %9s | %6s %6s %6s | %5s %6s %6s\n", "N", "sigma",
               "runs", "cover_S", "cover_g", "straight", "rms_err", "mean_u", "collapses", "run_mn",

@@ -16,7 +16,8 @@
 using namespace errsep::core;
 using errsep::test::make_refine_case;
 
-TEST_CASE("clean data at sigma 0.1-0.3 um: no effect added in at least 95 % of 60 runs") {
+TEST_CASE("clean data at sigma 0.1-0.3 um: no effect added in at least 95 % of 60 runs",
+          "[sweep]") {
   RefineOptions o;
   o.residual.mc_samples = 199;  // the least that can reach p < alpha = 0.01 is 100
   int runs = 0, added = 0, not_white = 0;
@@ -66,7 +67,7 @@ TEST_CASE("an effect not in the library (a localised bump in one traverse): resi
   CHECK(std::abs(w.local_x_mm - 150.0) <= 20.0);
 }
 
-TEST_CASE("the localised bump over 20 noise seeds: residual not white in at least 18") {
+TEST_CASE("the localised bump over 20 noise seeds: residual not white in at least 18", "[sweep]") {
   int runs = 0, not_white = 0, located = 0;
   for (std::uint64_t seed = 301; seed <= 320; ++seed) {
     const auto c = make_refine_case(0.02, seed, {}, [](Eigen::MatrixXd& m, const Eigen::MatrixXd&) {

@@ -145,7 +145,8 @@ Coverage pe1_coverage() {
 
 }  // namespace
 
-TEST_CASE("coverage: stated uncertainties of gain, periodic error and PE1 at sigma 0.1-0.2 um") {
+TEST_CASE("coverage: stated uncertainties of gain, periodic error and PE1 at sigma 0.1-0.2 um",
+          "[sweep]") {
   const Coverage g = gain_coverage(), p = periodic_coverage(), e = pe1_coverage();
   report_and_check("gain 5 % of configuration 3, sigma 0.1 and 0.2 um", g, 3.0);
   report_and_check("periodic 600 um / 23 mm, sigma 0.1 and 0.2 um", p, 3.0);

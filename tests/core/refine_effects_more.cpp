@@ -408,7 +408,7 @@ TEST_CASE("yaw (two axes): a constant yaw is the lateral pair's zero offset, not
 // the linear drift instead and one ends with S 1.7 -> 5.2 µm.  τ is weakly determined at that noise
 // (relative singular value of the amplitude direction 0.21) and the loop has no guard against a
 // correction whose uncertainty exceeds the error it removes.
-TEST_CASE("realistic noise: non-repeating S at sigma 0.1 and 0.3 um") {
+TEST_CASE("realistic noise: non-repeating S at sigma 0.1 and 0.3 um", "[sweep]") {
   const auto c0 = make_refine_case(0.1, 1);
   const EffectContext ctx = scan_context(c0);
   const TraverseEffect tr;

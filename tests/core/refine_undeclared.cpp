@@ -116,7 +116,8 @@ TEST_CASE("undeclared effects: clean data adds nothing in at least 95 % of runs"
 // these sizes: a positioning or gain error that doubles the clean error is mostly too poorly
 // determined by one scan to be halved, and drift, thermal drift and a non-repeating traverse are
 // not identifiable from the single plan at all (their undetermined combinations move S).
-TEST_CASE("undeclared effects: a library effect never makes S or gamma worse beyond its u") {
+TEST_CASE("undeclared effects: a library effect never makes S or gamma worse beyond its u",
+          "[sweep]") {
   const RefineOptions o = test_options();
   int identifiable = 0, halved = 0;
   std::printf("%s\n", sweep_header().c_str());
@@ -229,7 +230,8 @@ TEST_CASE("undeclared effects: detected, not applied: reported and carried in u_
 // generator draws |a| in [b/3, b]: mean square 0.48 b^2, not 0.33 b^2), and it overcovers clean
 // data whatever they show.  A closing or reversed plan identifies the drift instead
 // (core/sequence_refine asserts 0.90-0.99 there); the bound is for a single scan.
-TEST_CASE("undeclared effects: a declared drift bound (Type B) covers what one scan cannot see") {
+TEST_CASE("undeclared effects: a declared drift bound (Type B) covers what one scan cannot see",
+          "[sweep]") {
   RefineOptions plain = test_options();
   RefineOptions declared = plain;
   declared.declared = {{"drift", 0.03}};

@@ -204,7 +204,7 @@ double power_normal(double delta, double z) {
 
 }  // namespace
 
-TEST_CASE("must-show: a non-linearity found where the residual can show it") {
+TEST_CASE("must-show: a non-linearity found where the residual can show it", "[sweep]") {
   // Sized with σ so that it at least doubles the clean S error (printed): 25σ·(2-4 %) of the
   // readings' half range at its ends.  More seeds than the other cells: the trace is cheap.
   constexpr int kSeeds = 40;
@@ -519,7 +519,8 @@ KnockCase knock_case(double sigma, std::uint64_t seed, bool knock, int* ci_out, 
 
 }  // namespace
 
-TEST_CASE("a knocked sensor: measuring each configuration twice names its configuration") {
+TEST_CASE("a knocked sensor: measuring each configuration twice names its configuration",
+          "[sweep]") {
   constexpr int kSeeds = 20;
   const FourSensorOptions solve;
   // Calibration: clean reversed-plan sequences, alpha = 0.05.

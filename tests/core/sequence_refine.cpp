@@ -537,11 +537,11 @@ TEST_CASE("must-show: closing pass identifies a non-repeating traverse") {
   check_redundant_plan(Plan{ScanSequenceKind::closing_pass}, kSigma, kAllCases);
 }
 
-TEST_CASE("must-show: closing pass with the stage's zero kept") {
+TEST_CASE("must-show: closing pass with the stage's zero kept", "[sweep]") {
   check_redundant_plan(Plan{ScanSequenceKind::closing_pass, true}, kSigma, kAllCases);
 }
 
-TEST_CASE("must-show: reversed traverses identify drift and a non-repeating traverse") {
+TEST_CASE("must-show: reversed traverses identify drift and a non-repeating traverse", "[sweep]") {
   check_redundant_plan(Plan{ScanSequenceKind::reversed}, kSigma, kAllCases);
 }
 
@@ -557,7 +557,8 @@ TEST_CASE("must-show: reversed traverses identify drift and a non-repeating trav
 // determined direction into S while the reversed plan leaves S free of the drift before the
 // step, so a step decision on S (step_decision.hpp) would not take it; the sequence refine has
 // none yet.  The cells' counts are printed (ERRSEP_SEQUENCE_SEED_BASE for other seeds).
-TEST_CASE("reversed plan with linear drift: the drift form midway keeps seed 1003 within u") {
+TEST_CASE("reversed plan with linear drift: the drift form midway keeps seed 1003 within u",
+          "[sweep]") {
   SequenceRefineOptions o;
   o.drift_form_midway = true;
   const FourSensorConfig cfg;
@@ -581,7 +582,7 @@ TEST_CASE("reversed plan with linear drift: the drift form midway keeps seed 100
 
 // The issue asks sigma = 0.05, 0.1 and 0.2 um; at the outer two, fewer cells (suite time): the
 // clean case, the all-configuration drifts and the non-repeating traverse.
-TEST_CASE("must-show at sigma 0.05 and 0.2 um: single and reversed plans") {
+TEST_CASE("must-show at sigma 0.05 and 0.2 um: single and reversed plans", "[sweep]") {
   for (double sigma : {0.05, 0.2}) {
     check_single_plan(sigma, {Case::none, Case::drift_all, Case::thermal_all, Case::traverse});
     check_redundant_plan(Plan{ScanSequenceKind::reversed}, sigma,
@@ -599,7 +600,8 @@ TEST_CASE("must-show at sigma 0.05 and 0.2 um: single and reversed plans") {
 // both, as u_S); on clean scans of the same seeds a knock is fitted in at most 1 of 20 per σ.
 // 20 seeds per σ (the issue's cell size; ~35 s of the suite's time on a loaded machine).
 // Printed: the same runs with the knock search off (the sequence fit before this change).
-TEST_CASE("a knock in one traverse of a reversed plan is named and S ends within 4 u_S") {
+TEST_CASE("a knock in one traverse of a reversed plan is named and S ends within 4 u_S",
+          "[sweep]") {
   const FourSensorConfig cfg;
   const ScanSequence seq = ScanSequence::make(ScanSequenceKind::reversed, cfg);
   SequenceRefineOptions off;
@@ -904,7 +906,8 @@ void hysteresis_cells(const ScanSequence& seq, bool expect_bias, bool unmet = fa
 
 }  // namespace
 
-TEST_CASE("a hysteresis on the reversed plan: identified, taken into the fit, S never worse") {
+TEST_CASE("a hysteresis on the reversed plan: identified, taken into the fit, S never worse",
+          "[sweep]") {
   const FourSensorConfig cfg;
   hysteresis_cells(ScanSequence::make(ScanSequenceKind::reversed, cfg), false);
 }
@@ -918,7 +921,7 @@ TEST_CASE("hysteresis: the targets not met yet (coverage <= 0.99 on reversed, ha
   hysteresis_cells(serpentine_plan(cfg), true, true);
 }
 
-TEST_CASE("a hysteresis on a serpentine plan: identified, S error halved, u_S covers") {
+TEST_CASE("a hysteresis on a serpentine plan: identified, S error halved, u_S covers", "[sweep]") {
   const FourSensorConfig cfg;
   hysteresis_cells(serpentine_plan(cfg), true);
   // The single plan reads every configuration forward: not identifiable, said, nothing tested.
@@ -994,7 +997,8 @@ TEST_CASE("rezeroed plan: the second pass at the stated offset, each traverse it
 // false-found <= 5 % (1 of 20) per σ; found
 // >= 80 % per σ; never worse beyond u; where it doubles the clean error, halved by the correction
 // in >= 80 % of those runs (pooled); coverage 0.90-0.99 pooled.
-TEST_CASE("rezeroed plan: a sensor non-linearity found, and corrected where that helps") {
+TEST_CASE("rezeroed plan: a sensor non-linearity found, and corrected where that helps",
+          "[sweep]") {
   const FourSensorConfig cfg;
   constexpr int kRuns = 20;
   constexpr double kPerSigma = 50.0;  // doubles the clean S error in most runs (printed)

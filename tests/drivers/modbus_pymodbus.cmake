@@ -12,7 +12,7 @@ set_tests_properties("drivers/modbus_pymodbus: (start pymodbus server)" PROPERTI
   FIXTURES_SETUP errsep_pymodbus_server TIMEOUT 30 LABELS drivers)
 set_tests_properties("drivers/modbus_pymodbus: (stop pymodbus server)" PROPERTIES
   FIXTURES_CLEANUP errsep_pymodbus_server TIMEOUT 30 LABELS drivers)
-catch_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "drivers/modbus_pymodbus: "
+errsep_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "drivers/modbus_pymodbus: "
   PROPERTIES FIXTURES_REQUIRED errsep_pymodbus_server
              ENVIRONMENT "ERRSEP_PYMODBUS_DIR=${_pm_dir}"
              SKIP_REGULAR_EXPRESSION "SKIPPED:"
