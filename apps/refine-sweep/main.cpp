@@ -4,7 +4,8 @@
 // the refined u_S.  A benchmark that prints figures, not a test (tests/core/refine_undeclared.cpp
 // asserts a smaller sweep).
 //   errsep-refine-sweep [--seeds 20] [--sigma 0.05,0.1,0.2] [--effects all|name,...]
-//                       [--declare effect=bound,...]
+//                       [--declare effect=bound,...] [--plan single|closing|reversed|
+//                       interleaved|rezeroed|identifying]
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cstdio>
@@ -39,6 +40,12 @@ int main(int argc, char** argv) {
       ->delimiter(',');
   app.add_option("--size", size, "scale of the effects' drawn sizes")->capture_default_str();
   app.add_flag("--runs", per_run, "print every run");
+  std::string plan = "single";
+  app.add_option("--plan", plan,
+                 std::string("the scan plan: ") + errsep::core::scan_sequence_kind_names() +
+                     ", or identifying (each effect on the plan that identifies it, chosen by "
+                     "the library's identifiability; the clean case on every plan used)")
+      ->capture_default_str();
   bool verdicts = false;
   app.add_flag("--verdicts", verdicts, "with --runs: also the refine's verdict of every effect");
   errsep::core::RefineOptions refine;
@@ -98,14 +105,25 @@ int main(int argc, char** argv) {
     std::string why;
     if (!base.is_valid(&why)) throw std::invalid_argument(why);
     if (!refine.is_valid(&why)) throw std::invalid_argument(why);
+    std::vector<std::string> skipped;
+    const auto cells = errsep::core::sweep_plan_cells(plan, list, &skipped);
+    for (const auto& s : skipped)
+      std::cout << "skipped " << s << "\n";
+    if (plan == "identifying")
+      for (const auto& c : cells)
+        std::cout << "plan for " << errsep::core::to_string(c.effect) << ": "
+                  << errsep::core::to_string(c.plan) << " (" << c.why << ")\n";
     std::cout << errsep::core::sweep_header() << "\n";
     const auto t0 = std::chrono::steady_clock::now();
     std::vector<std::string> breakdown;
+    std::vector<errsep::core::SweepCell> all_cells;
     long points = 0, covered = 0, halved = 0, identifiable = 0;
-    for (const auto e : list)
+    for (const auto& pc : cells)
       for (const double s : sigmas) {
-        const auto cell = errsep::core::run_sweep_cell(e, s, seeds, seed0, refine, base);
+        const auto cell =
+            errsep::core::run_sweep_cell_on(pc.plan, pc.effect, s, seeds, seed0, refine, base);
         breakdown.push_back(errsep::core::coverage_breakdown(cell));
+        all_cells.push_back(cell);
         halved += cell.halved_identifiable_runs();
         identifiable += cell.identifiable_runs();
         for (const auto& r : cell.runs)
@@ -134,6 +152,7 @@ int main(int argc, char** argv) {
         "the %ld runs where the effect is identifiable from the plan\n",
         covered, points, points ? static_cast<double>(covered) / points : 0.0, halved,
         identifiable);
+    std::cout << "must show: " << errsep::core::must_show(all_cells).brief() << "\n";
     std::printf("total %.1f s\n",
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     return 0;
