@@ -241,6 +241,13 @@ int main(int argc, char** argv) {
                                     ": not in a result directory's compensation/; give the first "
                                     "scan's result directory with --before");
     }
+    // Every scan's options are checked before anything starts: a plan the runner cannot run
+    // (scan.plan = rezeroed needs the sensor re-zeroed by hand) is refused before the device
+    // simulator starts, a stage moves or a staging folder exists.
+    for (const auto kind : {acq::ScanKind::four_sensor, acq::ScanKind::displacement})
+      if ((kind == acq::ScanKind::four_sensor) ? m != io::ScanMethod::displacement
+                                               : m != io::ScanMethod::four_sensor)
+        (void)acq::scan_options_from_config(cfg, kind);  // throws naming the key
     // The result folder is one set: everything is written into a staging folder beside it and
     // moved into place in one rename at the end (io/staged_directory.hpp), so that a kill at any
     // moment leaves the earlier result whole (or no folder), never files of two runs.  What is

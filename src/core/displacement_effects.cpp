@@ -12,7 +12,11 @@ constexpr double kUmPerUradMm = 1e-3;
 }  // namespace
 
 double TwoAxisScanOrder::time_s(int scan, int i, int j, int nx, int ny) const {
-  if (scan == 1) return (j * nx + i) * sample_period_s;  // raster index, x fastest
+  if (scan == 1) {
+    if (!diagonal_scan1) return (j * nx + i) * sample_period_s;  // raster index, x fastest
+    const int q = ((j - i) % ny + ny) % ny;  // the diagonal through (i, j) (file comment)
+    return (q * nx + i) * sample_period_s;
+  }
   const int k = y_fastest_scan2 ? i * ny + j : j * nx + i;
   const int n = nx * ny;
   const double t0 = n * sample_period_s + pause_between_scans_s;
@@ -20,11 +24,13 @@ double TwoAxisScanOrder::time_s(int scan, int i, int j, int nx, int ny) const {
 }
 
 std::string TwoAxisScanOrder::plan_name() const {
-  if (!reverse_scan2 && !y_fastest_scan2) return "scan 2 as scan 1 (paper)";
+  const std::string s1 = diagonal_scan1 ? "scan 1 diagonal, " : "";
+  if (!reverse_scan2 && !y_fastest_scan2)
+    return diagonal_scan1 ? s1 + "scan 2 raster x fastest" : "scan 2 as scan 1 (paper)";
   std::string s;
   if (y_fastest_scan2) s += ", y fastest";
   if (reverse_scan2) s += ", backwards";
-  return "scan 2" + s.substr(1);
+  return s1 + "scan 2" + s.substr(1);
 }
 
 bool TwoAxisScanOrder::is_valid(std::string* why) const {

@@ -186,10 +186,12 @@ TwoAxisSimData simulate_two_axis(const TwoAxisTruth& tr, const TwoAxisSimOptions
   const double T = opts.timing.sample_period_s;
   const double se = opts.eddy_sensor.noise_sigma_um, sc = opts.contact_sensor.noise_sigma_um;
   const double de = opts.eddy_sensor.drift_um_per_s, dc = opts.contact_sensor.drift_um_per_s;
-  // Scan 1 (Eqs. 10-14), raster x fastest.
+  // Scan 1 (Eqs. 10-14), raster x fastest (or along diagonals: TwoAxisScanOrder).
+  const TwoAxisScanOrder order{T, opts.timing.pause_between_scans_s, opts.reverse_scan2,
+                               opts.y_fastest_scan2, opts.diagonal_scan1};
   for (int j = 0; j < ny; ++j)
     for (int i = 0; i < nx; ++i) {
-      const double x = s.x_mm(i), y = s.y_mm(j), t = (j * nx + i) * T;
+      const double x = s.x_mm(i), y = s.y_mm(j), t = order.time_s(1, i, j, nx, ny);
       s.s0_1_um(i, j) = d.w_um(i, j) + d.m_w_um(i, j) + dc * t + rng.normal(sc);
       s.s1_1_um(i, j) = tr.r1x_um(x) + m1(i, j) + de * t + rng.normal(se);
       s.s2_1_um(i, j) = tr.r2x_um(x) + m2(i, j) + de * t + rng.normal(se);
@@ -201,8 +203,6 @@ TwoAxisSimData simulate_two_axis(const TwoAxisTruth& tr, const TwoAxisSimOptions
   const double ay =
       opts.displacement_y_mm + opts.displacement_bias_mm + rng.normal(opts.displacement_sigma_mm);
   // Scan 2 (Eqs. 16-19).
-  const TwoAxisScanOrder order{T, opts.timing.pause_between_scans_s, opts.reverse_scan2,
-                               opts.y_fastest_scan2};
   for (int j = 0; j < ny; ++j)
     for (int i = 0; i < nx; ++i) {
       const double x = s.x_mm(i), y = s.y_mm(j), t = order.time_s(2, i, j, nx, ny);

@@ -58,7 +58,7 @@ std::vector<double> CsvTable::column(const std::string& name,
     std::string have;
     for (const auto& c : columns)
       have += (have.empty() ? "" : ", ") + c;
-    throw CsvError(file, columns.empty() ? 0 : 1,
+    throw CsvError(file, columns.empty() ? 0 : (header_line > 0 ? header_line : 1),
                    "missing column '" + name + "' (header has: " + have + ")");
   }
   std::vector<double> v;
@@ -74,6 +74,12 @@ std::optional<std::string> CsvTable::meta(const std::string& key) const {
   return std::nullopt;
 }
 
+std::size_t CsvTable::meta_line(const std::string& key) const {
+  for (std::size_t i = 0; i < metadata.size(); ++i)
+    if (metadata[i].first == key) return i < metadata_line.size() ? metadata_line[i] : 0;
+  return 0;
+}
+
 std::optional<double> CsvTable::meta_number(const std::string& key,
                                             const std::filesystem::path& file) const {
   const auto v = meta(key);
@@ -81,7 +87,7 @@ std::optional<double> CsvTable::meta_number(const std::string& key,
   double out = 0;
   const auto [p, ec] = std::from_chars(v->data(), v->data() + v->size(), out);
   if (ec != std::errc() || p != v->data() + v->size() || !std::isfinite(out))
-    throw CsvError(file, 0, "metadata '" + key + ": " + *v + "': not a number");
+    throw CsvError(file, meta_line(key), "metadata '" + key + ": " + *v + "': not a number");
   return out;
 }
 
@@ -124,6 +130,7 @@ CsvTable read_stream(std::istream& in, const std::filesystem::path& file,
                                 trim(std::string_view(body).substr(colon + 1)));
       else if (!body.empty())
         t.metadata.emplace_back(body, "");
+      t.metadata_line.resize(t.metadata.size(), lineno);
       continue;
     }
     auto cells = split(s);
@@ -137,6 +144,7 @@ CsvTable read_stream(std::istream& in, const std::filesystem::path& file,
             throw CsvError(file, lineno, "duplicate column '" + cells[i] + "' in header");
       }
       t.columns = std::move(cells);
+      t.header_line = lineno;
       have_header = true;
       continue;
     }

@@ -33,12 +33,12 @@ ReadingRange reading_range(const CsvTable& t, const std::string& sensor,
   const bool has_lo = t.meta(lo).has_value(), has_hi = t.meta(hi).has_value();
   if (!has_lo && !has_hi) return {};
   if (has_lo != has_hi)
-    throw CsvError(file, 0,
+    throw CsvError(file, t.meta_line(has_lo ? lo : hi),
                    "metadata has '" + (has_lo ? lo : hi) + "' but not '" + (has_lo ? hi : lo) +
                        "': give both ends of the sensor's range or neither");
   ReadingRange r{*t.meta_number(lo, file), *t.meta_number(hi, file), true};
   if (!(r.min_um < r.max_um))
-    throw CsvError(file, 0,
+    throw CsvError(file, t.meta_line(lo),
                    "metadata range of sensor " + sensor + ": " + lo + " = " +
                        format_number(r.min_um) + " is not below " + hi + " = " +
                        format_number(r.max_um));

@@ -64,7 +64,8 @@ void check_time_order(const CsvTable& t, const std::string& column, bool backwar
 bool read_complete(const CsvTable& t, const std::filesystem::path& file) {
   const auto c = t.meta("complete");
   if (c && *c != "true" && *c != "false")
-    throw CsvError(file, 0, "metadata 'complete: " + *c + "': must be true or false");
+    throw CsvError(file, t.meta_line("complete"),
+                   "metadata 'complete: " + *c + "': must be true or false");
   if (t.meta("format")) return c && *c == "true";
   return !(c && *c == "false");
 }
@@ -73,7 +74,7 @@ void require_complete(bool complete, const CsvTable& t, const std::filesystem::p
                       const RawReadOptions& opts) {
   if (!complete && opts.require_complete) {
     std::string why = t.meta("stop_reason").value_or("no reason recorded");
-    throw CsvError(file, 0,
+    throw CsvError(file, t.meta_line("complete"),
                    "scan is marked incomplete (complete: false; stop_reason: " + why +
                        "): it is kept as a record but cannot be separated");
   }
@@ -96,7 +97,7 @@ int parse_int_meta(const CsvTable& t, const std::string& key, const std::filesys
   int out = 0;
   const auto [p, ec] = std::from_chars(v.data(), v.data() + v.size(), out);
   if (ec != std::errc() || p != v.data() + v.size())
-    throw CsvError(file, 0, "metadata '" + key + ": " + v + "': not an integer");
+    throw CsvError(file, t.meta_line(key), "metadata '" + key + ": " + v + "': not an integer");
   return out;
 }
 
@@ -108,14 +109,18 @@ RawSequence read_sequence(const CsvTable& t, const std::filesystem::path& file, 
   RawSequence q;
   q.plan = t.meta("plan").value_or("custom");
   const int T = parse_int_meta(t, "traverses", file);
+  // Every error here names the metadata line it concerns (a missing traverse: the line that
+  // announced T of them).
+  const std::size_t t_line = t.meta_line("traverses");
   if (T < 4 || T > 64)
-    throw CsvError(file, 0, "metadata 'traverses: " + std::to_string(T) + "': must be 4..64");
+    throw CsvError(file, t_line, "metadata 'traverses: " + std::to_string(T) + "': must be 4..64");
   for (int k = 1; k <= T; ++k) {
     const std::string key = "traverse_" + std::to_string(k);
     const auto v = t.meta(key);
     if (!v)
-      throw CsvError(file, 0,
+      throw CsvError(file, t_line,
                      "metadata '" + key + "' missing (traverses: " + std::to_string(T) + ")");
+    const std::size_t line = t.meta_line(key);
     core::Traverse tr;
     char dir[16] = {0};
     int c = 0;
@@ -124,7 +129,7 @@ RawSequence read_sequence(const CsvTable& t, const std::filesystem::path& file, 
     if (std::sscanf(v->c_str(), "configuration %d, %15[a-z], start_s %lf%n", &c, dir, &start,
                     &used) != 3 ||
         c < 1 || c > 4 || (std::string(dir) != "forward" && std::string(dir) != "backward"))
-      throw CsvError(file, 0,
+      throw CsvError(file, line,
                      "metadata '" + key + ": " + *v +
                          "': expected 'configuration 1..4, forward|backward, start_s <s>[, "
                          "zero_shift_um <um>]'");
@@ -134,7 +139,7 @@ RawSequence read_sequence(const CsvTable& t, const std::filesystem::path& file, 
       int used2 = 0;
       if (std::sscanf(rest.c_str(), ", zero_shift_um %lf%n", &tr.zero_shift_um, &used2) != 1 ||
           static_cast<std::size_t>(used2) != rest.size() || !std::isfinite(tr.zero_shift_um))
-        throw CsvError(file, 0,
+        throw CsvError(file, line,
                        "metadata '" + key + ": " + *v +
                            "': after start_s expected nothing or "
                            "', zero_shift_um <um>' (a finite number), got '" +
@@ -153,7 +158,8 @@ RawSequence read_sequence(const CsvTable& t, const std::filesystem::path& file, 
   }
   core::ScanSequence seq;
   seq.traverses = q.traverses;
-  if (std::string why; !seq.is_valid(&why)) throw CsvError(file, 0, "scan sequence: " + why);
+  if (std::string why; !seq.is_valid(&why))
+    throw CsvError(file, t_line, "scan sequence (traverse_1.." + std::to_string(T) + "): " + why);
   return q;
 }
 
@@ -328,7 +334,7 @@ RawFourSensorScan read_raw_four_sensor_csv(const std::filesystem::path& file,
   const CsvTable t = read_csv(file, ro);
   if (const auto f = t.meta("format"); f && *f != kRawFourSensorFormat)
     throw CsvError(
-        file, 0,
+        file, t.meta_line("format"),
         "format '" + *f + "' is not a four-sensor raw scan ('" + kRawFourSensorFormat + "')");
   RawFourSensorScan s;
   s.complete = read_complete(t, file);
@@ -359,7 +365,7 @@ RawFourSensorScan read_raw_four_sensor_csv(const std::filesystem::path& file,
   if (t.meta("dx_mm")) {
     for (const char* k : {"s2", "s3", "s4", "N"})
       if (!t.meta(k))
-        throw CsvError(file, 0,
+        throw CsvError(file, t.meta_line("dx_mm"),
                        std::string("metadata has dx_mm but not '") + k +
                            "': give the whole geometry (dx_mm, s2, s3, s4, N) or none");
     core::FourSensorConfig g;
@@ -369,9 +375,10 @@ RawFourSensorScan read_raw_four_sensor_csv(const std::filesystem::path& file,
     g.s4 = parse_int_meta(t, "s4", file);
     g.N = parse_int_meta(t, "N", file);
     std::string why;
-    if (!g.is_valid(&why)) throw CsvError(file, 0, "geometry in metadata: " + why);
+    if (!g.is_valid(&why))
+      throw CsvError(file, t.meta_line("dx_mm"), "geometry in metadata: " + why);
     if (s.complete && static_cast<std::size_t>(g.positions()) != s.x_mm.size())
-      throw CsvError(file, 0,
+      throw CsvError(file, t.meta_line("N"),
                      "geometry N - s2 - s3 - s4 = " + std::to_string(g.positions()) +
                          " slide positions, but the file has " + std::to_string(s.x_mm.size()) +
                          " rows");
@@ -393,7 +400,7 @@ RawDisplacementScan read_raw_displacement_csv(const std::filesystem::path& file,
   const CsvTable t = read_csv(file, ro);
   if (const auto f = t.meta("format"); f && *f != kRawDisplacementFormat)
     throw CsvError(
-        file, 0,
+        file, t.meta_line("format"),
         "format '" + *f + "' is not a displacement raw scan ('" + kRawDisplacementFormat + "')");
   RawDisplacementScan s;
   s.complete = read_complete(t, file);
@@ -404,7 +411,8 @@ RawDisplacementScan read_raw_displacement_csv(const std::filesystem::path& file,
     try {
       s.scan2_order = core::displacement_scan_order_from_string(*o);
     } catch (const std::invalid_argument& e) {
-      throw CsvError(file, 0, std::string("metadata 'scan2_order': ") + e.what());
+      throw CsvError(file, t.meta_line("scan2_order"),
+                     std::string("metadata 'scan2_order': ") + e.what());
     }
   }
   s.x_mm = t.column("x_mm", file);

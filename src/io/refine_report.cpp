@@ -57,6 +57,10 @@ CsvTable refine_csv(const core::RefineResult& r) {
   // corner that the corrected readings no longer have), so both λ go with them.
   t.set_meta("lambda_before", lambda_summary(r.before));
   t.set_meta("lambda_after", lambda_summary(r.after));
+  // The declared Type-B bounds (RefineOptions::declared): part of u_S, never fitted; the report
+  // prints them beside the steps (refine_steps_table), so the file carries them.
+  for (std::size_t i = 0; i < r.declared_notes.size(); ++i)
+    t.set_meta("declared" + std::to_string(i), r.declared_notes[i]);
   t.columns = refine_csv_columns();
   const double nan = std::numeric_limits<double>::quiet_NaN();
   for (const auto& s : r.steps) {
@@ -113,6 +117,13 @@ std::string format_refine_text(const core::RefineResult& r) {
                     s.error_after->gamma_urad, s.error_before->f_um, s.error_after->f_um);
       out += buf;
     }
+  }
+  // The declared bounds (Type B) enter u_S beside the steps' fitted parameters: said where the
+  // steps are, so that a u_S larger than the steps explain is accounted for.
+  if (!r.declared_notes.empty()) {
+    out += "\ndeclared bounds (Type B, RefineOptions::declared; not fitted, carried in u):\n";
+    for (const auto& n : r.declared_notes)
+      out += "  " + n + "\n";
   }
   if (!r.effects.empty()) {
     out += "\nthe refined result (final parameters):\n";
@@ -276,6 +287,17 @@ HtmlTable refine_steps_table(const CsvTable& t, const std::filesystem::path& fil
     cells.push_back(step == 0 ? "base model" : t.meta(k + "_verdict").value_or("?"));
     h.rows.push_back(std::move(cells));
   }
+  // The declared Type-B bounds (refine_csv's "declared<i>" lines), one row each after the steps:
+  // they are in u_S as the steps' parameters are, but stated by the user, not fitted.
+  for (std::size_t i = 0;; ++i) {
+    const auto note = t.meta("declared" + std::to_string(i));
+    if (!note) break;
+    std::vector<std::string> cells(h.header.size(), "\xE2\x80\x94");
+    cells.front() = "Type B";
+    cells[1] = *note;
+    cells.back() = "declared bound: carried in u, not fitted";
+    h.rows.push_back(std::move(cells));
+  }
   return h;
 }
 
@@ -306,6 +328,15 @@ CsvTable sequence_refine_csv(const core::SequenceRefineResult& r, const std::vec
     t.set_meta("knock", kn.scan.not_tested.empty()
                             ? (kn.scan.found ? "found, not attributed" : "none found")
                             : kn.scan.not_tested);
+  }
+  // The sensor's hysteresis (core::SequenceHysteresis): its figures when detected, else whether
+  // the plan could show it.
+  const core::SequenceHysteresis& hy = r.hysteresis;
+  if (hy.detected) {
+    t.set_meta("hysteresis_um", g(hy.h_um, 4) + " +- " + g(hy.u_h_um, 2));
+    t.set_meta("hysteresis_applied", hy.applied ? "true" : "false");
+  } else {
+    t.set_meta("hysteresis", hy.identifiable ? "none found" : hy.finding);
   }
   t.set_meta("findings", std::to_string(r.report.size()));
   for (std::size_t k = 0; k < r.report.size(); ++k)

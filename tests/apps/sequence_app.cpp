@@ -371,3 +371,37 @@ TEST_CASE(
   std::printf("rezeroed plan, c2 0.002/um: S error %.3f -> %.3f um RMS\n", err(Sb), err(Sa));
   CHECK(err(Sa) <= 0.5 * err(Sb));
 }
+
+// [scan] plan = "rezeroed" in a machine config: its second pass needs the sensor re-zeroed by
+// hand, which the scan runner cannot do or pause for, so errsep-scan refuses the plan before it
+// moves anything: a non-zero exit, an error naming the key and why, and nothing written (no
+// result folder, no staging folder beside it).
+TEST_CASE("errsep-scan with [scan] plan = rezeroed: refused before moving, nothing written") {
+  TempDir tmp;
+  std::string t = test::read_file(test::source_dir() / "config" / "simulator.toml");
+  const auto pos = t.find("[scan]\n");
+  REQUIRE(pos != std::string::npos);
+  t.replace(pos, 7, "[scan]\nplan = \"rezeroed\"\n");
+  REQUIRE(t.find("single_sensor = true") != std::string::npos);  // else refused for another reason
+  const auto cfg = tmp / "machine.toml";
+  { std::ofstream(cfg) << t; }
+  const auto out = tmp / "scan";
+  std::string log;
+  const int rc =
+      test::run_command(test::app_path("scan").string() + " --config " + cfg.string() + " --out " +
+                            out.string() + " --devsim " + test::app_path("devsim").string() +
+                            " --averages 5 --settle-ms 0 --refine --no-pdf 2>&1",
+                        &log);
+  INFO(log);
+  CHECK(rc != 0);
+  CHECK_THAT(log, Catch::Contains("scan.plan = rezeroed"));
+  CHECK_THAT(log, Catch::Contains("re-zeroed by hand"));
+  CHECK_FALSE(std::filesystem::exists(out));
+  // Nothing beside the config: no result, no staging folder, no raw file.
+  std::vector<std::string> left;
+  for (const auto& e : std::filesystem::directory_iterator(tmp.path()))
+    if (e.path().filename() != "machine.toml") left.push_back(e.path().filename().string());
+  for (const auto& name : left)
+    UNSCOPED_INFO("left behind: " << name);
+  CHECK(left.empty());
+}

@@ -1,7 +1,8 @@
 // Closing the loop for the two-axis displacement method (issue 16 item 4): random stages, noise
 // on every reading, one undeclared effect per cell (displacement_effects.hpp) at a size that at
-// least doubles the clean error, three scan plans (scan 2 as scan 1, the paper's; scan 2
-// backwards; scan 2 y fastest and backwards, the plan where drift shows).
+// least doubles the clean error, four scan plans (scan 2 as scan 1, the paper's; scan 2
+// backwards; scan 2 y fastest and backwards, the plan where drift shows; and that with scan 1
+// along diagonals, the plan where thermal drift shows, in a test case of its own).
 // Per cell: taken (any effect significant), ident (the injected effect's family taken), appl
 // (a correction applied), error of w and m_w (shape: constant removed) before and after (median,
 // worst), halved (w error at most half), worse (w error grown by more than the refined u's RMS),
@@ -12,6 +13,7 @@
 #include <cstdio>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "errsep/core/displacement_refine.hpp"
@@ -107,18 +109,20 @@ struct Plan {
   DisplacementEffectLibrary lib;
   /// A short column label.
   std::string label() const {
-    if (order.y_fastest_scan2) return order.reverse_scan2 ? "y-fast-bw" : "y-fast";
-    return order.reverse_scan2 ? "backward" : "paper";
+    const std::string d = order.diagonal_scan1 ? "diag+" : "";
+    if (order.y_fastest_scan2) return d + (order.reverse_scan2 ? "y-fast-bw" : "y-fast");
+    return d + (order.reverse_scan2 ? "backward" : order.diagonal_scan1 ? "x-fast" : "paper");
   }
 };
 
-CellStats run_cell(const Plan& plan, Effect effect, double sigma) {
+CellStats run_cell(const Plan& plan, Effect effect, double sigma,
+                   const DisplacementRefineOptions& ro) {
   CellStats c;
   for (int s = 0; s < kSeeds; ++s) {
     const std::uint64_t seed =
         5000 + static_cast<std::uint64_t>(s) + 100 * static_cast<std::uint64_t>(effect) +
         static_cast<std::uint64_t>(1000 * sigma) * 13 + (plan.order.reverse_scan2 ? 50000 : 0) +
-        (plan.order.y_fastest_scan2 ? 70000 : 0);
+        (plan.order.y_fastest_scan2 ? 70000 : 0) + (plan.order.diagonal_scan1 ? 90000 : 0);
     TwoAxisSimOptions so;
     so.nx = so.ny = kN;
     so.eddy_sensor.noise_sigma_um = sigma;
@@ -128,13 +132,14 @@ CellStats run_cell(const Plan& plan, Effect effect, double sigma) {
     so.timing.pause_between_scans_s = kPauseS;
     so.reverse_scan2 = plan.order.reverse_scan2;
     so.y_fastest_scan2 = plan.order.y_fastest_scan2;
+    so.diagonal_scan1 = plan.order.diagonal_scan1;
     so.disturbance = random_disturbance(effect, sigma, seed);
     so.seed = seed;
     const auto truth = random_two_axis_truth(seed, 0.0);
     const auto sim = simulate_two_axis(truth, so);
     TwoAxisOptions o;
     o.rotation = RotationCorrection::off;
-    const auto r = refine_two_axis(sim.scan, o, plan.lib);
+    const auto r = refine_two_axis(sim.scan, o, plan.lib, ro);
     // The method's gauge: r2_x(x_0) = r4_y(y_0) = 0 (rotation off).
     const double g = truth.r2x_um(sim.scan.x_mm(0)) + truth.r4y_um(sim.scan.y_mm(0));
     const Eigen::MatrixXd wt = sim.w_um.array() - g, mt = sim.m_w_um.array() + g;
@@ -159,7 +164,10 @@ CellStats run_cell(const Plan& plan, Effect effect, double sigma) {
     }
     c.confounded += said;
     c.both_taken += tilt && drift;
-    c.unsaid += plan.order.plan_name() != TwoAxisScanOrder{}.plan_name() && tilt != drift && !said;
+    // Scan 1 along diagonals makes the offset between sensor 0's two readings not affine in the
+    // grid indices (the wrap), so sensor 0's drift is no longer a tilt's direction there.
+    c.unsaid += plan.order.plan_name() != TwoAxisScanOrder{}.plan_name() &&
+                !plan.order.diagonal_scan1 && tilt != drift && !said;
     c.identified += identified && effect != Effect::none;
     c.applied += r.applied_any();
     c.halved += wa <= 0.5 * wb;
@@ -224,9 +232,9 @@ CellStats run_cell(const Plan& plan, Effect effect, double sigma) {
   return c;
 }
 
-Plan make_plan(bool reverse, bool y_fastest = false) {
+Plan make_plan(bool reverse, bool y_fastest = false, bool diagonal = false) {
   Plan p;
-  p.order = TwoAxisScanOrder{1.0, kPauseS, reverse, y_fastest};
+  p.order = TwoAxisScanOrder{1.0, kPauseS, reverse, y_fastest, diagonal};
   const Eigen::VectorXd x = Eigen::VectorXd::LinSpaced(kN, 0.0, (kN - 1) * kStepMm);
   TwoAxisOptions o;
   p.lib = make_displacement_effect_library(x, x, true, p.order, o);
@@ -235,16 +243,46 @@ Plan make_plan(bool reverse, bool y_fastest = false) {
 
 }  // namespace
 
+TEST_CASE("scan 1 along diagonals reads every point once and every row and column over scan 1") {
+  for (const auto& [nx, ny] : {std::pair{25, 25}, std::pair{7, 4}, std::pair{4, 9}}) {
+    TwoAxisScanOrder o;
+    o.diagonal_scan1 = true;
+    std::vector<int> seen(static_cast<std::size_t>(nx * ny), 0);
+    std::vector<double> row_lo(nx, 1e300), row_hi(nx, -1), col_lo(ny, 1e300), col_hi(ny, -1);
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        const double t = o.time_s(1, i, j, nx, ny);
+        REQUIRE(t >= 0);
+        REQUIRE(t < nx * ny);
+        ++seen[static_cast<std::size_t>(t)];
+        row_lo[i] = std::min(row_lo[i], t);
+        row_hi[i] = std::max(row_hi[i], t);
+        col_lo[j] = std::min(col_lo[j], t);
+        col_hi[j] = std::max(col_hi[j], t);
+      }
+    CHECK(std::count(seen.begin(), seen.end(), 1) == nx * ny);
+    // A raster x fastest reads a column within nx samples; along diagonals each row and column
+    // spans at least (n_other - 1) of its reading's steps of nx samples.
+    for (int i = 0; i < nx; ++i)
+      CHECK(row_hi[i] - row_lo[i] >= (ny - 1) * nx);
+    for (int j = 0; j < ny; ++j)
+      CHECK(col_hi[j] - col_lo[j] >= (std::min(nx, ny) - 1) * nx - nx);
+    // Scan 2 is unchanged by it.
+    TwoAxisScanOrder r;
+    CHECK(o.time_s(2, 1, 2, nx, ny) == r.time_s(2, 1, 2, nx, ny));
+  }
+}
+
 TEST_CASE("which effects each scan plan can identify, computed without data") {
   const Plan same = make_plan(false), rev = make_plan(true), yf = make_plan(false, true),
-             yfr = make_plan(true, true);
+             yfr = make_plan(true, true), dg = make_plan(true, true, true);
   auto identifiable = [](const Plan& p, const std::string& family) {
     bool any = false;
     for (const auto& e : p.lib.effects)
       if (e.family == family) any = any || e.identifiable;
     return any;
   };
-  for (const Plan* p : {&same, &rev, &yf, &yfr}) {
+  for (const Plan* p : {&same, &rev, &yf, &yfr, &dg}) {
     std::printf(
         "plan %s:   u of the fitted correction on w per um of noise: sensor 0 | 1-2 | 3-4\n",
         p->order.plan_name().c_str());
@@ -276,8 +314,16 @@ TEST_CASE("which effects each scan plan can identify, computed without data") {
   CHECK_FALSE(tilt);
 }
 
-TEST_CASE("displacement refine: the closing-the-loop table, sigma 0.05/0.1/0.2 um, 20 seeds") {
-  const Plan plans[3] = {make_plan(false), make_plan(true), make_plan(true, true)};
+namespace {
+
+/// The table over these plans (the assertions per cell and on the pooled coverage).
+void run_table(const std::vector<Plan>& plans) {
+  // The loop's own decision rule (bias_z = 0).  bias_z = 2 (the four-sensor loop's,
+  // refine_step_decision) was measured here on every cell: it kept worse at 0 and raised the
+  // coverage 0.961 -> 0.966, but cut the halvings of the cells asserted below (drift scanned y
+  // fastest backwards 18/18/17 -> 7/4/6 of 20, thermal drift with scan 1 diagonal 17/19/19 ->
+  // 11/12/11) and left drift scanned backwards x fastest at 0/20: not taken.
+  const DisplacementRefineOptions ro;
   std::printf(
       "25 x 25 grid, 5 mm, sensor 0 at 1.8 sigma and read in both scans, rotation off; w and m_w "
       "errors RMS after the constant, um\n"
@@ -288,11 +334,11 @@ TEST_CASE("displacement refine: the closing-the-loop table, sigma 0.05/0.1/0.2 u
   long cov_in = 0, pts_in = 0, cov_na = 0, pts_na = 0;
   int not_met = 0;
   for (const double sigma : {0.05, 0.1, 0.2}) {
-    double clean_median[3] = {0, 0, 0};
-    for (int pi = 0; pi < 3; ++pi) {
+    std::vector<double> clean_median(plans.size(), 0.0);
+    for (std::size_t pi = 0; pi < plans.size(); ++pi) {
       const Plan& plan = plans[pi];
       for (const Effect e : {Effect::none, Effect::thermal, Effect::tilt, Effect::drift}) {
-        const CellStats c = run_cell(plan, e, sigma);
+        const CellStats c = run_cell(plan, e, sigma, ro);
         const double wb = median(c.w_before), wa = median(c.w_after);
         const double wworst_b = *std::max_element(c.w_before.begin(), c.w_before.end());
         const double wworst_a = *std::max_element(c.w_after.begin(), c.w_after.end());
@@ -342,17 +388,24 @@ TEST_CASE("displacement refine: the closing-the-loop table, sigma 0.05/0.1/0.2 u
         CHECK(c.worse == 0);
         // The plan made for drift (scan 2 y fastest, backwards): every sensor's drift shows along
         // rows and columns alike (the identifiability table above), so it is asserted there.
+        // The plan made for thermal drift (scan 1 along diagonals, scan 2 y fastest backwards):
+        // every row and column is read over the whole of scan 1, so sensors 3-4's thermal drift
+        // is determined as well as 1-2's (0.33-1.07 per um of noise over the tau grid, against
+        // 1.6-5.0 with scan 1 a raster): asserted there.
         const bool drift_plan = plan.order.y_fastest_scan2 && plan.order.reverse_scan2;
-        if (e == Effect::tilt || (e == Effect::drift && drift_plan)) {
+        const bool thermal_plan = drift_plan && plan.order.diagonal_scan1;
+        if (e == Effect::tilt || (e == Effect::drift && drift_plan) ||
+            (e == Effect::thermal && thermal_plan)) {
           CHECK(c.halved >= 0.8 * c.runs);
         } else if (identifiable && c.halved < 0.8 * c.runs) {
-          // Issue 16 asks for >= 80 %: not met for thermal drift on any plan, nor for linear drift
-          // scanned backwards x fastest (printed, not asserted).  Backwards, the reference Y
-          // sensors 3-4 compare readings along the raster's fast axis and see only the fast part
-          // of their drift (u of the correction on w ~20 per um of noise, against ~1.5 y fastest).
-          // A thermal drift's correction carries τ, which trades with the amplitudes: at the sizes
-          // here (3 sigma per sensor) it moves w by ~5x the clean error while its correction's u
-          // is 2-5 per um of noise for sensors 3-4 even on the best plan.
+          // Issue 16 asks for >= 80 %: not met for thermal drift with scan 1 a raster, nor for
+          // linear drift scanned backwards x fastest (printed, not asserted).  Backwards, the
+          // reference Y sensors 3-4 compare readings along the raster's fast axis and see only the
+          // fast part of their drift (u of the correction on w ~20 per um of noise, against ~1.5
+          // y fastest).  With scan 1 a raster x fastest, a column (what sensors 3-4 compare) is
+          // read within n_x samples, so their thermal drift shows only through scan 2, when a
+          // drift with tau below about a scan has settled: its correction's u on w is 1.6-5.0 per
+          // um of noise while the drift moves w by ~5x the clean error.
           std::printf("        NOT MET: halved in %d/%d (issue 16 asks >= 80 %%)\n", c.halved,
                       c.runs);
           ++not_met;
@@ -387,4 +440,14 @@ TEST_CASE("displacement refine: the closing-the-loop table, sigma 0.05/0.1/0.2 u
       cover_na, pts_na / (kN * kN));
   CHECK(cover_na >= 0.90);
   CHECK(cover_na <= 0.99);
+}
+
+}  // namespace
+
+TEST_CASE("displacement refine: the closing-the-loop table, sigma 0.05/0.1/0.2 um, 20 seeds") {
+  run_table({make_plan(false), make_plan(true), make_plan(true, true)});
+}
+
+TEST_CASE("displacement refine: the closing-the-loop table on scan 1 diagonal, 20 seeds") {
+  run_table({make_plan(true, true, true)});
 }

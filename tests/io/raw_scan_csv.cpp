@@ -1,5 +1,6 @@
 #include "errsep/io/raw_scan_csv.hpp"
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <fstream>
@@ -361,6 +362,57 @@ TEST_CASE("a rezeroed plan's zero shifts round-trip, and a bad one is refused") 
       CHECK(w.rfind((dir / "bad.csv").string(), 0) == 0);
       CHECK(w.find(what) != std::string::npos);
       if (key != "traverse_1") CHECK(w.find(key) != std::string::npos);
+    }
+  }
+}
+
+// Issue 16: every error in a traverse header line says file:line (the line it concerns), and
+// what is wrong.  The expected line is found in the written text, not assumed: each bad line
+// replaces a good one in place, and a missing traverse names the line that announced T of them.
+TEST_CASE("a bad traverse header line is refused as file:line: what is wrong") {
+  TempDir dir;
+  auto s = sample_scan(true);
+  const auto seq = errsep::core::ScanSequence::make(errsep::core::ScanSequenceKind::rezeroed,
+                                                    *s.geometry, 4.0, 1.5, 20.0);
+  set_sequence(s, seq, Eigen::MatrixXd::Zero(9, seq.size()), seq.times_s(*s.geometry));
+  // The 1-based line of "# key:" in text.
+  auto line_of = [](const std::string& text, const std::string& key) {
+    const auto at = text.find("# " + key + ":");
+    REQUIRE(at != std::string::npos);
+    return 1 + std::count(text.begin(), text.begin() + static_cast<std::ptrdiff_t>(at), '\n');
+  };
+  struct Bad {
+    std::string key, value, line_key, what;
+  };
+  const std::vector<Bad> cases = {
+      {"traverse_3", "configuration 7, forward, start_s 1", "traverse_3", "configuration 1..4"},
+      {"traverse_2", "configuration 2, sideways, start_s 1", "traverse_2", "forward|backward"},
+      {"traverse_4", "configuration 4, forward, start_s soon", "traverse_4", "start_s <s>"},
+      {"traverse_6", "configuration 2, forward, start_s 40, zero_shift_um lots", "traverse_6",
+       "zero_shift_um <um>"},
+      {"traverse_7", "configuration 3, forward, start_s 60, zero_shift_um nan", "traverse_7",
+       "a finite number"},
+      {"traverse_1", "configuration 1, forward, start_s 0, zero_shift_um 5", "traverses",
+       "traverse 1"},
+      {"traverses", "eight", "traverses", "not an integer"},
+      {"traverses", "3", "traverses", "must be 4..64"},
+      {"traverses", "9", "traverses", "'traverse_9' missing"}};
+  for (const auto& c : cases) {
+    auto t = to_csv_table(s);
+    t.set_meta(c.key, c.value);
+    const auto file = dir / "bad.csv";
+    errsep::io::write_csv(file, t);
+    const std::string text = errsep::test::read_file(file);
+    const auto line = static_cast<std::size_t>(line_of(text, c.line_key));
+    INFO(c.key << ": " << c.value);
+    try {
+      read_raw_four_sensor_csv(file);
+      FAIL("accepted '" + c.key + ": " + c.value + "'");
+    } catch (const CsvError& e) {
+      const std::string w = e.what();
+      CHECK(e.line() == line);
+      CHECK_THAT(w, Catch::StartsWith(file.string() + ":" + std::to_string(line) + ": "));
+      CHECK_THAT(w, Catch::Contains(c.what));
     }
   }
 }

@@ -117,3 +117,43 @@ TEST_CASE("refine report: says when only one of the two separations is regularis
   std::printf("non-repeating S, sigma 0.3 um: lambda before %s, after %s\n",
               io::lambda_summary(r.before).c_str(), io::lambda_summary(r.after).c_str());
 }
+
+// The declared Type-B bounds (RefineOptions::declared) are printed where the refine's steps are:
+// in the step CSV's metadata, the text after the steps, and one row each of the report's steps
+// table.  A declared drift bound (not in the model on a clean scan) and one
+// on the gain: each has its note, in the order declared.
+TEST_CASE("refine report: the declared Type-B bounds are printed beside the steps") {
+  const auto c = test::make_refine_case(0.05, 31, {}, {});
+  core::RefineOptions o;
+  o.declared = {{"drift", 0.03}, {"gain", 0.01}};
+  REQUIRE(o.is_valid());
+  const auto r = core::refine_four_sensor(c.cfg, c.sim.m_um, Eigen::MatrixXd(), o, &c.truth);
+  REQUIRE(r.declared_notes.size() == 2);
+  const io::CsvTable t = io::refine_csv(r);
+  REQUIRE(t.meta("declared0"));
+  REQUIRE(t.meta("declared1"));
+  CHECK_FALSE(t.meta("declared2"));
+  CHECK(*t.meta("declared0") == r.declared_notes[0]);
+  CHECK_THAT(*t.meta("declared0"), Catch::StartsWith("drift declared within +-0.03"));
+  CHECK_THAT(*t.meta("declared1"), Catch::StartsWith("gain declared within +-0.01"));
+  const std::string text = io::format_refine_text(r);
+  const auto head = text.find("declared bounds (Type B");
+  REQUIRE(head != std::string::npos);
+  CHECK(text.find("step 0:") < head);  // after the steps
+  CHECK(text.find(r.declared_notes[0], head) != std::string::npos);
+  CHECK(text.find(r.declared_notes[1], head) != std::string::npos);
+  // The report's table: the steps, then one row per bound with the note and its verdict.
+  const io::HtmlTable h = io::refine_steps_table(t, "refine_steps.csv");
+  REQUIRE(h.rows.size() == r.steps.size() + 2);
+  for (std::size_t i = 0; i < 2; ++i) {
+    const auto& row = h.rows[r.steps.size() + i];
+    REQUIRE(row.size() == h.header.size());
+    CHECK(row.front() == "Type B");
+    CHECK(row[1] == r.declared_notes[i]);
+    CHECK_THAT(row.back(), Catch::Contains("not fitted"));
+  }
+  // Without declared bounds nothing of the kind is printed.
+  const auto plain = core::refine_four_sensor(c.cfg, c.sim.m_um, Eigen::MatrixXd(), {}, &c.truth);
+  CHECK_FALSE(io::refine_csv(plain).meta("declared0"));
+  CHECK(io::format_refine_text(plain).find("declared bounds") == std::string::npos);
+}

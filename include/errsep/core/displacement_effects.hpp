@@ -24,6 +24,13 @@
 // raster's slow axis (y) by ~2·n_x·n_y samples but along its fast axis (x, what the reference Y
 // sensors 3-4 compare) only by ~2·n_x; y fastest, it varies by ~n_x·n_y along both axes, so the
 // drift of every sensor shows in its redundancy (see displacement_refine.hpp).
+//
+// A thermal drift that settles within about a scan is seen by the reference Y sensors 3-4 only
+// through scan 1's time variation along a column, which a raster x fastest compresses into n_x
+// samples.  diagonal_scan1 reads scan 1 along wrapped diagonals: reading k = q·n_x + i is at
+// (i, (q + i) mod n_y), so x still steps by one every reading, but every row and every column is
+// read over the whole of scan 1 (row i at k ≡ i mod n_x, column j at q = (j − i) mod n_y; with
+// n_x < n_y a column spans ~n_x² samples, still n_x times a raster's).
 #include <Eigen/Core>
 #include <array>
 #include <string>
@@ -38,6 +45,8 @@ struct TwoAxisScanOrder {
   double pause_between_scans_s = 0.0;
   bool reverse_scan2 = false;    ///< scan 2 runs the raster from its last point back to its first
   bool y_fastest_scan2 = false;  ///< scan 2's raster runs y fastest (scan 1's: x fastest)
+  /// Scan 1 along wrapped diagonals instead of the paper's raster (file comment).
+  bool diagonal_scan1 = false;
   /// Time (s) of the reading at grid point (i, j) in scan 1 or 2, t = 0 at the first reading.
   double time_s(int scan, int i, int j, int nx, int ny) const;
   bool is_valid(std::string* why = nullptr) const;

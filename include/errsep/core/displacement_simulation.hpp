@@ -113,6 +113,8 @@ struct TwoAxisSimOptions {
   bool reverse_scan2 = false;
   /// Scan 2's raster runs y fastest (TwoAxisScanOrder::y_fastest_scan2).
   bool y_fastest_scan2 = false;
+  /// Scan 1 along wrapped diagonals (TwoAxisScanOrder::diagonal_scan1).
+  bool diagonal_scan1 = false;
   /// Undeclared effects (displacement_effects.hpp) added after every draw: they change no draw.
   DisplacementDisturbance disturbance;
   bool is_valid(std::string* why = nullptr) const;

@@ -151,7 +151,18 @@ struct SequenceRefineOptions {
   /// Search the differences of repeated traverses for a knocked sensor first (repeat_steps.hpp)
   /// and, when one is attributed, fit its step before the effects (SequenceKnock).
   bool find_knocks = true;
+  /// When the first round takes a thermal drift and the F-test of its τ against the line,
+  /// Šidák-adjusted over the τ grid, does not reject the line: S midway between the two forms'
+  /// fits, their half-difference in u_S (sequence_refine.cpp).  Off by default: it keeps a
+  /// linear drift of a reversed plan within u (seed 1003: 0.09 -> 1.90 um with u_S 0.65 um
+  /// without it; 0.96 um with u_S 1.03 um with it) but moves a knocked sensor the search misses
+  /// at σ 0.2 (knock seed 715) from 3.88 to 4.06 u_S at its worst point, past the 4 u_S that
+  /// test asserts, and halves one run fewer of 19 in the reversed plan's thermal_all cell.
+  bool drift_form_midway = false;
   RepeatStepOptions repeat_steps;
+  /// Test the sensor's hysteresis on plans that read a configuration both ways and take it into
+  /// the fit when decide_step expects S, γ, f to improve (SequenceHysteresis).
+  bool fit_hysteresis = true;
   bool is_valid(std::string* why = nullptr) const;
 };
 
@@ -223,6 +234,37 @@ SequenceFit fit_sequence_nonlinearity(const FourSensorConfig& cfg, const ScanSeq
                                       const Eigen::MatrixXd& m_um, const SequenceFit& before,
                                       SequenceNonlinearity* nl, double alpha = 0.01);
 
+/// A hysteresis of the sensor: it reads r − h·sign(dr/dt), lagging behind the surface by h in the
+/// direction its reading changes (backlash of its plunger, friction of its tip).  With the slide
+/// at ±v, dr/dt = ±v·dr/dx: a reading offset that depends on the direction of travel and on the
+/// sign of the profile's slope, column −(direction)·sign(dû/dx) at the fitted readings û (one
+/// Gauss–Newton step from h = 0, as the non-linearity's).  One h for the sensor, not one per
+/// configuration: the sequence is read by the one sensor of the single-sensor system, moved
+/// between configurations, and its lag is the sensor's; one parameter is determined by any
+/// configuration read both ways and corrects the configurations read one way only, where four
+/// would each need their own reversal.  Identifiable only when some configuration is read
+/// forward and backward (its two traverses read the same points, so the column's flip between
+/// them is absorbed by none of f, S, γ, e); read one way only, a lag is part of the profile read
+/// and the plan cannot tell them apart ("not identifiable from this plan").  Detected by the
+/// column's F test in the base fit; taken into the fit (its coefficient's covariance in u_S by
+/// the joint fit) when decide_step (step_decision.hpp) expects S, γ, f to improve, or when it
+/// changes none of them (a plan that reads every configuration both ways averages it out of the
+/// estimates, but its residual would inflate σ̂); else left out with its bias (D_S·ĥ)² in u_S.
+struct SequenceHysteresis {
+  bool identifiable = false;  ///< some configuration is read both ways
+  bool detected = false;      ///< its column's F test in the base fit
+  bool applied = false;       ///< taken into the result's fit
+  double h_um = 0, u_h_um = 0;
+  double F = 0, p_value = 1;
+  std::string decision;  ///< decide_step's reason (or why it was taken in without changing S)
+  /// P: what it adds to u_S when detected and not applied (its bias); zeros otherwise.
+  Eigen::VectorXd u_S_added_um;
+  /// One line when detected (also in SequenceRefineResult::report), or, on a plan that reads
+  /// every configuration one way only, "hysteresis: not identifiable from this plan (...)" (not
+  /// in the report: a clean run says nothing).
+  std::string finding;
+};
+
 struct SequenceRefineResult {
   std::string plan;                            ///< "single", "closing pass", … or "custom"
   SequenceFit before, after;                   ///< without effects; with the added ones
@@ -245,6 +287,8 @@ struct SequenceRefineResult {
   SequenceKnock knock;
   /// A sensor non-linearity the trace found; corrected when the plan re-zeroes.
   SequenceNonlinearity nonlinearity;
+  /// The sensor's hysteresis, tested on plans that read a configuration both ways.
+  SequenceHysteresis hysteresis;
   /// The residual of every traverse under the final fit traced against time, position, reading
   /// level and direction (trace_sequence_residual); its findings are also in `report`.
   ResidualTrace trace;

@@ -32,6 +32,9 @@ struct CsvTable {
   std::vector<std::string> columns;                           ///< header names, units as suffix
   std::vector<std::vector<double>> rows;                      ///< rows.size() x columns.size()
   std::vector<std::size_t> row_line;  ///< 1-based source line of each row (empty when built)
+  std::size_t header_line = 0;        ///< 1-based source line of the header (0 when built)
+  /// 1-based source line of each metadata entry (empty, or shorter, when built by set_meta).
+  std::vector<std::size_t> metadata_line;
 
   /// Index of a column, or nullopt.
   std::optional<std::size_t> find_column(const std::string& name) const;
@@ -39,8 +42,11 @@ struct CsvTable {
   std::vector<double> column(const std::string& name, const std::filesystem::path& file = {}) const;
   /// Value of a metadata key, or nullopt.
   std::optional<std::string> meta(const std::string& key) const;
+  /// The 1-based source line of a metadata key, or 0 when it is absent or the table was built
+  /// (so that an error about a metadata value can say file:line).
+  std::size_t meta_line(const std::string& key) const;
   /// Value of a metadata key as a finite number, or nullopt when the key is absent; throws
-  /// CsvError(file, 0, "metadata 'key: value': not a number") when it is not one.
+  /// CsvError(file, meta_line(key), "metadata 'key: value': not a number") when it is not one.
   std::optional<double> meta_number(const std::string& key,
                                     const std::filesystem::path& file = {}) const;
   void set_meta(const std::string& key, const std::string& value);
