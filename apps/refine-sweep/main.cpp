@@ -153,6 +153,12 @@ int main(int argc, char** argv) {
         covered, points, points ? static_cast<double>(covered) / points : 0.0, halved,
         identifiable);
     std::cout << "must show: " << errsep::core::must_show(all_cells).brief() << "\n";
+    for (const double s : sigmas) {
+      std::vector<errsep::core::SweepCell> at;
+      for (const auto& c : all_cells)
+        if (c.sigma_um == s) at.push_back(c);
+      std::printf("must show at sigma %.2f: %s\n", s, errsep::core::must_show(at).brief().c_str());
+    }
     std::printf("total %.1f s\n",
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     return 0;

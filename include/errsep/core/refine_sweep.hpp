@@ -136,6 +136,10 @@ struct MustShow {
   int clean_runs = 0, clean_added = 0;               ///< none: runs that added anything
   int library_runs = 0, library_worse_beyond_u = 0;  ///< library effects (library_effect_name)
   int library_identifiable = 0, library_halved = 0;  ///< of those identifiable from the plan
+  /// Of the identifiable runs, those where the effect at least doubled the clean S error (the
+  /// issue's sizes: "each at a size that at least doubles the clean error"; a linear drift on the
+  /// reversed plan leaves S alone, so there is nothing to halve), and of those the halved ones.
+  int library_identifiable_doubled = 0, library_halved_doubled = 0;
   int not_in_library_runs = 0, not_in_library_not_white = 0;  ///< nonlinearity, bump
   long points = 0, covered = 0;              ///< u_S coverage pooled over all cells
   long points_found = 0, covered_found = 0;  ///< ... over the runs where something was added
