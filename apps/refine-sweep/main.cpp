@@ -1,8 +1,9 @@
 // errsep-refine-sweep: the refinement loop over generated scans with one undeclared effect each
 // (issue 16): per effect and noise level, how often the effect is found, the errors of S and γ
 // before and after (median and worst), how often the result was made worse, and the coverage of
-// the refined u_S.  A benchmark that prints figures, not a test (tests/core/refine_undeclared.cpp
-// asserts a smaller sweep).
+// the refined u_S, and issue 16's must-show counts pooled over every cell and per sigma.  A
+// benchmark that prints figures, not a test (tests/core/refine_undeclared.cpp asserts a smaller
+// sweep; tests/core/refine_identifying_plan.cpp the --plan identifying cells, 20 seeds each).
 //   errsep-refine-sweep [--seeds 20] [--sigma 0.05,0.1,0.2] [--effects all|name,...]
 //                       [--declare effect=bound,...] [--plan single|closing|reversed|
 //                       interleaved|rezeroed|identifying]
