@@ -1,10 +1,12 @@
 // errsep-refine-sweep: the refinement loop over generated scans with one undeclared effect each
 // (issue 16): per effect and noise level, how often the effect is found, the errors of S and γ
 // before and after (median and worst), how often the result was made worse, and the coverage of
-// the refined u_S.  A benchmark that prints figures, not a test (tests/core/refine_undeclared.cpp
-// asserts a smaller sweep).
+// the refined u_S, and issue 16's must-show counts pooled over every cell and per sigma.  A
+// benchmark that prints figures, not a test (tests/core/refine_undeclared.cpp asserts a smaller
+// sweep; tests/core/refine_identifying_plan.cpp the --plan identifying cells, 20 seeds each).
 //   errsep-refine-sweep [--seeds 20] [--sigma 0.05,0.1,0.2] [--effects all|name,...]
-//                       [--declare effect=bound,...]
+//                       [--declare effect=bound,...] [--plan single|closing|reversed|
+//                       interleaved|rezeroed|identifying]
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cstdio>
@@ -39,6 +41,12 @@ int main(int argc, char** argv) {
       ->delimiter(',');
   app.add_option("--size", size, "scale of the effects' drawn sizes")->capture_default_str();
   app.add_flag("--runs", per_run, "print every run");
+  std::string plan = "single";
+  app.add_option("--plan", plan,
+                 std::string("the scan plan: ") + errsep::core::scan_sequence_kind_names() +
+                     ", or identifying (each effect on the plan that identifies it, chosen by "
+                     "the library's identifiability; the clean case on every plan used)")
+      ->capture_default_str();
   bool verdicts = false;
   app.add_flag("--verdicts", verdicts, "with --runs: also the refine's verdict of every effect");
   errsep::core::RefineOptions refine;
@@ -98,14 +106,25 @@ int main(int argc, char** argv) {
     std::string why;
     if (!base.is_valid(&why)) throw std::invalid_argument(why);
     if (!refine.is_valid(&why)) throw std::invalid_argument(why);
+    std::vector<std::string> skipped;
+    const auto cells = errsep::core::sweep_plan_cells(plan, list, &skipped);
+    for (const auto& s : skipped)
+      std::cout << "skipped " << s << "\n";
+    if (plan == "identifying")
+      for (const auto& c : cells)
+        std::cout << "plan for " << errsep::core::to_string(c.effect) << ": "
+                  << errsep::core::to_string(c.plan) << " (" << c.why << ")\n";
     std::cout << errsep::core::sweep_header() << "\n";
     const auto t0 = std::chrono::steady_clock::now();
     std::vector<std::string> breakdown;
+    std::vector<errsep::core::SweepCell> all_cells;
     long points = 0, covered = 0, halved = 0, identifiable = 0;
-    for (const auto e : list)
+    for (const auto& pc : cells)
       for (const double s : sigmas) {
-        const auto cell = errsep::core::run_sweep_cell(e, s, seeds, seed0, refine, base);
+        const auto cell =
+            errsep::core::run_sweep_cell_on(pc.plan, pc.effect, s, seeds, seed0, refine, base);
         breakdown.push_back(errsep::core::coverage_breakdown(cell));
+        all_cells.push_back(cell);
         halved += cell.halved_identifiable_runs();
         identifiable += cell.identifiable_runs();
         for (const auto& r : cell.runs)
@@ -134,6 +153,13 @@ int main(int argc, char** argv) {
         "the %ld runs where the effect is identifiable from the plan\n",
         covered, points, points ? static_cast<double>(covered) / points : 0.0, halved,
         identifiable);
+    std::cout << "must show: " << errsep::core::must_show(all_cells).brief() << "\n";
+    for (const double s : sigmas) {
+      std::vector<errsep::core::SweepCell> at;
+      for (const auto& c : all_cells)
+        if (c.sigma_um == s) at.push_back(c);
+      std::printf("must show at sigma %.2f: %s\n", s, errsep::core::must_show(at).brief().c_str());
+    }
     std::printf("total %.1f s\n",
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     return 0;

@@ -3,7 +3,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <random>
+#include <stdexcept>
 #include <vector>
+
+#include "errsep/core/four_sensor_sequence_simulation.hpp"
+#include "errsep/core/four_sensor_simulation.hpp"
 
 namespace errsep::core {
 
@@ -154,13 +159,15 @@ std::string coverage_breakdown(const SweepCell& c) {
     if (r.u_S_before_um > 0 && r.u_S_after_um > 1.01 * r.u_S_before_um)
       ratio.push_back(r.u_S_after_um / r.u_S_before_um);
   std::sort(ratio.begin(), ratio.end());
-  char buf[400];
-  std::snprintf(buf, sizeof buf,
-                "%-12s %5.2f coverage within 2 u_S: %.3f; applied %.3f (%d runs), detected not "
-                "applied %.3f (%d), nothing added %.3f (%d); u_S widened in %zu (median x%.2f, "
-                "max x%.2f)",
-                to_string(c.effect), c.sigma_um, c.coverage(), ca, na, cd, nd, cn, nn, ratio.size(),
-                ratio.empty() ? 1.0 : ratio[ratio.size() / 2], ratio.empty() ? 1.0 : ratio.back());
+  char buf[512];
+  std::snprintf(
+      buf, sizeof buf,
+      "%-12s %-12s %5.2f coverage within 2 u_S: %.3f; applied %.3f (%d runs), detected not "
+      "applied %.3f (%d), nothing added %.3f (%d); u_S widened in %zu (median x%.2f, "
+      "max x%.2f)",
+      to_string(c.effect), to_string(c.plan), c.sigma_um, c.coverage(), ca, na, cd, nd, cn, nn,
+      ratio.size(), ratio.empty() ? 1.0 : ratio[ratio.size() / 2],
+      ratio.empty() ? 1.0 : ratio.back());
   return buf;
 }
 
@@ -178,14 +185,395 @@ SweepCell run_sweep_cell(UndeclaredEffect effect, double sigma_um, int seeds, st
   return cell;
 }
 
-std::string sweep_header() {
-  char buf[400];
+bool sequence_simulates(UndeclaredEffect effect) {
+  switch (effect) {
+    case UndeclaredEffect::pe1:
+    case UndeclaredEffect::gain:
+    case UndeclaredEffect::pe2:
+    case UndeclaredEffect::periodic:
+      return false;
+    default:
+      return true;
+  }
+}
+
+namespace {
+
+// The sequence refine's effect that describes an injected one (drift and thermal are one
+// family, sequence_refine.hpp); false for the others.
+bool sequence_kind_of(UndeclaredEffect e, SequenceEffectKind* k) {
+  switch (e) {
+    case UndeclaredEffect::drift_one:
+    case UndeclaredEffect::drift_all:
+      *k = SequenceEffectKind::drift;
+      return true;
+    case UndeclaredEffect::thermal_one:
+    case UndeclaredEffect::thermal_all:
+      *k = SequenceEffectKind::thermal;
+      return true;
+    case UndeclaredEffect::traverse:
+      *k = SequenceEffectKind::traverse;
+      return true;
+    default:
+      return false;
+  }
+}
+
+bool drift_family(SequenceEffectKind k) {
+  return k == SequenceEffectKind::drift || k == SequenceEffectKind::thermal;
+}
+
+}  // namespace
+
+PlanChoice identifying_plan(UndeclaredEffect effect, const FourSensorConfig& cfg,
+                            const SequenceRefineOptions& seq_opts) {
+  PlanChoice c;
+  c.effect = effect;
+  c.plan = ScanSequenceKind::single;
+  SequenceEffectKind kind{};
+  char buf[512];
+  if (sequence_kind_of(effect, &kind)) {
+    // Every redundant plan's identifiability of the effect (of both drift members for drift:
+    // the refine takes whichever fits, so both must be identifiable), the smallest
+    // undetermined S gain winning.
+    double best = 0;
+    int best_T = 0;
+    bool found = false;
+    std::string scores;
+    for (const ScanSequenceKind k : {ScanSequenceKind::closing_pass, ScanSequenceKind::reversed,
+                                     ScanSequenceKind::interleaved, ScanSequenceKind::rezeroed}) {
+      const ScanSequence seq = ScanSequence::make(k, cfg);
+      bool ok = true;
+      double gain = 0;
+      for (const auto& id : sequence_identifiability(cfg, seq, seq_opts))
+        if (id.kind == kind || (drift_family(kind) && drift_family(id.kind))) {
+          ok = ok && id.identifiable_from_plan;
+          gain = std::max(gain, id.undetermined_S_gain);
+        }
+      std::snprintf(buf, sizeof buf, "%s%s %.2g%s", scores.empty() ? "" : ", ", to_string(k), gain,
+                    ok ? "" : " (no)");
+      scores += buf;
+      if (ok && (!found || gain < best - 1e-9 || (gain <= best + 1e-9 && seq.size() < best_T))) {
+        found = true;
+        best = gain;
+        best_T = seq.size();
+        c.plan = k;
+      }
+    }
+    std::snprintf(buf, sizeof buf,
+                  "sequence_identifiability of %s%s, undetermined S gain per plan (<= %.2g "
+                  "identifiable): %s",
+                  to_string(kind), drift_family(kind) ? " and its family" : "",
+                  seq_opts.undetermined_S_max, scores.c_str());
+    c.why = found ? buf : std::string(buf) + "; identifiable from none: single";
+    return c;
+  }
+  switch (effect) {
+    case UndeclaredEffect::nonlinearity: {
+      // SequenceNonlinearity is identifiable exactly on a plan that re-zeroes the sensor.
+      for (const ScanSequenceKind k : {ScanSequenceKind::closing_pass, ScanSequenceKind::reversed,
+                                       ScanSequenceKind::interleaved, ScanSequenceKind::rezeroed})
+        if (ScanSequence::make(k, cfg).rezeroed()) {
+          c.plan = k;
+          break;
+        }
+      c.why =
+          "the sequence refine fits a non-linearity's c2 where the plan re-zeroes the sensor "
+          "(SequenceNonlinearity::identifiable)";
+      return c;
+    }
+    case UndeclaredEffect::bump:
+      c.why =
+          "in neither library and identifiable from no plan: single (the single refine's gross "
+          "errors and trace report it)";
+      return c;
+    case UndeclaredEffect::none:
+      c.why = "clean";
+      return c;
+    default:
+      c.why =
+          "a single-scan library effect: the sequence refine has no candidate for it, "
+          "effect_identifiability judges each single scan";
+      return c;
+  }
+}
+
+std::vector<PlanChoice> sweep_plan_cells(const std::string& plan,
+                                         const std::vector<UndeclaredEffect>& effects,
+                                         std::vector<std::string>* skipped,
+                                         const FourSensorConfig& cfg) {
+  std::vector<PlanChoice> cells;
+  if (plan == "identifying") {
+    std::vector<ScanSequenceKind> used;
+    bool clean = false;
+    for (const auto e : effects) {
+      if (e == UndeclaredEffect::none) {
+        clean = true;
+        continue;
+      }
+      cells.push_back(identifying_plan(e, cfg));
+      if (std::find(used.begin(), used.end(), cells.back().plan) == used.end())
+        used.push_back(cells.back().plan);
+    }
+    if (clean) {
+      if (used.empty()) used.push_back(ScanSequenceKind::single);
+      std::vector<PlanChoice> c0;
+      for (const auto k : used)
+        c0.push_back({UndeclaredEffect::none, k, "clean, on every plan the effects use"});
+      cells.insert(cells.begin(), c0.begin(), c0.end());
+    }
+    return cells;
+  }
+  const ScanSequenceKind k = scan_sequence_kind_from_string(plan);
+  for (const auto e : effects) {
+    if (k != ScanSequenceKind::single && !sequence_simulates(e)) {
+      if (skipped)
+        skipped->push_back(std::string(to_string(e)) + ": not on the " + to_string(k) +
+                           " plan (a single-scan library effect: the sequence simulator does not "
+                           "model it and the sequence refine has no candidate for it)");
+      continue;
+    }
+    cells.push_back({e, k, "--plan"});
+  }
+  return cells;
+}
+
+SweepRun evaluate_sequence_run(UndeclaredEffect effect, const ScanSequence& seq,
+                               const UndeclaredCaseOptions& o, SequenceModel& model) {
+  if (!sequence_simulates(effect))
+    throw std::invalid_argument(std::string("evaluate_sequence_run: ") + to_string(effect) +
+                                " is not simulated on a scan sequence");
+  const FourSensorConfig& cfg = o.cfg;
+  const double L = cfg.travel_mm();
+  const SlidewayTruth truth = random_smooth_truth(cfg, o.seed, o.truth);
+  // The effect's draws: the ranges of simulate_undeclared (undeclared_effect_simulation.hpp),
+  // from a stream of their own.
+  std::mt19937_64 rng(o.seed * 0x9E3779B97F4A7C15ULL + 0x5bd1e995ULL);
+  auto uni = [&](double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng); };
+  auto sign = [&] { return uni(0.0, 1.0) < 0.5 ? -1.0 : 1.0; };
+  auto pick = [&](int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(rng); };
+  const double k = o.size;
+  SequenceSimOptions so;
+  so.sigma_um = o.sigma_um;
+  so.seed = o.seed * 7919 + 17;
+  SequenceEffects& fx = so.effects;
+  char buf[300];
+  std::string description = "clean";
+  const int which = pick(0, 3);
+  switch (effect) {
+    case UndeclaredEffect::drift_one:
+    case UndeclaredEffect::drift_all:
+      for (int c = 0; c < 4; ++c)
+        if (effect == UndeclaredEffect::drift_all || c == which)
+          fx.drift_um_per_s[static_cast<std::size_t>(c)] = k * sign() * uni(0.01, 0.03);
+      std::snprintf(buf, sizeof buf, "drift %+.3g %+.3g %+.3g %+.3g um/s", fx.drift_um_per_s[0],
+                    fx.drift_um_per_s[1], fx.drift_um_per_s[2], fx.drift_um_per_s[3]);
+      description = buf;
+      break;
+    case UndeclaredEffect::thermal_one:
+    case UndeclaredEffect::thermal_all:
+      for (int c = 0; c < 4; ++c)
+        if (effect == UndeclaredEffect::thermal_all || c == which)
+          fx.thermal_um[static_cast<std::size_t>(c)] = k * sign() * uni(2.0, 5.0);
+      fx.thermal_tau_s = uni(20.0, 80.0);
+      std::snprintf(buf, sizeof buf, "thermal %+.3g %+.3g %+.3g %+.3g um, tau %.3g s",
+                    fx.thermal_um[0], fx.thermal_um[1], fx.thermal_um[2], fx.thermal_um[3],
+                    fx.thermal_tau_s);
+      description = buf;
+      break;
+    case UndeclaredEffect::traverse: {
+      // The slide bending more on each traverse: P2 and P3 of 1-2 um each at the last traverse,
+      // in proportion to the traverse's mid-time (the truth is the first traverse's S).
+      const double a2 = k * sign() * uni(1.0, 2.0), a3 = k * sign() * uni(1.0, 2.0);
+      const Eigen::VectorXd mid = seq.times_s(cfg).colwise().mean().transpose();
+      const double span = std::max(mid.maxCoeff() - mid(0), 1e-9);
+      fx.S_change_um = [a2, a3, L, mid, span](int t, double x) {
+        const double u = 2.0 * x / L - 1.0;
+        return (mid(t) - mid(0)) / span *
+               (a2 * 0.5 * (3 * u * u - 1) + a3 * 0.5 * (5 * u * u * u - 3 * u));
+      };
+      std::snprintf(buf, sizeof buf, "S bending progressively: P2 %.3g um, P3 %.3g um at the end",
+                    a2, a3);
+      description = buf;
+      break;
+    }
+    case UndeclaredEffect::bump: {
+      const int t0 = pick(0, seq.size() - 1);
+      const double h = k * sign() * uni(1.5, 3.0), w = uni(5.0, 15.0), x0 = uni(0.1 * L, 0.9 * L);
+      fx.S_change_um = [t0, h, w, x0](int t, double x) {
+        return t == t0 ? h * std::exp(-0.5 * std::pow((x - x0) / w, 2)) : 0.0;
+      };
+      std::snprintf(buf, sizeof buf, "bump on traverse %d: %.3g um, %.3g mm wide at %.4g mm",
+                    t0 + 1, h, w, x0);
+      description = buf;
+      break;
+    }
+    case UndeclaredEffect::nonlinearity: {
+      // As simulate_undeclared: relative to the noise-free readings' range (all traverses, the
+      // re-zeroed ones included), q of the half range at its ends.
+      SequenceSimOptions s0 = so;
+      s0.sigma_um = 0;
+      const Eigen::MatrixXd r = simulate_four_sensor_sequence(cfg, truth, seq, s0).m_um;
+      const double lo = r.minCoeff(), hi = r.maxCoeff();
+      const double half = std::max(0.5 * (hi - lo), 1e-9);
+      const double q = k * sign() * uni(0.02, 0.04);
+      fx.nonlinearity_c2_per_um = q / half;
+      fx.nonlinearity_mid_um = 0.5 * (lo + hi);
+      std::snprintf(buf, sizeof buf,
+                    "sensor non-linearity: %+.3g %% of the half range %.3g um at its ends", 100 * q,
+                    half);
+      description = buf;
+      break;
+    }
+    default:
+      break;
+  }
+  const SequenceSimData d = simulate_four_sensor_sequence(cfg, truth, seq, so);
+  const SequenceRefineResult r = model.refine(d.m_um);
+  const SequenceFit clean = model.fit(d.m_clean_um);
+  SweepRun run;
+  run.seed = o.seed;
+  run.description = description;
+  // Errors as profile_errors: S after its constant, line and bow, γ after its constant and line.
+  auto s_err = [&](const Eigen::VectorXd& S) { return rms(remove_polynomial(S - d.S_um, 2)); };
+  auto g_err = [&](const Eigen::VectorXd& g) {
+    return 1e6 * rms(remove_polynomial(g - d.gamma_rad, 1));
+  };
+  run.S_clean_um = s_err(clean.S_um);
+  run.S_before_um = s_err(r.before.S_um);
+  run.S_after_um = s_err(r.after.S_um);
+  run.gamma_clean_urad = g_err(clean.gamma_rad);
+  run.gamma_before_urad = g_err(r.before.gamma_rad);
+  run.gamma_after_urad = g_err(r.after.gamma_rad);
+  run.u_S_after_um = rms(r.after.u_S_um);
+  run.u_S_before_um = rms(r.before.u_S_um);
+  run.u_gamma_after_urad = 1e6 * rms(r.after.u_gamma_rad);
+  for (const auto& a : r.added)
+    run.model += std::string(run.model.empty() ? "" : "+") + to_string(a.kind);
+  if (r.knock.fitted) run.model += std::string(run.model.empty() ? "" : "+") + "knock";
+  if (r.nonlinearity.applied)
+    run.model += std::string(run.model.empty() ? "" : "+") + "nonlinearity";
+  if (run.model.empty()) run.model = "base";
+  run.added = !r.added.empty() || r.knock.fitted || r.nonlinearity.applied;
+  run.applied = !r.added.empty() || r.knock.applied || r.nonlinearity.applied;
+  SequenceEffectKind kind{};
+  if (sequence_kind_of(effect, &kind)) {
+    for (const auto& a : r.added)
+      run.identified =
+          run.identified || a.kind == kind || (drift_family(kind) && drift_family(a.kind));
+    run.identifiable_from_plan = r.identifiable_from_plan(kind);
+    for (const auto& id : r.plan_identifiability)
+      if (id.kind == kind) {
+        std::snprintf(buf, sizeof buf, "%s on %s: %d of %d directions, undetermined S gain %.2g%s",
+                      to_string(kind), r.plan.c_str(), id.identifiable, id.parameters,
+                      id.undetermined_S_gain,
+                      id.identifiable_from_plan ? "" : " (not identifiable)");
+        run.identifiability = buf;
+      }
+  } else if (effect == UndeclaredEffect::nonlinearity) {
+    run.identified = r.nonlinearity.detected;
+    run.identifiable_from_plan = r.nonlinearity.identifiable;
+    run.identifiability = r.nonlinearity.identifiable ? "nonlinearity: the plan re-zeroes"
+                                                      : "nonlinearity: the plan does not re-zero";
+  }
+  // Not white: the refine says the readings hold something its model lacks (the trace of the
+  // final fit depends on a recorded variable, a non-linearity or a knock found).
+  run.not_white = r.trace.depends || r.nonlinearity.detected || r.knock.scan.found;
+  for (const auto& line : r.report) {
+    run.verdicts += (run.verdicts.empty() ? "" : " | ") + line;
+    run.not_identifiable_reported =
+        run.not_identifiable_reported || line.find("not identifiable from this plan") != line.npos;
+  }
+  {
+    const Eigen::VectorXd dS = r.after.S_um - r.before.S_um;
+    run.gauge_change_um = rms(dS - remove_polynomial(dS, 2));
+  }
+  // Coverage: the sequence fit's u_S is of Ŝ about its best-fit constant, line and bow, so the
+  // error is taken likewise (pointwise and shape are the same here).
+  const Eigen::VectorXd dev = remove_polynomial(r.after.S_um - d.S_um, 2);
+  run.points = static_cast<int>(dev.size());
+  for (Eigen::Index n = 0; n < dev.size(); ++n)
+    if (std::abs(dev(n)) <= 2.0 * r.after.u_S_um(n)) ++run.covered;
+  run.covered_shape = run.covered;
+  return run;
+}
+
+SweepCell run_sweep_cell_on(ScanSequenceKind plan, UndeclaredEffect effect, double sigma_um,
+                            int seeds, std::uint64_t seed0, const RefineOptions& refine,
+                            const UndeclaredCaseOptions& base,
+                            const SequenceRefineOptions& seq_opts) {
+  if (plan == ScanSequenceKind::single)
+    return run_sweep_cell(effect, sigma_um, seeds, seed0, refine, base);
+  SweepCell cell;
+  cell.effect = effect;
+  cell.sigma_um = sigma_um;
+  cell.plan = plan;
+  const ScanSequence seq = ScanSequence::make(plan, base.cfg, base.speed_mm_per_s);
+  SequenceModel model(base.cfg, seq, seq_opts);
+  for (int k = 0; k < seeds; ++k) {
+    UndeclaredCaseOptions o = base;
+    o.sigma_um = sigma_um;
+    o.seed = seed0 + static_cast<std::uint64_t>(k);
+    cell.runs.push_back(evaluate_sequence_run(effect, seq, o, model));
+  }
+  return cell;
+}
+
+MustShow must_show(const std::vector<SweepCell>& cells) {
+  MustShow m;
+  for (const auto& c : cells) {
+    const bool library = !library_effect_name(c.effect).empty();
+    for (const auto& r : c.runs) {
+      m.points += r.points;
+      m.covered += r.covered;
+      if (r.added) m.points_found += r.points, m.covered_found += r.covered;
+      if (c.effect == UndeclaredEffect::none) {
+        ++m.clean_runs;
+        m.clean_added += r.added;
+      } else if (library) {
+        ++m.library_runs;
+        m.library_worse_beyond_u += r.worse_beyond_u();
+        if (r.identifiable_from_plan) {
+          ++m.library_identifiable;
+          m.library_halved += r.halved();
+          if (r.S_before_um >= 2.0 * r.S_clean_um) {
+            ++m.library_identifiable_doubled;
+            m.library_halved_doubled += r.halved();
+          }
+        }
+      } else {
+        ++m.not_in_library_runs;
+        m.not_in_library_not_white += r.not_white;
+      }
+    }
+  }
+  return m;
+}
+
+std::string MustShow::brief() const {
+  char buf[900];
   std::snprintf(buf, sizeof buf,
-                "%-12s %5s %4s | %5s %5s %5s %5s %5s | %6s %6s %6s %6s %6s | %6s %6s %6s %6s | "
-                "%5s %5s %5s | %5s %5s | %7s",
-                "effect", "sigma", "runs", "added", "ident", "appl", "!wht", "!idp", "S_cln",
-                "S_bef", "S_aft", "Sbef^", "Saft^", "g_bef", "g_aft", "gbef^", "gaft^", "worse",
-                ">u", "half", "cov", "covsh", "hlf/idf");
+                "clean: added in %d of %d runs; library effects: worse beyond u in %d of %d, "
+                "halved in %d of the %d identifiable from the plan (%d of the %d where the effect "
+                "doubled the clean S error); not in the library: not white "
+                "in %d of %d; u_S coverage (2 u_S) %ld of %ld points (%.3f), %.3f where something "
+                "was added (%ld points)",
+                clean_added, clean_runs, library_worse_beyond_u, library_runs, library_halved,
+                library_identifiable, library_halved_doubled, library_identifiable_doubled,
+                not_in_library_not_white, not_in_library_runs, covered, points, coverage(),
+                points_found ? static_cast<double>(covered_found) / points_found : 0.0,
+                points_found);
+  return buf;
+}
+
+std::string sweep_header() {
+  char buf[512];
+  std::snprintf(buf, sizeof buf,
+                "%-12s %-12s %5s %4s | %5s %5s %5s %5s %5s | %6s %6s %6s %6s %6s | %6s %6s %6s "
+                "%6s | %5s %5s %5s | %5s %5s | %7s",
+                "effect", "plan", "sigma", "runs", "added", "ident", "appl", "!wht", "!idp",
+                "S_cln", "S_bef", "S_aft", "Sbef^", "Saft^", "g_bef", "g_aft", "gbef^", "gaft^",
+                "worse", ">u", "half", "cov", "covsh", "hlf/idf");
   return std::string(buf) +
          "\n  (fractions of runs; errors RMS in um / urad, median and ^ worst; S_cln: the same "
          "scan without the effect; worse: S or gamma error grew; >u: by more than its stated u; "
@@ -195,12 +583,12 @@ std::string sweep_header() {
 }
 
 std::string sweep_row(const SweepCell& c) {
-  char buf[400];
+  char buf[512];
   std::snprintf(
       buf, sizeof buf,
-      "%-12s %5.2f %4zu | %5.2f %5.2f %5.2f %5.2f %5.2f | %6.3f %6.3f %6.3f %6.3f %6.3f | %6.1f "
-      "%6.1f %6.1f %6.1f | %5.2f %5.2f %5.2f | %5.3f %5.3f | %3d/%-3d",
-      to_string(c.effect), c.sigma_um, c.runs.size(),
+      "%-12s %-12s %5.2f %4zu | %5.2f %5.2f %5.2f %5.2f %5.2f | %6.3f %6.3f %6.3f %6.3f %6.3f | "
+      "%6.1f %6.1f %6.1f %6.1f | %5.2f %5.2f %5.2f | %5.3f %5.3f | %3d/%-3d",
+      to_string(c.effect), to_string(c.plan), c.sigma_um, c.runs.size(),
       c.fraction([](const SweepRun& r) { return r.added; }),
       c.fraction([](const SweepRun& r) { return r.identified; }),
       c.fraction([](const SweepRun& r) { return r.applied; }),

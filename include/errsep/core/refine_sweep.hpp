@@ -11,6 +11,8 @@
 #include <vector>
 
 #include "errsep/core/refine.hpp"
+#include "errsep/core/scan_sequence.hpp"
+#include "errsep/core/sequence_refine.hpp"
 #include "errsep/core/undeclared_effect_simulation.hpp"
 
 namespace errsep::core {
@@ -56,6 +58,7 @@ SweepRun evaluate_refine_run(UndeclaredEffect effect, const UndeclaredCaseOption
 struct SweepCell {
   UndeclaredEffect effect = UndeclaredEffect::none;
   double sigma_um = 0;
+  ScanSequenceKind plan = ScanSequenceKind::single;  ///< the plan the cell's scans were made with
   std::vector<SweepRun> runs;
   double fraction(bool (*pred)(const SweepRun&)) const;
   double median(double (*get)(const SweepRun&)) const;
@@ -72,6 +75,78 @@ struct SweepCell {
 /// `seeds` runs from seed0 on.
 SweepCell run_sweep_cell(UndeclaredEffect effect, double sigma_um, int seeds, std::uint64_t seed0,
                          const RefineOptions& refine = {}, const UndeclaredCaseOptions& base = {});
+
+// ---- The table on a scan plan (issue 16: "falls by at least half ... where the effect is
+// identifiable from the plan used").  On the single plan a case is simulate_undeclared's and the
+// refine is refine_four_sensor (the effect library).  On a redundant plan (scan_sequence.hpp) the
+// case is simulated by simulate_four_sensor_sequence with the same truth (random_smooth_truth of
+// the seed) and effect sizes as simulate_undeclared's, and refined by refine_four_sensor_sequence,
+// which fits drift, thermal drift, a non-repeating traverse, a knock and (rezeroed) a sensor
+// non-linearity.  It has no candidate for PE1, gain, PE2 or a periodic error (the single-scan
+// library effects), and the sequence simulator does not model them: those cells exist only on
+// the single plan.
+
+/// Whether the sequence simulator can express the effect (none, drift, thermal, traverse,
+/// non-linearity, bump: a ΔS on one traverse).
+bool sequence_simulates(UndeclaredEffect effect);
+
+/// The plan a cell runs on, and why it was chosen.
+struct PlanChoice {
+  UndeclaredEffect effect = UndeclaredEffect::none;
+  ScanSequenceKind plan = ScanSequenceKind::single;
+  std::string why;
+};
+
+/// The plan that identifies the effect, from the library's own computation, not a table:
+/// drift and thermal (one family: the refine may take either) and the non-repeating traverse get
+/// the redundant plan on which sequence_identifiability says the effect (for drift: both
+/// members) is identifiable with the smallest undetermined_S_gain, the fewest traverses on a tie;
+/// the non-linearity the plan that re-zeroes (the only one on which SequenceNonlinearity is
+/// identifiable); the single-scan library effects (PE1, gain, PE2, periodic) the single plan
+/// (effect_identifiability decides per scan whether it sees them); the bump (not in either
+/// library, identifiable from no plan) the single plan; none: single.
+PlanChoice identifying_plan(UndeclaredEffect effect, const FourSensorConfig& cfg = {},
+                            const SequenceRefineOptions& seq_opts = {});
+
+/// The cells of a sweep for `plan` ("identifying" or a ScanSequenceKind name, as
+/// scan_sequence_kind_from_string): one per effect that the plan can simulate (a fixed plan) or
+/// per effect on its identifying plan; on the identifying plan, the clean case (none) once on
+/// every plan used, since "clean adds nothing" must hold on each.  `skipped` gets one line per
+/// effect left out, with why.  Throws std::invalid_argument for an unknown plan name.
+std::vector<PlanChoice> sweep_plan_cells(const std::string& plan,
+                                         const std::vector<UndeclaredEffect>& effects,
+                                         std::vector<std::string>* skipped = nullptr,
+                                         const FourSensorConfig& cfg = {});
+
+/// One case on a redundant plan, refined by `model` (its plan's SequenceModel, kept over a cell).
+/// Throws std::invalid_argument when !sequence_simulates(effect).
+SweepRun evaluate_sequence_run(UndeclaredEffect effect, const ScanSequence& seq,
+                               const UndeclaredCaseOptions& cases, SequenceModel& model);
+
+/// run_sweep_cell on `plan`: the single plan as run_sweep_cell, a redundant one with the
+/// sequence refine.
+SweepCell run_sweep_cell_on(ScanSequenceKind plan, UndeclaredEffect effect, double sigma_um,
+                            int seeds, std::uint64_t seed0, const RefineOptions& refine = {},
+                            const UndeclaredCaseOptions& base = {},
+                            const SequenceRefineOptions& seq_opts = {});
+
+/// Issue 16's must-show bullets over a set of cells (any plans): counts, so that a test asserts
+/// them and the app prints them alike.
+struct MustShow {
+  int clean_runs = 0, clean_added = 0;               ///< none: runs that added anything
+  int library_runs = 0, library_worse_beyond_u = 0;  ///< library effects (library_effect_name)
+  int library_identifiable = 0, library_halved = 0;  ///< of those identifiable from the plan
+  /// Of the identifiable runs, those where the effect at least doubled the clean S error (the
+  /// issue's sizes: "each at a size that at least doubles the clean error"; a linear drift on the
+  /// reversed plan leaves S alone, so there is nothing to halve), and of those the halved ones.
+  int library_identifiable_doubled = 0, library_halved_doubled = 0;
+  int not_in_library_runs = 0, not_in_library_not_white = 0;  ///< nonlinearity, bump
+  long points = 0, covered = 0;              ///< u_S coverage pooled over all cells
+  long points_found = 0, covered_found = 0;  ///< ... over the runs where something was added
+  double coverage() const { return points ? static_cast<double>(covered) / points : 0.0; }
+  std::string brief() const;
+};
+MustShow must_show(const std::vector<SweepCell>& cells);
 
 /// The table's header and one row per cell (fixed-width text).
 std::string sweep_header();
