@@ -626,16 +626,15 @@ TEST_CASE("seed 1046, reversed plan: a step that would make S worse is declined,
 }
 
 // Seeds the refine was not tuned on (1041-1060, where seed 1046 failed), reversed plan, sigma
-// 0.1: every library effect's cell, no run made worse beyond its refined u_S, the drifts and
-// the non-repeating traverse identified in >= 80 %.  A seed sweep (~5 s in release): [sweep].
+// 0.1, the three cells seed 1046 failed in: no run made worse beyond its refined u_S, the
+// effect identified in >= 80 %.  A seed sweep (~18 s on the loaded 2-core machine): [sweep].
 TEST_CASE("reversed plan, seeds 1041-1060: no run made worse beyond u", "[sequence][sweep]") {
   const Plan plan{ScanSequenceKind::reversed};
-  for (auto c :
-       {Case::drift_one, Case::drift_all, Case::thermal_one, Case::thermal_all, Case::traverse}) {
+  for (auto c : {Case::drift_one, Case::drift_all, Case::traverse}) {
     const Cell cell = run_cell(c, plan, kSigma, {}, 1040);
     INFO(name(c) << ", seeds 1041-1060");
     CHECK(cell.worse == 0);
-    if (c != Case::thermal_one) CHECK(cell.identified >= kSeeds * 8 / 10);
+    CHECK(cell.identified >= kSeeds * 8 / 10);
   }
 }
 
