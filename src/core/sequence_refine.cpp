@@ -1216,9 +1216,9 @@ SequenceRefineResult SequenceModel::Impl::refine_effects(const Eigen::MatrixXd& 
     std::vector<int> best_of;  // candidate index of each scored entry, or -1 (no directions)
     for (auto kind : kinds) {
       if (res.identified(kind)) continue;
-      // A declined effect is not offered again (its signal is in the residual of every later
-      // round); the drift family's members are one effect (a·t is the long-τ limit of the
-      // thermal form), so declining one declines both.
+      // A declined effect is not offered again; the drift family's members are one effect (a·t
+      // is the long-τ limit of the thermal form), so declining one declines both.  (Not reached
+      // today: a decline ends the loop, below.)
       if (std::any_of(res.declined.begin(), res.declined.end(), [&](const auto& c) {
             return c.kind == kind || (is_drift_kind(c.kind) && is_drift_kind(kind));
           }))
