@@ -48,6 +48,13 @@ bool SequenceRefineOptions::is_valid(std::string* why) const {
   if (!(undetermined_S_max > 0)) return fail("undetermined_S_max must be > 0");
   if (thermal_grid < 1) return fail("thermal_grid must be >= 1");
   if (traverse_degree < 1) return fail("traverse_degree must be >= 1");
+  if (!(certain_selection_ratio >= 0 && certain_selection_ratio <= 1))
+    return fail("certain_selection_ratio = " + std::to_string(certain_selection_ratio) +
+                ": must be in [0, 1]");
+  {
+    std::string w;
+    if (!decision.is_valid(&w)) return fail("decision: " + w);
+  }
   std::string w;
   if (!repeat_steps.is_valid(&w)) return fail("repeat_steps: " + w);
   return true;
@@ -255,6 +262,10 @@ SequenceFit fit_with(const Base& b, const Factor& F, const Eigen::MatrixXd& m_um
 Eigen::VectorXd nonlinearity_column(const Eigen::MatrixXd& m_um, const SequenceFit& before,
                                     double mid_um) {
   return flatten(((m_um - before.residual_um).array() - mid_um).square().matrix());
+}
+
+bool is_drift_kind(SequenceEffectKind k) {
+  return k == SequenceEffectKind::drift || k == SequenceEffectKind::thermal;
 }
 
 // Some configuration is read forward and backward: the hysteresis of SequenceHysteresis is then
@@ -643,6 +654,73 @@ struct SequenceModel::Impl {
     Gs.rightCols(G.cols()) = G;
     res.u_S_widening_um = var.cwiseSqrt();
     res.after.u_S_um = (res.after.u_S_um.cwiseAbs2() + var).cwiseSqrt();
+  }
+
+  // The step decision of SequenceRefineOptions::decide_steps for candidate i joining the model
+  // `key`: the parameters are the coefficients of its fitted directions in the model with them
+  // (covariance σ̂²·R₂₂⁻¹R₂₂⁻ᵀ, R₂₂ their block of R); their effect on S, γ, f is, by
+  // Frisch-Waugh, minus what the model without them puts into S, γ, f from their columns
+  // (R⁻¹Qᵀ·J), S after the gauge.  Returns whether to apply; cand.decision says why, and for a
+  // declined step bias_S = D_S·p̂ (what it would have changed in S) and cand.u_S_added_um its RMS.
+  bool decide(const std::vector<int>& key, int i, const Eigen::MatrixXd& m_um,
+              const Eigen::VectorXd& y, double threshold, SequenceCandidate& cand,
+              Eigen::VectorXd& bias_S) {
+    Factor& F = factor(key);
+    std::vector<int> nkey = key;
+    nkey.push_back(i);
+    Factor& Fn = factor(nkey);
+    const Eigen::Index k = Fn.Q.cols() - F.Q.cols();
+    if (k <= 0) return true;
+    const Eigen::VectorXd qty = Fn.Q.transpose() * y;
+    const Eigen::VectorXd beta = Fn.R.triangularView<Eigen::Upper>().solve(qty);
+    const Eigen::VectorXd p = beta.tail(k);
+    const double dof_n = static_cast<double>(Fn.Q.rows() - Fn.Q.cols());
+    const double s2 = dof_n > 0 ? (y - Fn.Q * qty).squaredNorm() / dof_n : 0.0;
+    const Eigen::MatrixXd R22inv =
+        Fn.R.bottomRightCorner(k, k).triangularView<Eigen::Upper>().solve(
+            Eigen::MatrixXd::Identity(k, k));
+    const Eigen::MatrixXd cov = s2 * R22inv * R22inv.transpose();
+    const Eigen::MatrixXd Bcol =
+        F.R.triangularView<Eigen::Upper>().solve(F.Q.transpose() * directions(F, i));
+    // The quantities' u at the noise's σ̂ (the model with the step): the current model's σ̂
+    // holds the effect's signal when it is real, and weighing by it would call a poorly
+    // determined step negligible exactly when the effect is large.
+    const SequenceFit cur = fit_with(b, F, m_um);
+    const double scale = cur.sigma_um > 0 ? std::sqrt(s2) / cur.sigma_um : 1.0;
+    std::vector<QuantityImpact> q(3);
+    q[0] = {"S", "um", Pi * Bcol.middleRows(b.nf, b.P), scale * cur.u_S_um};
+    q[1] = {"gamma", "urad", Bcol.middleRows(b.nf + b.P, b.P), scale * 1e6 * cur.u_gamma_rad};
+    q[2] = {"f", "um", b.Bf * Bcol.topRows(b.nf), scale * cur.u_f_um};
+    // Decided on S (the measure: the straightness the user gets); γ's and f's figures
+    // are printed with the decision but do not veto it (the poorly determined γ of a thermal
+    // drift on one configuration would keep a step that halves S's error out).
+    StepDecisionOptions rule = o.decision;
+    if (cand.p_value < o.certain_selection_ratio * threshold) rule.bias_z = 0.0;
+    const StepDecision d = decide_step(p, cov, {q[0]}, rule);
+    const StepDecision dgf = decide_step(p, cov, {q[1], q[2]}, rule);
+    // A step that leaves S alone (it moves S by less than a tenth of u_S either way: a linear
+    // drift of a plan that reads each configuration forward and back, whose two directions
+    // cancel it in S) is taken: left in the residual it would inflate σ̂ and every u.
+    const QuantityEffect* eS = d.quantity("S");
+    bool negligible =
+        eS->rms_change <= 0.1 * eS->rms_u_base && eS->rms_added_u <= 0.1 * eS->rms_u_base;
+    char fig[240];
+    std::snprintf(fig, sizeof fig,
+                  " [rms change / added u / u: S %.2g/%.2g/%.2g um, gamma %.2g/%.2g/%.2g urad, f "
+                  "%.2g/%.2g/%.2g um]",
+                  eS->rms_change, eS->rms_added_u, eS->rms_u_base, dgf.quantities[0].rms_change,
+                  dgf.quantities[0].rms_added_u, dgf.quantities[0].rms_u_base,
+                  dgf.quantities[1].rms_change, dgf.quantities[1].rms_added_u,
+                  dgf.quantities[1].rms_u_base);
+    cand.decision = d.apply || !negligible
+                        ? d.reason + fig
+                        : "leaves S alone (it moves S by less than a tenth of u_S): taken so that "
+                          "sigma_hat is the noise's (" +
+                              d.reason + ")" + fig;
+    if (d.apply || negligible) return true;
+    bias_S = q[0].sensitivity * p;
+    cand.u_S_added_um = std::sqrt(bias_S.squaredNorm() / static_cast<double>(b.P));
+    return false;
   }
 
   SequenceRefineResult refine(const Eigen::MatrixXd& m_um);
@@ -1126,8 +1204,9 @@ SequenceRefineResult SequenceModel::Impl::refine_effects(const Eigen::MatrixXd& 
   const Eigen::VectorXd y = flatten(m_um);
   const std::vector<SequenceEffectKind> kinds = {
       SequenceEffectKind::drift, SequenceEffectKind::thermal, SequenceEffectKind::traverse};
-  std::vector<int> key;           // the candidates added, in order
-  std::vector<int> detected_ids;  // candidate of each res.detected_not_identifiable
+  std::vector<int> key;                        // the candidates added, in order
+  std::vector<int> detected_ids;               // candidate of each res.detected_not_identifiable
+  std::vector<Eigen::VectorXd> declined_bias;  // D_S·p̂ of each res.declined
   for (int round = 0; round < o.max_effects; ++round) {
     Factor& F = factor(key);
     const Eigen::VectorXd r = y - F.Q * (F.Q.transpose() * y);
@@ -1137,6 +1216,13 @@ SequenceRefineResult SequenceModel::Impl::refine_effects(const Eigen::MatrixXd& 
     std::vector<int> best_of;  // candidate index of each scored entry, or -1 (no directions)
     for (auto kind : kinds) {
       if (res.identified(kind)) continue;
+      // A declined effect is not offered again; the drift family's members are one effect (a·t
+      // is the long-τ limit of the thermal form), so declining one declines both.  (Not reached
+      // today: a decline ends the loop, below.)
+      if (std::any_of(res.declined.begin(), res.declined.end(), [&](const auto& c) {
+            return c.kind == kind || (is_drift_kind(c.kind) && is_drift_kind(kind));
+          }))
+        continue;
       SequenceCandidate best;
       best.kind = kind;
       int best_i = -1;
@@ -1185,6 +1271,11 @@ SequenceRefineResult SequenceModel::Impl::refine_effects(const Eigen::MatrixXd& 
       if (ib == scored.size() || scored[i].p_value < scored[ib].p_value) ib = i;
     }
     if (ib == scored.size()) break;
+    if (o.prefer_linear_drift && scored[ib].kind == SequenceEffectKind::thermal)
+      for (std::size_t i = 0; i < scored.size(); ++i)
+        if (scored[i].kind == SequenceEffectKind::drift && scored[i].p_value < threshold &&
+            best_of[i] >= 0 && identifiable_from_plan(scored[i].kind))
+          ib = i;
     // Attribution: when another significant candidate explains the chosen one's signal (the
     // chosen is no longer significant once the other is in the model), the data cannot tell
     // which effect it is, and the two change S differently (a drift leaves S alone, a
@@ -1225,6 +1316,19 @@ SequenceRefineResult SequenceModel::Impl::refine_effects(const Eigen::MatrixXd& 
                     seq.name.c_str());
       res.ambiguous.push_back(amb);
       break;
+    }
+    if (o.decide_steps) {
+      SequenceCandidate& cand = scored[ib];
+      Eigen::VectorXd bias_S;
+      if (!decide(key, best_of[ib], m_um, y, threshold, cand, bias_S)) {
+        res.declined.push_back(cand);
+        declined_bias.push_back(bias_S);
+        // No further step: the declined effect's signal stays in the residual, where another
+        // candidate would take it (thermal drift on one configuration, reversed plan, seed
+        // 1046: the drift declined, a non-repeating traverse then fitted it, S 0.72 -> 1.25 um
+        // with u_S 0.58).
+        break;
+      }
     }
     key.push_back(best_of[ib]);
     res.added.push_back(scored[ib]);
@@ -1312,7 +1416,9 @@ SequenceRefineResult SequenceModel::Impl::refine_effects(const Eigen::MatrixXd& 
         const Factor& Fd = factor(key);
         const double rss_d = (y - Fd.Q * (Fd.Q.transpose() * y)).squaredNorm();
         const double F = tf.dof > 0 ? (rss_d - tf.rss) / (tf.rss / tf.dof) : 0.0;
-        if (f_test_p_value(F, 1, tf.dof) < o.alpha) {
+        const double p_tau =
+            o.prefer_linear_drift ? tau_p(F, tf.dof) : f_test_p_value(F, 1, tf.dof);
+        if (p_tau < o.alpha) {
           char note[120];
           std::snprintf(note, sizeof note, " (fits better than a linear drift: F = %.3g)", F);
           th.description += note;
@@ -1360,16 +1466,39 @@ SequenceRefineResult SequenceModel::Impl::refine_effects(const Eigen::MatrixXd& 
         (res.after.u_S_um.cwiseAbs2() + res.u_S_drift_form_um.cwiseAbs2()).cwiseSqrt();
   }
   widen_for_unidentifiable(*Ff, y, detected_ids, res);
+  // The declined effects' bias, what applying them would have changed in S (D_S·p̂, the gauge
+  // removed), carried in u_S as the single-scan refine does (refined_uncertainty).
+  res.u_S_declined_um = Eigen::VectorXd::Zero(b.P);
+  if (!declined_bias.empty()) {
+    Eigen::MatrixXd& G = res.after.S_covariance_factor_um;
+    for (const Eigen::VectorXd& g : declined_bias) {
+      G.conservativeResize(Eigen::NoChange, G.cols() + 1);
+      G.col(G.cols() - 1) = g;
+      res.u_S_declined_um += g.cwiseAbs2();
+    }
+    res.after.u_S_um = (res.after.u_S_um.cwiseAbs2() + res.u_S_declined_um).cwiseSqrt();
+    res.u_S_declined_um = res.u_S_declined_um.cwiseSqrt();
+  }
   char buf[600];
   for (const auto& a : res.added) {
     std::snprintf(buf, sizeof buf, "%s identified: %s, %d direction(s), F = %.3g, p = %.2g",
                   to_string(a.kind), a.description.c_str(), a.identifiable, a.F, a.p_value);
+    if (!a.decision.empty()) {
+      const std::string step = "; applied: " + a.decision;
+      std::strncat(buf, step.c_str(), sizeof buf - std::strlen(buf) - 1);
+    }
     if (a.kind == SequenceEffectKind::thermal) {
       char t[120];
       std::snprintf(t, sizeof t, "; tau fitted %.3g +- %.2g s (carried in u_S)", a.tau_s,
                     a.u_tau_s);
       std::strncat(buf, t, sizeof buf - std::strlen(buf) - 1);
     }
+    res.report.push_back(buf);
+  }
+  for (const auto& a : res.declined) {
+    std::snprintf(buf, sizeof buf,
+                  "%s detected (F = %.3g, p = %.2g): not applied, adds %.2g um RMS to u_S; %s",
+                  to_string(a.kind), a.F, a.p_value, a.u_S_added_um, a.decision.c_str());
     res.report.push_back(buf);
   }
   if (drift_form_dS.size()) {

@@ -90,6 +90,8 @@ struct Run {
   bool ambiguous = false;
   double u_rms = 0;  // RMS of the refined u_S: "worse" means beyond it
   std::string added;
+  std::string declined;       // the effects the step decision declined, "+"-joined
+  double u_declined_rms = 0;  // RMS of what they add to u_S
 };
 
 double s_error(const Eigen::VectorXd& S, const Eigen::VectorXd& truth) {
@@ -146,6 +148,11 @@ Run run_case(Case c, const Plan& plan, std::uint64_t seed, double sigma, Sequenc
   }
   for (const auto& a : r.added)
     out.added += std::string(out.added.empty() ? "" : "+") + to_string(a.kind);
+  for (const auto& a : r.declined)
+    out.declined += std::string(out.declined.empty() ? "" : "+") + to_string(a.kind);
+  if (r.u_S_declined_um.size())
+    out.u_declined_rms =
+        std::sqrt(r.u_S_declined_um.squaredNorm() / static_cast<double>(r.u_S_declined_um.size()));
   // A linear drift is the long-tau limit of a thermal one: either identifies a drift.
   if (c != Case::none)
     out.identified =
@@ -196,13 +203,15 @@ std::uint64_t seed_base() {
   return e ? std::strtoull(e, nullptr, 10) : 1000;
 }
 
+// `base`: the cell's seeds are base + 1 .. + kSeeds (0: seed_base()).
 Cell run_cell(Case c, const Plan& plan, double sigma = kSigma,
-              const SequenceRefineOptions& opts = {}) {
+              const SequenceRefineOptions& opts = {}, std::uint64_t base = 0) {
   Cell cell;
   const FourSensorConfig cfg;
   SequenceModel model(cfg, sequence_of(plan, cfg), opts);
+  if (base == 0) base = seed_base();
   for (int s = 1; s <= kSeeds; ++s) {
-    const Run r = run_case(c, plan, seed_base() + static_cast<std::uint64_t>(s), sigma, model);
+    const Run r = run_case(c, plan, base + static_cast<std::uint64_t>(s), sigma, model);
     cell.identified += r.identified;
     cell.added += r.any_added;
     cell.ambiguous += r.ambiguous;
@@ -425,17 +434,20 @@ TEST_CASE("identifiability from the plan: what each sequence lets drift and a no
 //   - reversed traverses: linear drift (one configuration and all) and thermal drift on all
 //     configurations identified in >= 80 % (measured 20/20 each);
 //   - no run's S error grows by more than the RMS of its refined u_S (each such run's seed is
-//     printed; ERRSEP_SEQUENCE_SEED_BASE=1020, 1040 runs other seeds), except in the reversed
-//     plan's linear-drift cells at the defaults (see below and the test case after the next).
+//     printed; ERRSEP_SEQUENCE_SEED_BASE=1020, 1040 runs other seeds), except one run of the
+//     reversed plan's drift on all configurations (seed 1003, below).  Each effect the F-test
+//     chooses is taken only when the step decision (SequenceRefineOptions::decide_steps) expects
+//     S to improve; seeds 1041-1060 and seed 1046 in their own test cases below.
 // What does not hold (figures at seeds 1001-1020, sigma 0.1 um, printed by this test):
 //   - linear drift is not identifiable from a closing pass (its own zero adjustment absorbs the
 //     offset a drift gives the repeated traverse; with the stage's zero kept, 2 of 4 rates are
 //     seen) and is harmless in a reversed plan (forward and back cancel it: S error 0.151 um with
 //     and without the drift), so "halved" cannot happen there; at the defaults fitting it made
 //     S worse beyond u in 1 of 20 runs (seed 1003, all configurations: 0.09 -> 1.90 um, u_S
-//     0.65 um): its line taken for a warm-up at tau 37 s on the unadjusted 1-dof F-test of tau
-//     (F = 6.8, p = 0.009).  SequenceRefineOptions::drift_form_midway (off by default, see its
-//     comment) fixes it; asserted in the test case after the next;
+//     0.65 um): its line taken for a warm-up at tau 34 s, the thermal step well determined under
+//     its own form, so the step decision takes it.  SequenceRefineOptions::drift_form_midway
+//     and prefer_linear_drift (both off, see their comments) fix it at a cost elsewhere; the
+//     first is asserted in the test case after the next;
 //   - thermal drift with the reversed plan: identified 13/20 on one configuration (the effect
 //     doubled the clean error in only 3 of 20, all three halved) and 20/20 on all, S error halved
 //     in 11 of the 19 runs where it doubled the clean error (median 0.93 -> 0.35 um); the closing
@@ -507,8 +519,16 @@ void check_redundant_plan(const Plan& plan, double sigma, const std::vector<Case
     if (plan.kind == ScanSequenceKind::reversed) CHECK(cell.reported == 0);
     if (c == Case::traverse) CHECK(cell.identified >= kSeeds * 8 / 10);
     if (!main_table) continue;
-    // The reversed plan's linear drift: see the test case after the next (defaults: seed 1003).
-    if (!(plan.kind == ScanSequenceKind::reversed && drift)) CHECK(cell.worse == 0);
+    // Every cell, the reversed plan's linear drift included (seed 1046, below: a spurious
+    // non-repeating traverse after the drift, now declined by the step decision), except one run
+    // of the reversed plan's drift on all configurations: seed 1003, whose line is taken for a
+    // warm-up at tau 34 s (0.09 -> 1.90 um with u_S 0.65); the step decision accepts it because
+    // under the thermal form the step is well determined.  The options that fix it cost
+    // elsewhere: drift_form_midway (the test case after the next) and prefer_linear_drift
+    // (thermal_all halved 10 -> 8 of 19 at sigma 0.1, 17 -> 12 of 20 at 0.05).
+    const bool seed_1003 = plan.kind == ScanSequenceKind::reversed && c == Case::drift_all &&
+                           seed_base() == 1000 && sigma == kSigma;
+    CHECK(cell.worse <= (seed_1003 ? 1 : 0));
     if (c == Case::traverse) CHECK(cell.halved >= kSeeds * 8 / 10);
     if (plan.kind == ScanSequenceKind::reversed && (drift || c == Case::thermal_all))
       CHECK(cell.identified >= kSeeds * 8 / 10);
@@ -551,12 +571,9 @@ TEST_CASE("must-show: reversed traverses identify drift and a non-repeating trav
 // otherwise S lies midway between the two forms and their half-difference is in u_S.  Asserted:
 // the run it was made for (seed 1003, all configurations, sigma 0.1: 0.09 -> 1.90 um with u_S
 // 0.65 at the defaults) stays within u, and the drift is still identified in >= 80 % of runs.
-// NOT asserted, because it does not hold: worse == 0 over other seeds.  Seed 1046 (one and all
-// configurations, every sigma) is made worse beyond u with or without the option (0.17 -> 3.26
-// um, u_S 2.0-2.4 at sigma 0.1; the error scales with sigma): the fitted drift puts a poorly
-// determined direction into S while the reversed plan leaves S free of the drift before the
-// step, so a step decision on S (step_decision.hpp) would not take it; the sequence refine has
-// none yet.  The cells' counts are printed (ERRSEP_SEQUENCE_SEED_BASE for other seeds).
+// Seed 1046 (made worse beyond u with or without the option before the step decision: a
+// spurious non-repeating traverse after the drift) has its own test case below.  The cells'
+// counts are printed (ERRSEP_SEQUENCE_SEED_BASE for other seeds).
 TEST_CASE("reversed plan with linear drift: the drift form midway keeps seed 1003 within u",
           "[sweep]") {
   SequenceRefineOptions o;
@@ -578,6 +595,48 @@ TEST_CASE("reversed plan with linear drift: the drift form midway keeps seed 100
       INFO(name(c) << ", sigma " << sigma);
       CHECK(cell.identified >= kSeeds * 8 / 10);
     }
+}
+
+// Issue 16: the step decision (SequenceRefineOptions::decide_steps).  Seed 1046, reversed plan:
+// after the drift (which a reversed plan cancels in S: taken, S unchanged) the F-test found a
+// non-repeating traverse (F = 4.35 on 4 directions, p = 0.002 against 0.0033) that the truth does
+// not hold; with the drift in the model its columns are poorly determined in S (applying it
+// added 0.96 um RMS to u_S = 0.19 um and moved S by 3.2 um), and the F-test alone applied it:
+// S error 0.17 -> 3.26 um with u_S 2.0-2.4 um in drift_one, drift_all and (the traverse first,
+// then a spurious drift) traverse, the error scaling with sigma.  Asserted at sigma 0.05, 0.1 and
+// 0.2: S never worse than before by more than the refined u_S (RMS); the drift still identified
+// in the drift cases; no non-repeating traverse applied there.  Printed: what was declined and
+// what its bias adds to u_S.
+TEST_CASE("seed 1046, reversed plan: a step that would make S worse is declined, S within u") {
+  const FourSensorConfig cfg;
+  const Plan plan{ScanSequenceKind::reversed};
+  SequenceModel model(cfg, sequence_of(plan, cfg));
+  for (double sigma : {0.05, 0.1, 0.2})
+    for (auto c : {Case::drift_one, Case::drift_all, Case::traverse}) {
+      const Run r = run_case(c, plan, 1046, sigma, model);
+      std::printf(
+          "seed 1046 %s reversed s %.2f: added %s, declined %s (adds %.3f um RMS to u_S): S err "
+          "%.3f -> %.3f um, u_S RMS %.3f\n",
+          name(c), sigma, r.added.c_str(), r.declined.empty() ? "-" : r.declined.c_str(),
+          r.u_declined_rms, r.err_before, r.err_after, r.u_rms);
+      INFO(name(c) << ", sigma " << sigma << ": added " << r.added << ", declined " << r.declined);
+      CHECK(r.err_after <= r.err_before + r.u_rms);
+      CHECK(r.identified);
+      if (c != Case::traverse) CHECK(r.added.find("non-repeating") == std::string::npos);
+    }
+}
+
+// Seeds the refine was not tuned on (1041-1060, where seed 1046 failed), reversed plan, sigma
+// 0.1, the three cells seed 1046 failed in: no run made worse beyond its refined u_S, the
+// effect identified in >= 80 %.  A seed sweep (~18 s on the loaded 2-core machine): [sweep].
+TEST_CASE("reversed plan, seeds 1041-1060: no run made worse beyond u", "[sequence][sweep]") {
+  const Plan plan{ScanSequenceKind::reversed};
+  for (auto c : {Case::drift_one, Case::drift_all, Case::traverse}) {
+    const Cell cell = run_cell(c, plan, kSigma, {}, 1040);
+    INFO(name(c) << ", seeds 1041-1060");
+    CHECK(cell.worse == 0);
+    CHECK(cell.identified >= kSeeds * 8 / 10);
+  }
 }
 
 // The issue asks sigma = 0.05, 0.1 and 0.2 um; at the outer two, fewer cells (suite time): the
