@@ -151,6 +151,14 @@ std::string group_name(std::vector<int> g) {
   return "sensors " + std::to_string(g.front()) + "-" + std::to_string(g.back());
 }
 
+/// "3.3-170" (or "0.78" when both ends print the same) with the printf format `f`.
+std::string format_range(double lo, double hi, const char* f) {
+  char a[32], b[32];
+  std::snprintf(a, sizeof a, f, lo);
+  std::snprintf(b, sizeof b, f, hi);
+  return std::string(a) == b ? std::string(a) : std::string(a) + "-" + b;
+}
+
 std::string thermal_name(double tau_s) {
   char buf[64];
   std::snprintf(buf, sizeof buf, "thermal (tau = %.0f s)", tau_s);
@@ -248,6 +256,9 @@ bool DisplacementRefineOptions::is_valid(std::string* why) const {
   if (!(identifiable_tolerance > 0 && identifiable_tolerance < 1))
     return fail("identifiable_tolerance = " + std::to_string(identifiable_tolerance) +
                 ": not in (0, 1)");
+  if (!(poorly_determined_ratio > 1))
+    return fail("poorly_determined_ratio = " + std::to_string(poorly_determined_ratio) +
+                ": must be > 1");
   std::string sub;
   if (!decision.is_valid(&sub)) return fail("decision." + sub);
   return true;
@@ -334,6 +345,52 @@ DisplacementEffectLibrary make_displacement_effect_library(const Eigen::VectorXd
       std::snprintf(buf, sizeof buf, " (relative singular value %.1e)", e.relative_singular_value);
       lib.not_identifiable.push_back(e.family + ": not identifiable from this plan" + buf + ": " +
                                      family_hint(e.family, s0_repeat));
+    }
+  }
+  // Identifiable, but one pair of sensors' correction poorly determined beside the other pair's
+  // (group_u_w_per_sigma, from the plan alone): on a raster scan 1 a column, what sensors 3-4
+  // compare, is read within n_x samples, so their drift shows only through its fast part (file
+  // comment; thermal of 3-4 halved 1/6/4 of 20 against 15/16/16 for 1-2).  Said once per family
+  // and pair, with the time constants where it holds, so a user knows why that pair's correction
+  // is rarely applied on this plan and which plan determines it.
+  for (std::size_t a = 0; a < fx.size(); ++a) {
+    const std::string& family = fx[a].family;
+    bool first = true;
+    for (std::size_t b = 0; b < a; ++b)
+      first = first && fx[b].family != family;
+    if (!first) continue;
+    for (std::size_t g = 1; g < fx[a].groups.size(); ++g) {
+      double lo = 1e300, hi = 0, other_lo = 1e300, other_hi = 0, tau_lo = 1e300, tau_hi = 0;
+      for (const auto& e : fx) {
+        if (e.family != family || e.group_u_w_per_sigma.size() != e.groups.size()) continue;
+        double best_other = 1e300;
+        for (std::size_t h = 1; h < e.groups.size(); ++h)
+          if (h != g) best_other = std::min(best_other, e.group_u_w_per_sigma[h]);
+        const double u = e.group_u_w_per_sigma[g];
+        if (!(best_other < 1e300) || !(u > o.poorly_determined_ratio * best_other)) continue;
+        lo = std::min(lo, u);
+        hi = std::max(hi, u);
+        other_lo = std::min(other_lo, best_other);
+        other_hi = std::max(other_hi, best_other);
+        tau_lo = std::min(tau_lo, e.tau_s);
+        tau_hi = std::max(tau_hi, e.tau_s);
+      }
+      if (!(hi > 0)) continue;
+      char buf[320];
+      const std::string tau =
+          family == "thermal" ? " at tau " + format_range(tau_lo, tau_hi, "%.0f") + " s" : "";
+      std::snprintf(buf, sizeof buf,
+                    "%s of %s: poorly determined on this plan (its correction adds %s um to "
+                    "u(w) per um of reading noise%s, the other pair's %s): rarely worth applying; ",
+                    family.c_str(), group_name(fx[a].groups[g]).c_str(),
+                    format_range(lo, hi, "%.3g").c_str(), tau.c_str(),
+                    format_range(other_lo, other_hi, "%.3g").c_str());
+      std::string line = buf;
+      line += g == 2 && !order.diagonal_scan1
+                  ? "scan 1 along diagonals reads every column over the whole scan and determines "
+                    "it as well as sensors 1-2's"
+                  : "no plan of this library determines it better";
+      lib.not_identifiable.push_back(line);
     }
   }
   lib.not_identifiable.push_back(

@@ -227,8 +227,10 @@ io::RawDisplacementScan record_scan(const TempDir& dir, const std::string& name,
 }
 
 struct DriftRun {
-  double w_error_um = 0;  ///< RMS (shape) of w against the drift-free separation of the scan
-  io::CsvTable account;   ///< <out>.refine.csv
+  double w_error_um = 0;         ///< RMS (shape) of w against the drift-free separation of the scan
+  double w_error_before_um = 0;  ///< the same of the drifted scan's separation, not refined
+  double u_w_rms_um = 0;         ///< RMS of the refined u(w)
+  io::CsvTable account;          ///< <out>.refine.csv
 };
 
 /// Adds a linear drift `v` um/s of the workpiece sensor 1 to a recorded scan at its recorded
@@ -256,6 +258,12 @@ DriftRun add_drift_and_refine(const TempDir& dir, const std::string& name,
   const auto wc = io::read_csv(dir / (name + "_c.csv")).column("w_um");
   const auto wa = io::read_csv(dir / (name + "_d.refined.csv")).column("w_um");
   r.w_error_um = rms_shape(wa, wc);
+  r.w_error_before_um = rms_shape(io::read_csv(dir / (name + "_d.csv")).column("w_um"), wc);
+  const auto ua = io::read_csv(dir / (name + "_d.refined.csv")).column("u_w_um");
+  double u2 = 0;
+  for (const double u : ua)
+    u2 += u * u;
+  r.u_w_rms_um = ua.empty() ? 0.0 : std::sqrt(u2 / static_cast<double>(ua.size()));
   return r;
 }
 
@@ -294,7 +302,14 @@ TEST_CASE(
   CHECK(is_drift_of_sensor_1(f.account.meta("step1_effect").value_or("(none)")));
   CHECK(f.account.meta("step1_decision") == std::optional<std::string>("not identifiable"));
   CHECK_THAT(f.account.meta("step1_line").value_or(""), Catch::Contains("run scan 2 backwards"));
-  CHECK(f.account.meta("applied_any") == std::optional<std::string>("false"));
+  // Nothing is applied for the drift; but the recorded times carry the machine's timing jitter,
+  // and on a loaded machine (p99 5 ms in a 17 ms period) a 1 um drift leaves a few tens of nm
+  // in the workpiece repeat, which a short thermal drift can fit and the decision may apply (seen
+  // 1 run in 6 under 3 parallel scans).  Whatever it applies must not make w worse beyond its u.
+  std::printf("forward: applied %s, w error %.3g -> %.3g um (u(w) rms %.3g um)\n",
+              f.account.meta("applied_any").value_or("?").c_str(), f.w_error_before_um,
+              f.w_error_um, f.u_w_rms_um);
+  CHECK(f.w_error_um <= f.w_error_before_um + 2 * f.u_w_rms_um);
 
   // Backward: identified (taken by the F-test, not "not identifiable"), its rate within 4 u of
   // the injected one, and w's error at most half the paper order's.

@@ -82,6 +82,10 @@ struct DisplacementRefineOptions {
   /// An effect is identifiable when the smallest singular value of its residual columns, relative
   /// to that of its scan-difference columns, is above this.
   double identifiable_tolerance = 1e-3;
+  /// A sensor pair's correction is called poorly determined on a plan (a line in
+  /// not_identifiable; nothing else changes) when what it adds to u(w) per µm of noise
+  /// (group_u_w_per_sigma) is more than this many times the other pair's.
+  double poorly_determined_ratio = 2.0;
   StepDecisionOptions decision;
   bool is_valid(std::string* why = nullptr) const;
 };
@@ -112,7 +116,8 @@ struct DisplacementEffectLibrary {
   bool s0_repeat = false;  ///< sensor 0 read in scan 2 (its repeat is in the residual rows)
   TwoAxisScanOrder order;
   std::vector<DisplacementEffect> effects;
-  /// What this plan cannot identify, one line each (said once, not per run).
+  /// What this plan cannot identify, or determines poorly for one pair of sensors (their
+  /// correction rarely worth applying), one line each (said once, not per run).
   std::vector<std::string> not_identifiable;
 };
 

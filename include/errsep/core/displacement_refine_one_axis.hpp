@@ -34,8 +34,10 @@ namespace errsep::core {
 
 /// The two-axis loop's options (alpha, the τ grid, the decision rule) with the one-axis
 /// identifiability threshold: an effect is identifiable when its residual column keeps more than
-/// 5 % of its scan difference's norm (a paper-order plan's timing jitter leaves ~3e-3–7e-3 of a
-/// linear drift in recorded simulator scans).
+/// 5 % of its scan difference's norm, on the plan's nominal times (equal steps, in the order the
+/// recorded times show): a paper-order plan's timing jitter leaves ~3e-3–7e-3 of a linear drift
+/// in recorded simulator scans, and up to 5 % on a loaded machine, which must not make the
+/// plan's identifiability change from run to run.
 struct OneAxisRefineOptions : DisplacementRefineOptions {
   OneAxisRefineOptions() { identifiable_tolerance = 0.05; }
   /// The order scan 2 ran in, for the reading times modelled when none are recorded (equal
