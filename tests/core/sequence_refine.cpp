@@ -577,7 +577,7 @@ TEST_CASE("must-show: reversed traverses identify drift and a non-repeating trav
 TEST_CASE("reversed plan with linear drift: the drift form midway keeps seed 1003 within u",
           "[sweep]") {
   SequenceRefineOptions o;
-  o.drift_form_midway = true;
+  o.drift_form_decision = false;
   const FourSensorConfig cfg;
   const Plan plan{ScanSequenceKind::reversed};
   SequenceModel model(cfg, sequence_of(plan, cfg), o), model_default(cfg, sequence_of(plan, cfg));
@@ -1147,4 +1147,62 @@ TEST_CASE("rezeroed plan: a sensor non-linearity found, and corrected where that
   CHECK(halved_of_doubled_all * 10 >= 8 * doubled_all);
   CHECK(covered / points >= 0.90);
   CHECK(covered / points <= 0.99);
+}
+
+// DIAG (temporary): the drift form's evidence per run.
+TEST_CASE("diag: drift form evidence", "[.diag]") {
+  const FourSensorConfig cfg;
+  const Plan plan{ScanSequenceKind::reversed};
+  const ScanSequence seq = sequence_of(plan, cfg);
+  SequenceModel model(cfg, seq);
+  const char* cs = std::getenv("DIAG_CASE");
+  const Case c = cs && std::string(cs) == "drift_all"     ? Case::drift_all
+                 : cs && std::string(cs) == "thermal_one" ? Case::thermal_one
+                 : cs && std::string(cs) == "drift_one"   ? Case::drift_one
+                 : cs && std::string(cs) == "none"        ? Case::none
+                                                          : Case::thermal_all;
+  const double sigma = std::getenv("DIAG_SIGMA") ? std::atof(std::getenv("DIAG_SIGMA")) : 0.1;
+  for (int s = 1; s <= kSeeds; ++s) {
+    const std::uint64_t seed = seed_base() + s;
+    const SlidewayTruth truth =
+        random_smooth_truth(cfg, seed, UndeclaredCaseOptions::wavy_reference());
+    SequenceSimOptions so;
+    so.sigma_um = sigma;
+    so.seed = seed;
+    so.effects = draw_effects(c, seed, cfg);
+    const SequenceSimData d = simulate_four_sensor_sequence(cfg, truth, seq, so);
+    const SequenceRefineResult r = model.refine(d.m_um);
+    const Eigen::MatrixXd Jl = sequence_effect_columns(SequenceEffectKind::drift, cfg, seq).J;
+    const SequenceFit fl = fit_four_sensor_sequence(cfg, seq, d.m_um, Jl);
+    double best_rss = 1e300, best_tau = 0;
+    SequenceFit ft;
+    for (int q = 0; q < 80; ++q) {
+      const double tau = 5.0 * std::pow(2000.0 / 5.0, q / 79.0);
+      const SequenceFit f = fit_four_sensor_sequence(
+          cfg, seq, d.m_um, sequence_effect_columns(SequenceEffectKind::thermal, cfg, seq, tau).J);
+      if (f.rss_um2 < best_rss) {
+        best_rss = f.rss_um2;
+        best_tau = tau;
+        ft = f;
+      }
+    }
+    // both: linear + thermal at best tau
+    Eigen::MatrixXd Jb(Jl.rows(), 8);
+    Jb << Jl, sequence_effect_columns(SequenceEffectKind::thermal, cfg, seq, best_tau).J;
+    const SequenceFit fb = fit_four_sensor_sequence(cfg, seq, d.m_um, Jb);
+    const double F = (fl.rss_um2 - ft.rss_um2) / (ft.rss_um2 / (ft.dof - 1));
+    const double dS = s_error(fl.S_um, ft.S_um);
+    auto rms = [](const Eigen::VectorXd& v) { return std::sqrt(v.squaredNorm() / v.size()); };
+    std::string added;
+    for (const auto& a : r.added)
+      added += std::string(to_string(a.kind)) + " ";
+    std::printf(
+        "seed %llu tau_true %.0f fit %.0f | F_tau %.2f p %.3g | err before %.3f lin %.3f th %.3f "
+        "both %.3f refine %.3f | dS %.3f uS_lin %.3f uS_th %.3f form %.3f uS_ref %.3f | %s\n",
+        (unsigned long long)seed, so.effects.thermal_tau_s, best_tau, F,
+        f_test_p_value(F, 1, ft.dof - 1), s_error(r.before.S_um, d.S_um), s_error(fl.S_um, d.S_um),
+        s_error(ft.S_um, d.S_um), s_error(fb.S_um, d.S_um), s_error(r.after.S_um, d.S_um), dS,
+        rms(fl.u_S_um), rms(ft.u_S_um), rms(r.u_S_drift_form_um), rms(r.after.u_S_um),
+        added.c_str());
+  }
 }
