@@ -59,11 +59,16 @@
 //
 // The drift family.  A thermal drift added at a grid τ gets τ fitted (golden section between the
 // grid's neighbours) and carried in u_S by its Gauss-Newton column Σ_c Â_c·∂J_c/∂τ.  A linear
-// drift and a warm-up often fit the readings almost equally well yet give different S (what
-// differs is absorbed by S, γ, e); the thermal member replaces the linear one when it fits
-// significantly better (F-test on τ), and the form the data cannot reject (profile likelihood
-// over the linear member and 40 τ, 95 % bound) enters u_S at half the largest S difference
-// (u_S_drift_form_um).
+// drift (the τ → ∞ limit of a warm-up) and a warm-up often fit the readings almost equally well
+// yet give different S (what differs, a configuration's curvature in time against its slope, is
+// mostly absorbed by S, γ, e).  The form is decided on evidence (drift_form_decision): both are
+// fitted, the thermal one with τ fitted, and the thermal one is taken only when τ beats the line
+// on the F-test Šidák-adjusted over the τ grid; otherwise, where their S differ by more than a
+// tenth of u_S, S is taken midway, half the difference enters u_S (or τ's 95 % profile set
+// about the midway S where it reaches farther: u_S_drift_form_um) and the report says "drift
+// form not identifiable from this plan".  A thermal form taken enters u_S with its profile set
+// (linear member and 40 τ, 95 % bound) at half the largest S difference.
+
 #include <Eigen/Core>
 #include <memory>
 #include <string>
@@ -325,8 +330,9 @@ struct SequenceRefineResult {
   /// P: the part of after.u_S_um that the detected-but-unidentifiable effects add (quadrature);
   /// zero when there are none.
   Eigen::VectorXd u_S_widening_um;
-  /// P: the part of after.u_S_um that the drift's form adds when the data do not tell a linear
-  /// drift from a thermal one (|ΔS|/√3, ΔS the difference of Ŝ between them); zero otherwise.
+  /// P: the part of after.u_S_um that the drift's form adds: when the data do not tell a linear
+  /// drift from a thermal one, |ΔS|/2 (ΔS the difference of Ŝ between them; Ŝ midway), or half
+  /// the largest S change over τ's 95 % profile set where it reaches farther; zero otherwise.
   Eigen::VectorXd u_S_drift_form_um;
   /// Significant candidates the data cannot tell apart (one explains the other's signal): not
   /// applied; one line each, also in `report`.
