@@ -346,26 +346,21 @@ SweepRun evaluate_sequence_run(UndeclaredEffect effect, const ScanSequence& seq,
   const FourSensorConfig& cfg = o.cfg;
   const double L = cfg.travel_mm();
   const SlidewayTruth truth = random_smooth_truth(cfg, o.seed, o.truth);
-  // The effect's draws: the ranges of simulate_undeclared (undeclared_effect_simulation.hpp),
-  // from a stream of their own.
-  std::mt19937_64 rng(o.seed * 0x9E3779B97F4A7C15ULL + 0x5bd1e995ULL);
-  auto uni = [&](double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng); };
-  auto sign = [&] { return uni(0.0, 1.0) < 0.5 ? -1.0 : 1.0; };
-  auto pick = [&](int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(rng); };
+  UndeclaredEffectDraws draw(o.seed);
   const double k = o.size;
   SequenceSimOptions so;
   so.sigma_um = o.sigma_um;
-  so.seed = o.seed * 7919 + 17;
+  so.seed = undeclared_noise_seed(o.seed);
   SequenceEffects& fx = so.effects;
   char buf[300];
   std::string description = "clean";
-  const int which = pick(0, 3);
+  const int which = draw.pick(0, 3);
   switch (effect) {
     case UndeclaredEffect::drift_one:
     case UndeclaredEffect::drift_all:
       for (int c = 0; c < 4; ++c)
         if (effect == UndeclaredEffect::drift_all || c == which)
-          fx.drift_um_per_s[static_cast<std::size_t>(c)] = k * sign() * uni(0.01, 0.03);
+          fx.drift_um_per_s[static_cast<std::size_t>(c)] = k * draw.sign() * draw.uni(0.01, 0.03);
       std::snprintf(buf, sizeof buf, "drift %+.3g %+.3g %+.3g %+.3g um/s", fx.drift_um_per_s[0],
                     fx.drift_um_per_s[1], fx.drift_um_per_s[2], fx.drift_um_per_s[3]);
       description = buf;
@@ -374,8 +369,8 @@ SweepRun evaluate_sequence_run(UndeclaredEffect effect, const ScanSequence& seq,
     case UndeclaredEffect::thermal_all:
       for (int c = 0; c < 4; ++c)
         if (effect == UndeclaredEffect::thermal_all || c == which)
-          fx.thermal_um[static_cast<std::size_t>(c)] = k * sign() * uni(2.0, 5.0);
-      fx.thermal_tau_s = uni(20.0, 80.0);
+          fx.thermal_um[static_cast<std::size_t>(c)] = k * draw.sign() * draw.uni(2.0, 5.0);
+      fx.thermal_tau_s = draw.uni(20.0, 80.0);
       std::snprintf(buf, sizeof buf, "thermal %+.3g %+.3g %+.3g %+.3g um, tau %.3g s",
                     fx.thermal_um[0], fx.thermal_um[1], fx.thermal_um[2], fx.thermal_um[3],
                     fx.thermal_tau_s);
@@ -384,7 +379,8 @@ SweepRun evaluate_sequence_run(UndeclaredEffect effect, const ScanSequence& seq,
     case UndeclaredEffect::traverse: {
       // The slide bending more on each traverse: P2 and P3 of 1-2 um each at the last traverse,
       // in proportion to the traverse's mid-time (the truth is the first traverse's S).
-      const double a2 = k * sign() * uni(1.0, 2.0), a3 = k * sign() * uni(1.0, 2.0);
+      const double a2 = k * draw.sign() * draw.uni(1.0, 2.0),
+                   a3 = k * draw.sign() * draw.uni(1.0, 2.0);
       const Eigen::VectorXd mid = seq.times_s(cfg).colwise().mean().transpose();
       const double span = std::max(mid.maxCoeff() - mid(0), 1e-9);
       fx.S_change_um = [a2, a3, L, mid, span](int t, double x) {
@@ -398,8 +394,9 @@ SweepRun evaluate_sequence_run(UndeclaredEffect effect, const ScanSequence& seq,
       break;
     }
     case UndeclaredEffect::bump: {
-      const int t0 = pick(0, seq.size() - 1);
-      const double h = k * sign() * uni(1.5, 3.0), w = uni(5.0, 15.0), x0 = uni(0.1 * L, 0.9 * L);
+      const int t0 = draw.pick(0, seq.size() - 1);
+      const double h = k * draw.sign() * draw.uni(1.5, 3.0), w = draw.uni(5.0, 15.0),
+                   x0 = draw.uni(0.1 * L, 0.9 * L);
       fx.S_change_um = [t0, h, w, x0](int t, double x) {
         return t == t0 ? h * std::exp(-0.5 * std::pow((x - x0) / w, 2)) : 0.0;
       };
@@ -416,7 +413,7 @@ SweepRun evaluate_sequence_run(UndeclaredEffect effect, const ScanSequence& seq,
       const Eigen::MatrixXd r = simulate_four_sensor_sequence(cfg, truth, seq, s0).m_um;
       const double lo = r.minCoeff(), hi = r.maxCoeff();
       const double half = std::max(0.5 * (hi - lo), 1e-9);
-      const double q = k * sign() * uni(0.02, 0.04);
+      const double q = k * draw.sign() * draw.uni(0.02, 0.04);
       fx.nonlinearity_c2_per_um = q / half;
       fx.nonlinearity_mid_um = 0.5 * (lo + hi);
       std::snprintf(buf, sizeof buf,

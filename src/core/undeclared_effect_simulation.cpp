@@ -105,17 +105,12 @@ UndeclaredCase simulate_undeclared(UndeclaredEffect effect, const UndeclaredCase
   const int P = cfg.positions();
   const double L = cfg.travel_mm();
   const SlidewayTruth truth = random_smooth_truth(cfg, o.seed, o.truth);
-  // The effect's own draws come from a stream of their own, so that the truth and the noise of
-  // a seed are the same whatever the effect.
-  std::mt19937_64 rng(o.seed * 0x9E3779B97F4A7C15ULL + 0x5bd1e995ULL);
-  auto uni = [&](double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng); };
-  auto sign = [&] { return uni(0.0, 1.0) < 0.5 ? -1.0 : 1.0; };
-  auto pick = [&](int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(rng); };
+  UndeclaredEffectDraws draw(o.seed);
   const double k = o.size;
 
   FourSensorSimOptions so;
   so.sigma_um = o.sigma_um;
-  so.seed = o.seed * 7919 + 17;
+  so.seed = undeclared_noise_seed(o.seed);
   UndeclaredCase c;
   c.cfg = cfg;
   c.t_s = scan_order_times_s(cfg, o.speed_mm_per_s);
@@ -133,10 +128,10 @@ UndeclaredCase simulate_undeclared(UndeclaredEffect effect, const UndeclaredCase
     case UndeclaredEffect::pe1: {
       const auto O = cfg.offsets_mm();
       std::array<double, 3> D = {O[1] - O[0], O[2] - O[1], O[3] - O[2]};
-      const int skip = pick(0, 2);  // two of the three spacings are off
+      const int skip = draw.pick(0, 2);  // two of the three spacings are off
       std::array<double, 3> dD = {0, 0, 0};
       for (int j = 0; j < 3; ++j)
-        if (j != skip) dD[static_cast<std::size_t>(j)] = k * sign() * uni(0.4, 0.9);
+        if (j != skip) dD[static_cast<std::size_t>(j)] = k * draw.sign() * draw.uni(0.4, 0.9);
       for (int j = 0; j < 3; ++j)
         D[static_cast<std::size_t>(j)] += dD[static_cast<std::size_t>(j)];
       so.actual_spacing_mm = D;
@@ -147,8 +142,8 @@ UndeclaredCase simulate_undeclared(UndeclaredEffect effect, const UndeclaredCase
       break;
     }
     case UndeclaredEffect::gain: {
-      const int i = pick(1, 3);
-      const double g = k * sign() * uni(0.03, 0.06);
+      const int i = draw.pick(1, 3);
+      const double g = k * draw.sign() * draw.uni(0.03, 0.06);
       c.m_um.col(i) *= 1.0 + g;
       std::snprintf(buf, sizeof buf, "gain: configuration %d reads %+.3g %%", i + 1, 100 * g);
       c.description = buf;
@@ -157,10 +152,11 @@ UndeclaredCase simulate_undeclared(UndeclaredEffect effect, const UndeclaredCase
     case UndeclaredEffect::drift_one:
     case UndeclaredEffect::drift_all: {
       const bool one = effect == UndeclaredEffect::drift_one;
-      const int which = pick(0, 3);
+      const int which = draw.pick(0, 3);
       std::array<double, 4> a = {0, 0, 0, 0};
       for (int i = 0; i < 4; ++i)
-        if (!one || i == which) a[static_cast<std::size_t>(i)] = k * sign() * uni(0.01, 0.03);
+        if (!one || i == which)
+          a[static_cast<std::size_t>(i)] = k * draw.sign() * draw.uni(0.01, 0.03);
       for (int i = 0; i < 4; ++i)
         c.m_um.col(i) += a[static_cast<std::size_t>(i)] * c.t_s.col(i);
       std::snprintf(buf, sizeof buf, "linear drift %.3g, %.3g, %.3g, %.3g um/s", a[0], a[1], a[2],
@@ -171,11 +167,12 @@ UndeclaredCase simulate_undeclared(UndeclaredEffect effect, const UndeclaredCase
     case UndeclaredEffect::thermal_one:
     case UndeclaredEffect::thermal_all: {
       const bool one = effect == UndeclaredEffect::thermal_one;
-      const int which = pick(0, 3);
-      const double tau = uni(20.0, 80.0);
+      const int which = draw.pick(0, 3);
+      const double tau = draw.uni(20.0, 80.0);
       std::array<double, 4> a = {0, 0, 0, 0};
       for (int i = 0; i < 4; ++i)
-        if (!one || i == which) a[static_cast<std::size_t>(i)] = k * sign() * uni(2.0, 5.0);
+        if (!one || i == which)
+          a[static_cast<std::size_t>(i)] = k * draw.sign() * draw.uni(2.0, 5.0);
       const double t0 = c.t_s.minCoeff();
       for (int i = 0; i < 4; ++i)
         c.m_um.col(i) += a[static_cast<std::size_t>(i)] *
@@ -188,9 +185,9 @@ UndeclaredCase simulate_undeclared(UndeclaredEffect effect, const UndeclaredCase
     case UndeclaredEffect::pe2:
     case UndeclaredEffect::periodic: {
       if (effect == UndeclaredEffect::pe2) {
-        const std::array<double, 3> cc = {k * sign() * uni(300.0, 800.0),
-                                          k * sign() * uni(300.0, 800.0),
-                                          k * sign() * uni(300.0, 800.0)};
+        const std::array<double, 3> cc = {k * draw.sign() * draw.uni(300.0, 800.0),
+                                          k * draw.sign() * draw.uni(300.0, 800.0),
+                                          k * draw.sign() * draw.uni(300.0, 800.0)};
         so.positioning_error_um = [cc, L](double x) {
           const double u = 2.0 * x / L - 1.0;
           return cc[0] * legendre(1, u) + cc[1] * legendre(2, u) + cc[2] * legendre(3, u);
@@ -198,7 +195,8 @@ UndeclaredCase simulate_undeclared(UndeclaredEffect effect, const UndeclaredCase
         std::snprintf(buf, sizeof buf, "pe2: Legendre P1..P3 of %.3g, %.3g, %.3g um", cc[0], cc[1],
                       cc[2]);
       } else {
-        const double A = k * uni(300.0, 700.0), period = uni(15.0, 40.0), ph = uni(0.0, 2 * kPi);
+        const double A = k * draw.uni(300.0, 700.0), period = draw.uni(15.0, 40.0),
+                     ph = draw.uni(0.0, 2 * kPi);
         so.positioning_error_um = [A, period, ph](double x) {
           return A * std::sin(2 * kPi * x / period + ph);
         };
@@ -210,8 +208,9 @@ UndeclaredCase simulate_undeclared(UndeclaredEffect effect, const UndeclaredCase
       break;
     }
     case UndeclaredEffect::traverse: {
-      const int i = pick(0, 3);
-      const double a2 = k * sign() * uni(1.0, 2.0), a3 = k * sign() * uni(1.0, 2.0);
+      const int i = draw.pick(0, 3);
+      const double a2 = k * draw.sign() * draw.uni(1.0, 2.0),
+                   a3 = k * draw.sign() * draw.uni(1.0, 2.0);
       for (int n = 0; n < P; ++n) {
         const double u = P > 1 ? 2.0 * n / (P - 1.0) - 1.0 : 0.0;
         c.m_um(n, i) += a2 * legendre(2, u) + a3 * legendre(3, u);
@@ -227,7 +226,7 @@ UndeclaredCase simulate_undeclared(UndeclaredEffect effect, const UndeclaredCase
       const Eigen::MatrixXd r = c.m_clean_um;
       const double lo = r.minCoeff(), hi = r.maxCoeff(), mid = 0.5 * (lo + hi);
       const double half = std::max(0.5 * (hi - lo), 1e-9);
-      const double q = k * sign() * uni(0.02, 0.04);
+      const double q = k * draw.sign() * draw.uni(0.02, 0.04);
       const double kappa = q / half;
       c.m_um = c.m_um.array() + kappa * (r.array() - mid).square();
       std::snprintf(buf, sizeof buf,
@@ -237,8 +236,9 @@ UndeclaredCase simulate_undeclared(UndeclaredEffect effect, const UndeclaredCase
       break;
     }
     case UndeclaredEffect::bump: {
-      const int i = pick(0, 3);
-      const double h = k * sign() * uni(1.5, 3.0), w = uni(5.0, 15.0), x0 = uni(0.1 * L, 0.9 * L);
+      const int i = draw.pick(0, 3);
+      const double h = k * draw.sign() * draw.uni(1.5, 3.0), w = draw.uni(5.0, 15.0),
+                   x0 = draw.uni(0.1 * L, 0.9 * L);
       for (int n = 0; n < P; ++n) {
         const double x = n * cfg.dx_mm;
         c.m_um(n, i) += h * std::exp(-0.5 * std::pow((x - x0) / w, 2));

@@ -335,6 +335,7 @@ CsvTable sequence_refine_csv(const core::SequenceRefineResult& r, const std::vec
   if (hy.detected) {
     t.set_meta("hysteresis_um", g(hy.h_um, 4) + " +- " + g(hy.u_h_um, 2));
     t.set_meta("hysteresis_applied", hy.applied ? "true" : "false");
+    if (!hy.decision.empty()) t.set_meta("hysteresis_decision", hy.decision);
   } else {
     t.set_meta("hysteresis", hy.identifiable ? "none found" : hy.finding);
   }
@@ -354,6 +355,12 @@ CsvTable sequence_refine_csv(const core::SequenceRefineResult& r, const std::vec
   t.add_column("u_S_after_um", col(r.after.u_S_um));
   t.add_column("u_S_widening_um", col(r.u_S_widening_um));
   t.add_column("u_S_knock_um", col(r.knock.u_S_added_um));
+  // The rest of u_S_after's parts (each in quadrature, zero when it adds nothing): a step declined
+  // (its bias), the drift's form when the data do not tell linear from thermal, a hysteresis
+  // detected and not applied.  A user reads from them why u_S grew.
+  t.add_column("u_S_declined_um", col(r.u_S_declined_um));
+  t.add_column("u_S_drift_form_um", col(r.u_S_drift_form_um));
+  t.add_column("u_S_hysteresis_um", col(hy.u_S_added_um));
   return t;
 }
 

@@ -25,6 +25,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <optional>
+#include <random>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -69,6 +70,27 @@ struct UndeclaredCaseOptions {
   static RandomTruthOptions wavy_reference();
   bool is_valid(std::string* why = nullptr) const;
 };
+
+/// The draws of an undeclared effect (its size, sign, place, time constant) for one seed, from a
+/// stream of their own, so that the truth and the noise of a seed are the same whatever the
+/// effect.  simulate_undeclared and the scan-sequence generator (refine_sweep.cpp) both draw from
+/// it, so one seed means the same draws in both.
+class UndeclaredEffectDraws {
+ public:
+  explicit UndeclaredEffectDraws(std::uint64_t seed)
+      : rng_(seed * 0x9E3779B97F4A7C15ULL + 0x5bd1e995ULL) {}
+  double uni(double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng_); }
+  double sign() { return uni(0.0, 1.0) < 0.5 ? -1.0 : 1.0; }
+  int pick(int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(rng_); }
+
+ private:
+  std::mt19937_64 rng_;
+};
+
+/// The sensor noise's seed for an undeclared case of `seed` (the simulators' own stream).
+inline std::uint64_t undeclared_noise_seed(std::uint64_t seed) {
+  return seed * 7919 + 17;
+}
 
 struct UndeclaredCase {
   FourSensorConfig cfg;

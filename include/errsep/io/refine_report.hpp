@@ -35,11 +35,14 @@ std::string format_refine_text(const core::RefineResult& r);
 HtmlTable refine_steps_table(const CsvTable& steps, const std::filesystem::path& file);
 
 /// A scan sequence's refine (core/sequence_refine.hpp) as CSV: columns x_mm, S_before_um,
-/// u_S_before_um, S_after_um, u_S_after_um, u_S_widening_um (u at k = 1, S about its best-fit
-/// constant, line and bow); metadata "format: errsep sequence refine", plan, added effects, and
-/// one "finding_<k>" line per finding (an effect identified, ambiguous, or detected and not
-/// identifiable from the plan, with what to measure instead).  Throws std::invalid_argument when
-/// x_mm does not have one value per position.
+/// u_S_before_um, S_after_um, u_S_after_um and u_S_after_um's parts in quadrature
+/// (u_S_widening_um, u_S_knock_um, u_S_declined_um, u_S_drift_form_um, u_S_hysteresis_um; u at
+/// k = 1, S about its best-fit constant, line and bow); metadata "format: errsep sequence refine",
+/// plan, added effects, the knock and the hysteresis (hysteresis_um "h +- u" and
+/// hysteresis_applied when detected, else "hysteresis: none found" or why the plan cannot show
+/// it), and one "finding_<k>" line per finding (an effect identified, ambiguous, or detected and
+/// not identifiable from the plan, with what to measure instead).  Throws std::invalid_argument
+/// when x_mm does not have one value per position.
 CsvTable sequence_refine_csv(const core::SequenceRefineResult& r, const std::vector<double>& x_mm);
 
 /// A sequence_refine.csv read back as the report's table of findings (one row each; a run that
