@@ -59,11 +59,16 @@
 //
 // The drift family.  A thermal drift added at a grid τ gets τ fitted (golden section between the
 // grid's neighbours) and carried in u_S by its Gauss-Newton column Σ_c Â_c·∂J_c/∂τ.  A linear
-// drift and a warm-up often fit the readings almost equally well yet give different S (what
-// differs is absorbed by S, γ, e); the thermal member replaces the linear one when it fits
-// significantly better (F-test on τ), and the form the data cannot reject (profile likelihood
-// over the linear member and 40 τ, 95 % bound) enters u_S at half the largest S difference
-// (u_S_drift_form_um).
+// drift (the τ → ∞ limit of a warm-up) and a warm-up often fit the readings almost equally well
+// yet give different S (what differs, a configuration's curvature in time against its slope, is
+// mostly absorbed by S, γ, e).  The form is decided on evidence (drift_form_decision): both are
+// fitted, the thermal one with τ fitted, and the thermal one is taken only when τ beats the line
+// on the F-test Šidák-adjusted over the τ grid; otherwise, where their S differ by more than a
+// tenth of u_S, S is taken midway, half the difference enters u_S (or τ's 95 % profile set
+// about the midway S where it reaches farther: u_S_drift_form_um) and the report says "drift
+// form not identifiable from this plan".  A thermal form taken enters u_S with its profile set
+// (linear member and 40 τ, 95 % bound) at half the largest S difference.
+
 #include <Eigen/Core>
 #include <memory>
 #include <string>
@@ -152,14 +157,16 @@ struct SequenceRefineOptions {
   /// Search the differences of repeated traverses for a knocked sensor first (repeat_steps.hpp)
   /// and, when one is attributed, fit its step before the effects (SequenceKnock).
   bool find_knocks = true;
-  /// When the first round takes a thermal drift and the F-test of its τ against the line,
-  /// Šidák-adjusted over the τ grid, does not reject the line: S midway between the two forms'
-  /// fits, their half-difference in u_S (sequence_refine.cpp).  Off by default: it keeps a
-  /// linear drift of a reversed plan within u (seed 1003: 0.09 -> 1.90 um with u_S 0.65 um
-  /// without it; 0.96 um with u_S 1.03 um with it) but moves a knocked sensor the search misses
-  /// at σ 0.2 (knock seed 715) from 3.88 to 4.06 u_S at its worst point, past the 4 u_S that
-  /// test asserts, and halves one run fewer of 19 in the reversed plan's thermal_all cell.
-  bool drift_form_midway = false;
+  /// The drift family's form decided on evidence (sequence_refine.cpp): the linear member and the
+  /// thermal one with τ fitted are both fitted; the thermal one is taken only when τ beats the
+  /// line on the F-test Šidák-adjusted over the τ grid; otherwise, where the two forms' S differ
+  /// by more than a tenth of u_S, S is taken midway between them, half the difference (or τ's
+  /// profile set) carried in u_S, and the report says "drift form not identifiable from this
+  /// plan".  Measured (reversed plan, seeds 1001-1020, σ 0.1): a line taken for a warm-up at
+  /// τ 34 s (seed 1003, all configurations) 0.09 -> 1.90 um with u_S 0.65 um without it.  Off:
+  /// the behaviour before it (a thermal member the first round chose is kept; a line is replaced
+  /// on the unadjusted test, or the adjusted one with prefer_linear_drift).
+  bool drift_form_decision = true;
   /// Each effect the F-test chooses is taken into the fit only when decide_step
   /// (step_decision.hpp) expects S, γ and f to improve (the sensitivities: what the model before
   /// the step puts into them from the effect's columns; the parameters and their covariance: the
@@ -323,8 +330,9 @@ struct SequenceRefineResult {
   /// P: the part of after.u_S_um that the detected-but-unidentifiable effects add (quadrature);
   /// zero when there are none.
   Eigen::VectorXd u_S_widening_um;
-  /// P: the part of after.u_S_um that the drift's form adds when the data do not tell a linear
-  /// drift from a thermal one (|ΔS|/√3, ΔS the difference of Ŝ between them); zero otherwise.
+  /// P: the part of after.u_S_um that the drift's form adds: when the data do not tell a linear
+  /// drift from a thermal one, |ΔS|/2 (ΔS the difference of Ŝ between them; Ŝ midway), or half
+  /// the largest S change over τ's 95 % profile set where it reaches farther; zero otherwise.
   Eigen::VectorXd u_S_drift_form_um;
   /// Significant candidates the data cannot tell apart (one explains the other's signal): not
   /// applied; one line each, also in `report`.
