@@ -615,11 +615,26 @@ TEST_CASE(
 // then a spurious drift) traverse, the error scaling with sigma.  Asserted at sigma 0.05, 0.1 and
 // 0.2: S never worse than before by more than the refined u_S (RMS); the drift still identified
 // in the drift cases; no non-repeating traverse applied there.  Printed: what was declined and
-// what its bias adds to u_S.
+// what its bias adds to u_S.  With decide_steps = false (the F-test alone, the behaviour before
+// the decision) the same run at sigma 0.1 (drift_one) takes the spurious traverse (S error 0.17
+// -> 1.53 um since the drift-form decision, u_S 2.8): the option is exercised and what the
+// decision declines is shown to be taken without it.
 TEST_CASE("seed 1046, reversed plan: a step that would make S worse is declined, S within u") {
   const FourSensorConfig cfg;
   const Plan plan{ScanSequenceKind::reversed};
   SequenceModel model(cfg, sequence_of(plan, cfg));
+  {
+    SequenceRefineOptions f_test_only;
+    f_test_only.decide_steps = false;
+    SequenceModel model_off(cfg, sequence_of(plan, cfg), f_test_only);
+    const Run r0 = run_case(Case::drift_one, plan, 1046, 0.1, model_off);
+    std::printf(
+        "seed 1046 drift_one reversed s 0.10, decide_steps off: added %s: S err %.3f -> %.3f um, "
+        "u_S RMS %.3f\n",
+        r0.added.c_str(), r0.err_before, r0.err_after, r0.u_rms);
+    CHECK(r0.added.find("non-repeating") != std::string::npos);
+    CHECK(r0.declined.empty());
+  }
   for (double sigma : {0.05, 0.1, 0.2})
     for (auto c : {Case::drift_one, Case::drift_all, Case::traverse}) {
       const Run r = run_case(c, plan, 1046, sigma, model);
