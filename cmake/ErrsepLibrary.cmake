@@ -14,11 +14,15 @@ function(errsep_library name)
     add_library(errsep::${name} ALIAS errsep_${name})
     return()
   endif()
-  add_library(errsep_${name} STATIC ${_srcs})
+  add_library(errsep_${name} ${_srcs})  # STATIC unless BUILD_SHARED_LIBS (CMakeLists.txt)
   add_library(errsep::${name} ALIAS errsep_${name})
   target_include_directories(errsep_${name} PUBLIC
     "$<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}/include>"
     "$<BUILD_INTERFACE:${PROJECT_BINARY_DIR}/generated>")
   target_link_libraries(errsep_${name} PUBLIC ${ARG_PUBLIC_DEPS} PRIVATE ${ARG_PRIVATE_DEPS} errsep_warnings)
-  set_target_properties(errsep_${name} PROPERTIES POSITION_INDEPENDENT_CODE ON)
+  # No <target>_EXPORTS define (nothing uses it): shared and static objects then compile alike.
+  set_target_properties(errsep_${name} PROPERTIES POSITION_INDEPENDENT_CODE ON DEFINE_SYMBOL "")
+  if(BUILD_SHARED_LIBS)  # the installed apps need them beside bin/
+    install(TARGETS errsep_${name} LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR})
+  endif()
 endfunction()

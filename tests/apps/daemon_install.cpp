@@ -69,7 +69,8 @@ TEST_CASE("cmake --install puts binaries, the unit and the example configs in pl
   for (const auto& e : fs::directory_iterator(bin))
     CHECK(e.path().filename().string().rfind("errsep-", 0) == 0);
 
-  // The installed daemon runs from its new place (static errsep libraries, system shared libs).
+  // The installed daemon runs from its new place (errsep libraries static, or shared and installed
+  // under lib/ with a relative RUNPATH; system shared libs).
   std::string ver;
   REQUIRE(test::run_command("'" + (bin / "errsep-daemon").string() + "' --version", &ver) == 0);
   CHECK_THAT(ver, Catch::Contains(std::string(errsep::kVersion)));
