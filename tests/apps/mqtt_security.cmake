@@ -3,4 +3,4 @@
 # python3-jsonschema are missing.
 add_dependencies(${test_target} errsep-daemon errsep-devsim)
 errsep_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "apps/mqtt_security: "
-                     PROPERTIES TIMEOUT 240 LABELS "apps;mqtt" SKIP_REGULAR_EXPRESSION "SKIPPED:")
+                     PROPERTIES TIMEOUT 240 LABELS apps EXTRA_LABEL mqtt SKIP_REGULAR_EXPRESSION "SKIPPED:")

@@ -4,4 +4,4 @@
 add_dependencies(${test_target} errsep-simulate errsep-separate errsep-refine errsep-report errsep-scan
                  errsep-devsim)
 errsep_discover_tests(${test_target} EXTRA_ARGS --warn NoTests TEST_PREFIX "apps/sequence_app: "
-                     PROPERTIES TIMEOUT 180 LABELS "apps;modbus")
+                     PROPERTIES TIMEOUT 180 LABELS apps EXTRA_LABEL modbus)
