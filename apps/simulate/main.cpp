@@ -150,6 +150,7 @@ int main(int argc, char** argv) {
   std::vector<double> drift_um_per_s, thermal_um;
   double thermal_tau_s = 40.0;
   double rezero_offset_um = 20.0, nonlinearity_c2_per_um = 0.0, nonlinearity_mid_um = 0.0;
+  double hysteresis_um = 0.0;
   std::string method = "four_sensor", scan2_order = "forward";
   bool refine = false;
   errsep::core::FourSensorConfig cfg;
@@ -211,6 +212,12 @@ int main(int argc, char** argv) {
   app.add_option("--nonlinearity-mid-um", nonlinearity_mid_um,
                  "mid of --nonlinearity-c2-per-um, um")
       ->capture_default_str();
+  app.add_option("--hysteresis-um", hysteresis_um,
+                 "undeclared sensor hysteresis h: it reads r - h * sign(dr/dt) (records the scan "
+                 "as a sequence; a plan reading a configuration both ways shows it: reversed, "
+                 "serpentine), um")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   app.add_option("--dx-mm", cfg.dx_mm, "sampling interval, mm")->capture_default_str();
   app.add_option("--N", cfg.N, "number of reference points")->capture_default_str();
   app.add_option("--s2", cfg.s2)->capture_default_str();
@@ -256,10 +263,11 @@ int main(int argc, char** argv) {
     const auto kind = errsep::core::scan_sequence_kind_from_string(plan);
     const bool sequence = kind != errsep::core::ScanSequenceKind::single ||
                           !drift_um_per_s.empty() || !thermal_um.empty() ||
-                          nonlinearity_c2_per_um != 0.0;
+                          nonlinearity_c2_per_um != 0.0 || hysteresis_um != 0.0;
     if (sequence && (combined || pe1 || pe2))
       throw std::invalid_argument(
-          "--plan/--drift-um-per-s/--thermal-um simulate the sensors' noise and no PE1/PE2: "
+          "--plan/--drift-um-per-s/--thermal-um/--nonlinearity-c2-per-um/--hysteresis-um simulate "
+          "the sensors' noise and no PE1/PE2: "
           "drop --noise-on combined, --pe1, --pe2");
     std::optional<errsep::core::SequenceSimData> seq_sim;
     if (sequence) {
@@ -274,6 +282,7 @@ int main(int argc, char** argv) {
       qo.effects.thermal_tau_s = thermal_tau_s;
       qo.effects.nonlinearity_c2_per_um = nonlinearity_c2_per_um;
       qo.effects.nonlinearity_mid_um = nonlinearity_mid_um;
+      qo.effects.hysteresis_um = hysteresis_um;
       seq_sim = errsep::core::simulate_four_sensor_sequence(cfg, truth, seq, qo);
       errsep::io::set_sequence(raw, seq, seq_sim->m_um, seq_sim->t_s);
       for (int j = 0; j < 4; ++j)

@@ -1,5 +1,6 @@
 #include "errsep/core/four_sensor_sequence_simulation.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <stdexcept>
@@ -20,6 +21,8 @@ SequenceSimData simulate_four_sensor_sequence(const FourSensorConfig& cfg,
   if (!std::isfinite(opts.effects.nonlinearity_c2_per_um) ||
       !std::isfinite(opts.effects.nonlinearity_mid_um))
     throw std::invalid_argument("the non-linearity's c2 and mid must be finite");
+  if (!(opts.effects.hysteresis_um >= 0) || !std::isfinite(opts.effects.hysteresis_um))
+    throw std::invalid_argument("the hysteresis must be finite and >= 0");
   const int P = cfg.positions(), T = seq.size();
   const auto O = cfg.offsets_mm();
   const auto& fx = opts.effects;
@@ -38,9 +41,13 @@ SequenceSimData simulate_four_sensor_sequence(const FourSensorConfig& cfg,
     d.S_um(n) = truth.S_um(x);
     d.gamma_rad(n) = truth.gamma_rad(x);
   }
+  Eigen::VectorXd r_clean(P);  // one traverse's noise-free Eq. (1) readings (hysteresis's sign)
   for (int k = 0; k < T; ++k) {
     const Traverse& tr = seq.traverses[static_cast<std::size_t>(k)];
     const auto c = static_cast<std::size_t>(tr.configuration);
+    const double dir = tr.direction == TraverseDirection::forward ? 1.0 : -1.0;
+    for (int n = 0; n < P; ++n)
+      r_clean(n) = four_sensor_reading_um(truth, n * cfg.dx_mm, O[c]);
     for (int n = 0; n < P; ++n) {
       const double x = n * cfg.dx_mm, t = d.t_s(n, k);
       // Eq. (1) at the traverse's zero plus noise; the effects on top of the same noisy reading.
@@ -53,6 +60,12 @@ SequenceSimData simulate_four_sensor_sequence(const FourSensorConfig& cfg,
       // The non-linearity acts on what the sensor reads, its zero shift included.
       extra += fx.nonlinearity_c2_per_um * (clean - fx.nonlinearity_mid_um) *
                (clean - fx.nonlinearity_mid_um);
+      if (fx.hysteresis_um > 0) {
+        // dr/dt = dr/dx · dx/dt: the change along x (central, one-sided at the ends) times the
+        // traverse's direction.
+        const double slope = r_clean(std::min(n + 1, P - 1)) - r_clean(std::max(n - 1, 0));
+        extra -= fx.hysteresis_um * dir * (slope > 0 ? 1.0 : slope < 0 ? -1.0 : 0.0);
+      }
       d.m_um(n, k) = d.m_clean_um(n, k) + extra;
     }
   }

@@ -18,12 +18,14 @@ const char* to_string(ScanSequenceKind k) {
       return "interleaved";
     case ScanSequenceKind::rezeroed:
       return "rezeroed";
+    case ScanSequenceKind::serpentine:
+      return "serpentine";
   }
   return "unknown";
 }
 
 const char* scan_sequence_kind_names() {
-  return "single, closing, reversed, interleaved, rezeroed";
+  return "single, closing, reversed, interleaved, rezeroed, serpentine";
 }
 
 ScanSequenceKind scan_sequence_kind_from_string(const std::string& name) {
@@ -32,6 +34,7 @@ ScanSequenceKind scan_sequence_kind_from_string(const std::string& name) {
   if (name == "reversed") return ScanSequenceKind::reversed;
   if (name == "interleaved") return ScanSequenceKind::interleaved;
   if (name == "rezeroed" || name == "re-zeroed") return ScanSequenceKind::rezeroed;
+  if (name == "serpentine") return ScanSequenceKind::serpentine;
   throw std::invalid_argument("unknown scan plan '" + name + "': one of " +
                               scan_sequence_kind_names());
 }
@@ -115,6 +118,10 @@ ScanSequence ScanSequence::make(ScanSequenceKind kind, const FourSensorConfig& c
     case ScanSequenceKind::rezeroed:
       for (int c : {0, 1, 2, 3, 0, 1, 2, 3})
         order.push_back({c, D::forward});
+      break;
+    case ScanSequenceKind::serpentine:
+      order = {
+          {0, D::forward}, {1, D::backward}, {2, D::forward}, {3, D::backward}, {0, D::backward}};
       break;
   }
   ScanSequence s;

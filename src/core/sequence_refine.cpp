@@ -977,7 +977,8 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
     if (!hy.identifiable)
       hy.finding = "hysteresis: not identifiable from this plan (" + seq.name +
                    "): every configuration is read in one direction only, where a reading lag "
-                   "is part of the profile read (measure each configuration forward and back)";
+                   "is part of the profile read (measure a configuration forward and back: the "
+                   "reversed or serpentine plan)";
     res.hysteresis = hy;
     return res;
   };

@@ -33,10 +33,12 @@ void check_len(const std::vector<double>& v, std::size_t n, const std::string& c
                                 " values for " + std::to_string(n) + " positions");
 }
 
-/// Scan 2's reading times go the way it read the rows: forward, they do not decrease from row to
-/// row; backward (the last row read first), they do not increase.
+/// Reading times go the way the rows were read: forward, they do not decrease from row to row;
+/// backward (the last row read first), they do not increase.  `declared` names what said
+/// backward, for the message (e.g. "scan2_order is backward").
 void check_time_order(const CsvTable& t, const std::string& column, bool backward,
-                      const std::filesystem::path& file, bool allow_nan) {
+                      const std::filesystem::path& file, bool allow_nan,
+                      const std::string& declared) {
   if (!backward) {
     check_increasing(t, column, false, file, allow_nan);
     return;
@@ -53,8 +55,8 @@ void check_time_order(const CsvTable& t, const std::string& column, bool backwar
     if (have_next && v < next)
       throw CsvError(file, line,
                      "column '" + column + "': " + fmt(v) + " before " + fmt(next) +
-                         " on the row below, but scan2_order is backward (the rows are read "
-                         "bottom up): time goes backwards");
+                         " on the row below, but " + declared +
+                         " (the rows are read bottom up): time goes backwards");
     have_next = true;
     next = v;
   }
@@ -153,6 +155,10 @@ RawSequence read_sequence(const CsvTable& t, const std::filesystem::path& file, 
     const std::string m = "k" + std::to_string(k), mc = m + "_um", tc = m + "_t_s";
     // The sensor of configuration c reads it: its recorded range applies.
     check_readings(t, mc, reading_range(t, "m" + std::to_string(c), file), file, !complete);
+    // Each traverse's times go the way it moved the slide (a backward one reads the last row
+    // first).
+    check_time_order(t, tc, tr.direction == core::TraverseDirection::backward, file, !complete,
+                     key + " is backward");
     q.m_um.push_back(t.column(mc, file));
     q.t_s.push_back(t.column(tc, file));
   }
@@ -355,7 +361,6 @@ RawFourSensorScan read_raw_four_sensor_csv(const std::filesystem::path& file,
   for (int i = 1; i <= 4; ++i) {
     const std::string m = "m" + std::to_string(i);
     check_readings(t, m + "_um", reading_range(t, m, file), file, !s.complete);
-    if (n_t == 4) check_increasing(t, "t" + std::to_string(i) + "_s", false, file, !s.complete);
   }
   if (n_t == 4) {
     s.t_s.emplace();
@@ -385,6 +390,23 @@ RawFourSensorScan read_raw_four_sensor_csv(const std::filesystem::path& file,
     s.geometry = g;
   }
   if (t.meta("traverses")) s.sequence = read_sequence(t, file, s.complete);
+  // m1..m4 are each configuration's first traverse: their times go the way it moved (forward
+  // without a sequence; a serpentine plan reads configurations 2 and 4 backward).
+  if (n_t == 4)
+    for (int i = 0; i < 4; ++i) {
+      bool backward = false;
+      std::string declared;
+      if (s.sequence)
+        for (std::size_t k = 0; k < s.sequence->traverses.size(); ++k)
+          if (s.sequence->traverses[k].configuration == i) {
+            backward = s.sequence->traverses[k].direction == core::TraverseDirection::backward;
+            declared = "traverse_" + std::to_string(k + 1) + " (configuration " +
+                       std::to_string(i + 1) + "'s first) is backward";
+            break;
+          }
+      check_time_order(t, "t" + std::to_string(i + 1) + "_s", backward, file, !s.complete,
+                       declared);
+    }
   s.metadata = other_meta(t, {"format", "complete", "units", "dx_mm", "s2", "s3", "s4", "N"});
   std::erase_if(s.metadata, [](const auto& kv) {
     return kv.first == "plan" || kv.first == "traverses" || kv.first.rfind("traverse_", 0) == 0;
@@ -431,7 +453,7 @@ RawDisplacementScan read_raw_displacement_csv(const std::filesystem::path& file,
   if (times) {
     check_increasing(t, "t_scan1_s", false, file, !s.complete);
     check_time_order(t, "t_scan2_s", s.scan2_order == core::DisplacementScanOrder::backward, file,
-                     !s.complete);
+                     !s.complete, "scan2_order is backward");
     s.t_scan1_s = t.column("t_scan1_s", file);
     s.t_scan2_s = t.column("t_scan2_s", file);
   }

@@ -891,15 +891,11 @@ TEST_CASE("a hysteresis is found in the trace of every traverse of a reversed pl
 namespace {
 
 ScanSequence serpentine_plan(const FourSensorConfig& cfg) {
-  ScanSequence seq = ScanSequence::make(ScanSequenceKind::closing_pass, cfg);
-  for (int k : {1, 3, 4})
-    seq.traverses[static_cast<std::size_t>(k)].direction = TraverseDirection::backward;
-  seq.name = "serpentine";
-  return seq;
+  return ScanSequence::make(ScanSequenceKind::serpentine, cfg);
 }
 
 struct HysteresisRun {
-  SequenceSimData d;
+  SequenceSimData d;     // d.m_clean_um: the same scan without the hysteresis
   Eigen::MatrixXd m_um;  // with the hysteresis
 };
 
@@ -908,22 +904,10 @@ HysteresisRun simulate_hysteresis(const FourSensorConfig& cfg, const ScanSequenc
   const SlidewayTruth truth = random_smooth_truth(cfg, seed);
   SequenceSimOptions so;
   so.seed = seed;
-  so.sigma_um = 0.0;
-  const SequenceSimData d0 = simulate_four_sensor_sequence(cfg, truth, seq, so);
   so.sigma_um = sigma;
+  so.effects.hysteresis_um = h_um;
   HysteresisRun out{simulate_four_sensor_sequence(cfg, truth, seq, so), {}};
   out.m_um = out.d.m_um;
-  const Eigen::Index P = out.m_um.rows();
-  for (int k = 0; k < seq.size(); ++k) {
-    const double dir =
-        seq.traverses[static_cast<std::size_t>(k)].direction == TraverseDirection::forward ? 1.0
-                                                                                           : -1.0;
-    for (Eigen::Index n = 0; n < P; ++n) {
-      const double slope =
-          d0.m_um(std::min(n + 1, P - 1), k) - d0.m_um(std::max<Eigen::Index>(n - 1, 0), k);
-      out.m_um(n, k) -= h_um * dir * (slope > 0 ? 1.0 : slope < 0 ? -1.0 : 0.0);
-    }
-  }
   return out;
 }
 
@@ -943,7 +927,7 @@ void hysteresis_cells(const ScanSequence& seq, bool expect_bias, bool unmet = fa
       const double h = sigma * std::uniform_real_distribution<double>(5.0, 10.0)(rng);
       const HysteresisRun hr = simulate_hysteresis(cfg, seq, seed, sigma, h);
       const SequenceRefineResult r = model.refine(hr.m_um);
-      const double clean = s_error(model.fit(hr.d.m_um).S_um, hr.d.S_um);
+      const double clean = s_error(model.fit(hr.d.m_clean_um).S_um, hr.d.S_um);
       const double before = s_error(r.before.S_um, hr.d.S_um);
       const double after = s_error(r.after.S_um, hr.d.S_um);
       const double u_rms =
@@ -969,7 +953,7 @@ void hysteresis_cells(const ScanSequence& seq, bool expect_bias, bool unmet = fa
       for (Eigen::Index n = 0; n < dev.size(); ++n, ++points)
         covered += std::abs(dev(n)) <= 2.0 * r.after.u_S_um(n) ? 1 : 0;
       // The same seed without the hysteresis.
-      const SequenceRefineResult rc = model.refine(hr.d.m_um);
+      const SequenceRefineResult rc = model.refine(hr.d.m_clean_um);
       clean_added += rc.hysteresis.applied ? 1 : 0;
       const Eigen::VectorXd dev_c = remove_polynomial(rc.after.S_um - hr.d.S_um, 2);
       for (Eigen::Index n = 0; n < dev_c.size(); ++n, ++points_clean)

@@ -290,6 +290,39 @@ TEST_CASE("a scan sequence round-trips, and a file without traverses is the sing
   CHECK(pm(3, 2) == plain.m_um[2][3]);
 }
 
+// The serpentine plan reads configurations 2 and 4 backward on their first (only) traverse: m2's
+// times t2_s then decrease down the rows, which the reader accepts because the traverse line says
+// backward; a backward traverse whose times increase is refused naming the line that said so.
+TEST_CASE(
+    "a serpentine plan's backward first traverses round-trip, times against the direction "
+    "are refused") {
+  TempDir dir;
+  auto s = sample_scan(true);
+  const auto seq =
+      errsep::core::ScanSequence::make(errsep::core::ScanSequenceKind::serpentine, *s.geometry);
+  CHECK(seq.name == "serpentine");
+  const Eigen::MatrixXd t = seq.times_s(*s.geometry);
+  set_sequence(s, seq, Eigen::MatrixXd::Zero(9, seq.size()), t);
+  write_raw_four_sensor_csv(dir / "serp.csv", s);
+  const auto r = read_raw_four_sensor_csv(dir / "serp.csv");
+  REQUIRE(r.sequence);
+  CHECK(r.sequence->plan == "serpentine");
+  REQUIRE(r.sequence->traverses.size() == 5);
+  CHECK(r.sequence->traverses[1].direction == errsep::core::TraverseDirection::backward);
+  CHECK(r.sequence->traverses[4].direction == errsep::core::TraverseDirection::backward);
+  REQUIRE(r.t_s);
+  CHECK((*r.t_s)[1].front() > (*r.t_s)[1].back());  // configuration 2: x_0 read last
+  CHECK(scan_sequence_of(r).first.name == "serpentine");
+  // Traverse 2 declared backward, its times increasing down the rows.
+  auto bad = s;
+  std::reverse(bad.sequence->t_s[1].begin(), bad.sequence->t_s[1].end());
+  write_raw_four_sensor_csv(dir / "bad.csv", bad);
+  CHECK_THROWS_WITH(read_raw_four_sensor_csv(dir / "bad.csv"),
+                    Catch::Contains("bad.csv") && Catch::Contains("k2_t_s") &&
+                        Catch::Contains("traverse_2 is backward") &&
+                        Catch::Contains("time goes backwards"));
+}
+
 TEST_CASE("a bad traverse line is refused with file and what is wrong") {
   TempDir dir;
   auto s = sample_scan(true);

@@ -7,7 +7,10 @@
 //   non-repeating S   m += ΔS(k, x)                   (the slide bends differently on traverse k)
 // and a re-zeroed traverse (Traverse::zero_shift_um = Δ) reads u = (Eq. 1) + Δ.  A sensor
 // non-linearity acts on the whole reading, offset included: m = u + c₂·(u − mid)² (not in the
-// effect library; what the rezeroed plan makes show, scan_sequence.hpp).
+// effect library; what the rezeroed plan makes show, scan_sequence.hpp).  A sensor hysteresis h
+// lags the reading behind its change: m −= h·sign(dr/dt), the sign from the noise-free readings'
+// change along the traverse in time (what a plan reading a configuration both ways reveals:
+// reversed, serpentine).
 // The truth S is the first traverse's (ΔS(0, x) should be 0: the scan refers to its first pass).
 #include <Eigen/Core>
 #include <array>
@@ -30,6 +33,8 @@ struct SequenceEffects {
   /// zero adjustment and the traverse's zero shift included); 0 = linear.
   double nonlinearity_c2_per_um = 0.0;
   double nonlinearity_mid_um = 0.0;
+  /// The sensor's hysteresis h (µm, >= 0): it reads r − h·sign(dr/dt); 0 = none.
+  double hysteresis_um = 0.0;
 };
 
 struct SequenceSimOptions {

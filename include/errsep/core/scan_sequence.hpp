@@ -21,6 +21,11 @@
 //                 two passes of a configuration differ by 2·c₂·Δ·r + const, a gain on the whole
 //                 traverse that no zero adjustment absorbs (residual_trace.hpp).  The repeated
 //                 traverses also show what the closing pass shows.
+//   serpentine    1 forward, 2 back, 3 forward, 4 back, then 1 back: the slide never returns
+//                 empty (the plan a machine runs fastest), and configuration 1 is read both ways,
+//                 so a sensor's hysteresis (a reading lag of sign dr/dt) is determined by its two
+//                 directions while configurations 2 and 4 read with the opposite lag, which S and
+//                 γ absorb.  Its closing traverse also shows what the closing pass shows.
 // Every traverse carries its start time and direction, so the reading times t(n, k) (P × T,
 // column k = traverse k) follow from the slide speed, and time-dependent effects are modelled on
 // them.
@@ -45,12 +50,14 @@ struct Traverse {
   double zero_shift_um = 0.0;
 };
 
-enum class ScanSequenceKind { single, closing_pass, reversed, interleaved, rezeroed };
+enum class ScanSequenceKind { single, closing_pass, reversed, interleaved, rezeroed, serpentine };
 const char* to_string(ScanSequenceKind k);
 /// The plan names a config or command line gives: "single", "closing" (or "closing pass"),
-/// "reversed", "interleaved", "rezeroed".  Throws std::invalid_argument naming the accepted names.
+/// "reversed", "interleaved", "rezeroed", "serpentine".  Throws std::invalid_argument naming the
+/// accepted names.
 ScanSequenceKind scan_sequence_kind_from_string(const std::string& name);
-/// "single, closing, reversed, interleaved, rezeroed" (for help texts and error messages).
+/// "single, closing, reversed, interleaved, rezeroed, serpentine" (for help texts and error
+/// messages).
 const char* scan_sequence_kind_names();
 
 struct ScanSequence {
