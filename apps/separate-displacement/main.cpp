@@ -151,23 +151,27 @@ void check_scan1_times(const std::string& file, const errsep::io::TwoAxisInput& 
   if (!bad) return;
   std::string shows;
   if (!first_inversion(t, !order.diagonal_scan1, false))
-    shows = "the times read scan 1 " + scan1_plan_words(!order.diagonal_scan1);
+    shows = "the times read scan 1 " + scan1_plan_words(!order.diagonal_scan1) + ": " +
+            (order.diagonal_scan1 ? "leave out --scan1-diagonal" : "give --scan1-diagonal");
   else if (!first_inversion(t, false, true))
-    shows = "the times read scan 1 as a raster y fastest, then x, a plan the refine cannot model";
+    shows =
+        "the times read scan 1 as a raster y fastest, then x, a plan the refine does not "
+        "model: run without --refine";
   else
     shows =
-        "the times follow none of the plans the refine models (raster x fastest, wrapped "
-        "diagonals)";
+        "the times follow neither plan the refine models (raster x fastest, wrapped "
+        "diagonals): run without --refine, or correct t_scan1_s";
   const auto& x = in.scan.x_mm;
   const auto& y = in.scan.y_mm;
-  throw std::invalid_argument(
-      file + ": t_scan1_s contradicts the declared scan-1 plan: declared " +
-      scan1_plan_words(order.diagonal_scan1) + ", which reads (x " + fmt(x(bad->i0)) + ", y " +
-      fmt(y(bad->j0)) + ") mm just before (x " + fmt(x(bad->i1)) + ", y " + fmt(y(bad->j1)) +
-      ") mm, but t_scan1_s has them at " + fmt(t(bad->i0, bad->j0)) + " s and " +
-      fmt(t(bad->i1, bad->j1)) + " s; " + shows +
-      ". The refine's drift and thermal columns follow the declared plan: declare the plan "
-      "the scan ran");
+  throw std::invalid_argument(file + ": t_scan1_s contradicts the declared scan-1 plan: declared " +
+                              scan1_plan_words(order.diagonal_scan1) + ", which reads (x " +
+                              fmt(x(bad->i0)) + ", y " + fmt(y(bad->j0)) + ") mm just before (x " +
+                              fmt(x(bad->i1)) + ", y " + fmt(y(bad->j1)) +
+                              ") mm, but t_scan1_s has them at " + fmt(t(bad->i0, bad->j0)) +
+                              " s and " + fmt(t(bad->i1, bad->j1)) +
+                              " s (the refine's drift and thermal columns follow the "
+                              "declared plan); " +
+                              shows);
 }
 
 }  // namespace

@@ -981,4 +981,17 @@ TEST_CASE("two-axis --refine --scan1-diagonal: a thermal drift of sensors 3-4 on
   CHECK_THAT(out, Catch::Contains("declared along wrapped diagonals (--scan1-diagonal)"));
   CHECK_THAT(out, Catch::Contains("the times read scan 1 a raster x fastest"));
   CHECK_FALSE(std::filesystem::exists(dir / "raster_t_w.csv"));
+  // Times of a raster y fastest (no plan of the refine): refused whichever scan 1 is declared.
+  for (int j = 0; j < kN; ++j)
+    for (int i = 0; i < kN; ++i)
+      t_raster(i, j) = i * kN + j;
+  write_two_axis(dir / "y_fastest_t.csv", sim.scan, -1, "", nullptr, &t_raster);
+  for (const std::string d : {"", " --scan1-diagonal"}) {
+    CHECK(run("two-axis" + flags + d + " -i " + (dir / "y_fastest_t.csv").string() + " -o " +
+                  (dir / "y_fastest_t_w.csv").string(),
+              &out) != 0);
+    CHECK_THAT(out, Catch::Contains("the times read scan 1 as a raster y fastest, then x, a plan "
+                                    "the refine does not model"));
+    CHECK_FALSE(std::filesystem::exists(dir / "y_fastest_t_w.csv"));
+  }
 }
