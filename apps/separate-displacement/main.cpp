@@ -530,7 +530,8 @@ int main(int argc, char** argv) {
         refined.set_meta("refine", stem + ".refine.csv");
         errsep::io::write_csv(stem + ".refine.csv", steps);
         errsep::io::write_csv(stem + ".refined.csv", refined);
-        std::cout << rr.brief_report() << "wrote " << stem << ".refine.csv and " << stem
+        std::cout << "refine plan: " << order.plan_name() << "\n"
+                  << rr.brief_report() << "wrote " << stem << ".refine.csv and " << stem
                   << ".refined.csv\n";
       }
     } else {

@@ -887,7 +887,8 @@ TEST_CASE("two-axis --refine --scan1-diagonal: a thermal drift of sensors 3-4 on
     REQUIRE(rc == 0);
     const auto acc =
         io::read_csv(dir / (name + "_w.refine.csv"), {.allow_non_finite = true, .min_rows = 0});
-    CHECK_THAT(acc.meta("plan").value_or(""), Catch::StartsWith("scan 1 diagonal"));
+    CHECK(acc.meta("plan").value_or("") == "scan 1 diagonal, scan 2 y fastest, backwards");
+    CHECK_THAT(out, Catch::Contains("refine plan: scan 1 diagonal, scan 2 y fastest, backwards"));
     for (const auto& n : notes(acc))
       CHECK(n.find("of sensors 3-4: poorly determined") == std::string::npos);
     for (int s = 1; s <= std::stoi(acc.meta("steps").value_or("0")); ++s)
