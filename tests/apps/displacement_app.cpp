@@ -811,6 +811,10 @@ TEST_CASE("two-axis --refine: a sensor drift is taken on the plan that identifie
 // line for sensors 3-4 and the refined w is not worse than the separation's beyond 2 u(w) (the
 // refined u, and the tighter u of the separation before the refine); the same file declared
 // without the flag is refused, naming the file, the declared plan and what its times show.
+// The stage has no roll or pitch (rotation_urad 0) and the correction of Eqs. (22)-(27) is off, as
+// in core's tables: left on auto it is switched on in most of these runs (its prediction sees the
+// noise, not the drift) and the drift's error of w before the refine grows from a median 0.48
+// to 3.4 um RMS (measured on these seeds), which is the rotation decision's matter, not the plan's.
 // ~9 s CPU in release (21 refines of 400 points; about 70 % of each run is the residuals'
 // Monte-Carlo whiteness test), [sweep]: not run under ASan.
 TEST_CASE("two-axis --refine --scan1-diagonal: a thermal drift of sensors 3-4 on its plan",
@@ -854,7 +858,7 @@ TEST_CASE("two-axis --refine --scan1-diagonal: a thermal drift of sensors 3-4 on
   };
   const std::string flags =
       " --refine --no-yaw --pause-s 60 --scan2-order backward "
-      "--scan2-y-fastest";
+      "--scan2-y-fastest --rotation-correction off";
   constexpr int kSeeds = 20;
   int not_worse = 0, halved = 0, refused = 0, thermal_taken = 0;
   for (std::uint64_t seed = 1601; seed < 1601 + kSeeds; ++seed) {
