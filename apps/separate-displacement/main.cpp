@@ -11,8 +11,10 @@
 #include <iostream>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include "errsep/core/displacement_effects.hpp"
 #include "errsep/core/displacement_method.hpp"
 #include "errsep/core/displacement_refine.hpp"
 #include "errsep/core/displacement_residuals.hpp"
@@ -41,9 +43,11 @@ sN_scanK_um = sensor N, scan K, as in the raw-scan CSV that errsep-scan records)
                s3_scan1_um, s3_scan2_um, s4_scan1_um, s4_scan2_um   (one row per grid point,
                any order, every point of a uniform x-y grid exactly once)
                optional: s0_scan2_um (sensor 0 during scan 2), t_scan1_s (time order of the
-               residuals; default x fastest, then y), and the lateral sensor pair on the side
-               face of reference X, sa_scan1_um, sa_scan2_um, sb_scan1_um, sb_scan2_um (all
-               four): with them the yaw of the x table is diagnosed (--no-yaw to skip)
+               residuals; default x fastest, then y, or along diagonals with --scan1-diagonal;
+               with --refine it must increase along the declared scan-1 plan, else the file is
+               refused), and the lateral sensor pair on the side face of reference X,
+               sa_scan1_um, sa_scan2_um, sb_scan1_um, sb_scan2_um (all four): with them the yaw
+               of the x table is diagnosed (--no-yaw to skip)
   three-point  x_mm, m1_um, m2_um, m3_um   (sensors at 0, s1*dx, (s1+s2)*dx on the carriage)
   -i may be given several times (one-axis, two-axis): repeated runs of the same measurement on
   the same grid; the separation uses their mean, and the repeats are a residual of their own.
@@ -64,6 +68,10 @@ Output CSV:
                on every row (sensors 1, 2) and column (3, 4), the reference pieces being functions
                of one coordinate; sensor 0 / sensor 1 read in both scans; repeated runs.  One axis
                with only Eqs. (1)-(3) is exactly determined: the file then says so.
+Choosing the two-axis plan (--refine): scan 2 y fastest and backwards (--scan2-order backward
+--scan2-y-fastest) makes every sensor's drift identifiable; add scan 1 along wrapped diagonals
+(--scan1-diagonal) when a thermal drift of sensors 3-4 is suspected (the paper's raster reads a
+column within n_x readings, so their drift is poorly determined; the account says so).
 d must be an integer multiple of the sampling interval.  Exit status 0 on success (also when the
 residual is not white: that is reported), 1 on bad input (message "file:line: problem"), nothing
 written on failure.)";
@@ -91,6 +99,79 @@ std::string fmt(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.4g", v);
   return buf;
+}
+
+/// Scan 1's plan in words, for the check below.
+std::string scan1_plan_words(bool diagonal) {
+  return diagonal ? "along wrapped diagonals (--scan1-diagonal)"
+                  : "a raster x fastest, then y (the paper's; --scan1-diagonal not given)";
+}
+
+/// Reading index of grid point (i, j) in scan 1 of a plan: core's TwoAxisScanOrder::time_s at
+/// one second per reading (so the order does not depend on the stated sample period).
+/// y_fastest: a raster y fastest, a plan the refine has no flag for, only named in the message.
+int scan1_index(int i, int j, int nx, int ny, bool diagonal, bool y_fastest) {
+  if (y_fastest) return i * ny + j;
+  errsep::core::TwoAxisScanOrder o;
+  o.diagonal_scan1 = diagonal;
+  return static_cast<int>(std::lround(o.time_s(1, i, j, nx, ny)));
+}
+
+/// The first pair of grid points whose recorded scan-1 times (t, nx × ny) do not increase along
+/// a plan's reading order; nullopt when they all do.
+struct TimeInversion {
+  int i0, j0, i1, j1;  ///< (i0, j0) is read before (i1, j1) in the plan, t not earlier
+};
+std::optional<TimeInversion> first_inversion(const Eigen::MatrixXd& t, bool diagonal,
+                                             bool y_fastest) {
+  const int nx = static_cast<int>(t.rows()), ny = static_cast<int>(t.cols());
+  std::vector<std::pair<int, int>> at(static_cast<std::size_t>(nx) * ny, {-1, -1});
+  for (int j = 0; j < ny; ++j)
+    for (int i = 0; i < nx; ++i)
+      at[static_cast<std::size_t>(scan1_index(i, j, nx, ny, diagonal, y_fastest))] = {i, j};
+  for (std::size_t k = 1; k < at.size(); ++k) {
+    const auto [i0, j0] = at[k - 1];
+    const auto [i1, j1] = at[k];
+    if (!(t(i1, j1) > t(i0, j0))) return TimeInversion{i0, j0, i1, j1};
+  }
+  return std::nullopt;
+}
+
+/// Issue 16 item 2: the refine builds its drift and thermal columns from the declared plan's
+/// reading times (core/displacement_effects.hpp), not from the file's, so a file whose recorded
+/// scan-1 times (t_scan1_s) read the grid in another order would be refined against the wrong
+/// times, silently.  Throws std::invalid_argument naming the file, the declared plan and what the
+/// times show.  Only the order is checked (an O(nx·ny) pass): the stated sample period and pause
+/// are taken as given.
+void check_scan1_times(const std::string& file, const errsep::io::TwoAxisInput& in,
+                       const errsep::core::TwoAxisScanOrder& order) {
+  const Eigen::MatrixXd& t = in.t_scan1_s;
+  if (t.size() == 0) return;
+  const auto bad = first_inversion(t, order.diagonal_scan1, false);
+  if (!bad) return;
+  std::string shows;
+  if (!first_inversion(t, !order.diagonal_scan1, false))
+    shows = "the times read scan 1 " + scan1_plan_words(!order.diagonal_scan1) + ": " +
+            (order.diagonal_scan1 ? "leave out --scan1-diagonal" : "give --scan1-diagonal");
+  else if (!first_inversion(t, false, true))
+    shows =
+        "the times read scan 1 as a raster y fastest, then x, a plan the refine does not "
+        "model: run without --refine";
+  else
+    shows =
+        "the times follow neither plan the refine models (raster x fastest, wrapped "
+        "diagonals): run without --refine, or correct t_scan1_s";
+  const auto& x = in.scan.x_mm;
+  const auto& y = in.scan.y_mm;
+  throw std::invalid_argument(file + ": t_scan1_s contradicts the declared scan-1 plan: declared " +
+                              scan1_plan_words(order.diagonal_scan1) + ", which reads (x " +
+                              fmt(x(bad->i0)) + ", y " + fmt(y(bad->j0)) + ") mm just before (x " +
+                              fmt(x(bad->i1)) + ", y " + fmt(y(bad->j1)) +
+                              ") mm, but t_scan1_s has them at " + fmt(t(bad->i0, bad->j0)) +
+                              " s and " + fmt(t(bad->i1, bad->j1)) +
+                              " s (the refine's drift and thermal columns follow the "
+                              "declared plan); " +
+                              shows);
 }
 
 }  // namespace
@@ -130,17 +211,25 @@ int main(int argc, char** argv) {
   bool refine_two = false, y_fastest_scan2 = false;
   std::string scan2_order = "forward";
   errsep::core::TwoAxisScanOrder order;
-  two->add_flag("--refine", refine_two,
-                "close the loop on one run (core/displacement_refine.hpp): its account to "
-                "<out>.refine.csv, the refined w, m_w with their u to <out>.refined.csv; the "
-                "plan is what --scan2-order, --scan2-y-fastest, --sample-period-s and --pause-s "
-                "say (the file records no scan-2 times)");
+  two->add_flag(
+      "--refine", refine_two,
+      "close the loop on one run (core/displacement_refine.hpp): its account to "
+      "<out>.refine.csv, the refined w, m_w with their u to <out>.refined.csv; the "
+      "plan is what --scan1-diagonal, --scan2-order, --scan2-y-fastest, --sample-period-s "
+      "and --pause-s say (the file records no scan-2 times; its t_scan1_s, when "
+      "present, is checked against the declared scan 1)");
   two->add_option("--scan2-order", scan2_order,
                   "with --refine: scan 2 ran the raster forward (the paper) or backward")
       ->check(CLI::IsMember({"forward", "backward"}))
       ->capture_default_str();
   two->add_flag("--scan2-y-fastest", y_fastest_scan2,
                 "with --refine: scan 2's raster ran y fastest (scan 1's x fastest)");
+  two->add_flag("--scan1-diagonal", order.diagonal_scan1,
+                "with --refine: scan 1 ran along wrapped diagonals (reading k = q*nx + i at grid "
+                "point (i, (q + i) mod ny): x steps by one each reading, every row and column is "
+                "read over the whole scan), the plan that determines a thermal drift of sensors "
+                "3-4 as well as 1-2's (a raster reads a column within nx readings); t_scan1_s, "
+                "when recorded, must follow it; without t_scan1_s it also orders the residuals");
   two->add_option("--sample-period-s", order.sample_period_s,
                   "with --refine: time per grid point (drift rates are per s of it)")
       ->capture_default_str()
@@ -318,6 +407,9 @@ int main(int argc, char** argv) {
               file + ": the lateral pair columns are " + (a.lateral ? "present" : "absent") +
               " but " + (all.front().lateral ? "present" : "absent") + " in " + input);
       }
+      if (refine_two)
+        for (std::size_t q = 0; q < all.size(); ++q)
+          check_scan1_times(inputs[q], all[q], order);
       const auto& in = all.front();
       errsep::core::TwoAxisOptions o;
       o.dx_mm = in.dx_mm;
@@ -340,7 +432,16 @@ int main(int argc, char** argv) {
       for (const auto& a : all)
         runs.push_back(a.scan);
       const auto scan = errsep::core::mean_of_runs(runs);
-      const auto resid = errsep::core::displacement_residuals_two_axis(runs, ropt, in.t_scan1_s);
+      // Without recorded times the residuals are ordered by the declared scan-1 plan.
+      Eigen::MatrixXd t_scan1_s = in.t_scan1_s;
+      if (t_scan1_s.size() == 0 && order.diagonal_scan1) {
+        const int nx = static_cast<int>(scan.x_mm.size()), ny = static_cast<int>(scan.y_mm.size());
+        t_scan1_s.resize(nx, ny);
+        for (int j = 0; j < ny; ++j)
+          for (int i = 0; i < nx; ++i)
+            t_scan1_s(i, j) = scan1_index(i, j, nx, ny, true, false);
+      }
+      const auto resid = errsep::core::displacement_residuals_two_axis(runs, ropt, t_scan1_s);
       const bool yaw = !yaw_off && (yaw_on || in.lateral.has_value());
       if (yaw && !in.lateral)
         throw std::invalid_argument(input +
@@ -429,7 +530,8 @@ int main(int argc, char** argv) {
         refined.set_meta("refine", stem + ".refine.csv");
         errsep::io::write_csv(stem + ".refine.csv", steps);
         errsep::io::write_csv(stem + ".refined.csv", refined);
-        std::cout << rr.brief_report() << "wrote " << stem << ".refine.csv and " << stem
+        std::cout << "refine plan: " << order.plan_name() << "\n"
+                  << rr.brief_report() << "wrote " << stem << ".refine.csv and " << stem
                   << ".refined.csv\n";
       }
     } else {
