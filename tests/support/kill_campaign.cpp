@@ -175,18 +175,33 @@ std::string landed_in_store(const fs::path& dir, std::uint64_t id) {
   return "before the first checkpoint";
 }
 
+namespace {
+/// A /proc file of a process that may exit while it is read: libstdc++'s filebuf throws on the
+/// read error (ESRCH, "No such process"), which made the kill campaign fail under load; a
+/// process gone is a process not found ("").
+std::string slurp_proc(const fs::path& p) {
+  try {
+    return slurp(p);
+  } catch (const std::exception&) {
+    return {};
+  }
+}
+}  // namespace
+
 std::vector<pid_t> processes_with(const std::vector<std::string>& needles) {
   std::vector<pid_t> out;
-  for (const auto& e : fs::directory_iterator("/proc")) {
+  std::error_code ec;
+  for (fs::directory_iterator it("/proc", ec), end; !ec && it != end; it.increment(ec)) {
+    const fs::directory_entry& e = *it;
     const std::string name = e.path().filename().string();
     if (name.empty() || !std::all_of(name.begin(), name.end(), ::isdigit)) continue;
-    std::string cmd = slurp(e.path() / "cmdline");
+    std::string cmd = slurp_proc(e.path() / "cmdline");
     std::replace(cmd.begin(), cmd.end(), '\0', ' ');
     bool all = !cmd.empty();
     for (const auto& n : needles)
       all = all && cmd.find(n) != std::string::npos;
     if (!all) continue;
-    const std::string st = slurp(e.path() / "stat");
+    const std::string st = slurp_proc(e.path() / "stat");
     const auto rp = st.rfind(')');
     if (rp == std::string::npos || rp + 2 >= st.size()) continue;
     const char state = st[rp + 2];
