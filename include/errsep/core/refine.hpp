@@ -250,6 +250,13 @@ struct RefineResult {
   /// none is declared), and one line per declared bound saying what it added ("Type B").
   Eigen::VectorXd u_S_declared_um;
   std::vector<std::string> declared_notes;
+  /// P: terms of the refined u_S (in quadrature, µm): what the added effects carry (their
+  /// covariance if applied, their fitted size if not, the part the plan cannot determine and
+  /// what they did to the gauge directions; zeros when none was added), and the gauge floor:
+  /// what restores the raw separation's uncertainty of the constant, line and bow of S (and
+  /// constant and line of γ) that the refined result keeps, when a correction's fresh separation
+  /// (lower σ̂) holds less there (zeros when nothing was corrected).
+  Eigen::VectorXd u_S_effects_um, u_S_gauge_um;
   /// True when the final residual passes the whiteness test.  False means the model is still
   /// missing something even if no candidate in the library was significant.
   bool residual_white() const { return residual.whiteness.white; }
