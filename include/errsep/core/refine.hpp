@@ -233,8 +233,12 @@ struct RefineResult {
   /// raw readings' separation: a step never moves what the data cannot see), and u_S, u_γ, u_f
   /// (and the covariance) carrying the applied parameters' covariance, the fitted size of the
   /// effects left out, the part of each effect this plan cannot determine, and what every effect
-  /// did to the gauge directions of `before` (kept, so their error stays).
-  /// `before` when no effect was added.
+  /// did to the gauge directions of `before` (kept, so their error stays), and at least
+  /// `before`'s covariance of those gauge directions (u_S_gauge_um: a correction's fresh
+  /// separation has a lower σ̂, but the gauge directions kept did not get the correction).
+  /// `before` when no effect was added.  When nothing is corrected (no effect applied, no gross
+  /// error removed, no non-linearity corrected) S is `before`'s and u_S, u_γ are at least
+  /// `before`'s at every point (tests/core/refine_u_raw.cpp).
   FourSensorResult after;
   Eigen::MatrixXd m_corrected_um;  ///< the readings `after` separates (applied effects only)
   Eigen::MatrixXd t_s;             ///< reading times used
