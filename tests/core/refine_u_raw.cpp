@@ -121,31 +121,68 @@ void report(const char* what, const Tally& t) {
       t.worst_gauge < 1e299 ? t.worst_gauge : 0.0);
 }
 
+// One case per sigma (each 3-5 s in release; the three sigmas of one effect took 9-15 s).
+void sweep(UndeclaredEffect effect, double sigma, Tally& t) {
+  for (std::uint64_t seed = 1; seed <= 20; ++seed)
+    check(effect, sigma, seed, t);
+  char what[64];
+  std::snprintf(what, sizeof what, "%s at sigma %.2f", to_string(effect), sigma);
+  report(what, t);
+}
+
 }  // namespace
 
-TEST_CASE("clean data, seeds 1-20 at sigma 0.05/0.1/0.2 um: u_S, u_gamma never below the raw ones",
+TEST_CASE("clean data, seeds 1-20 at sigma 0.05 um: u_S, u_gamma never below the raw ones",
           "[refine][sweep]") {
   Tally t;
-  for (double sigma : {0.05, 0.1, 0.2})
-    for (std::uint64_t seed = 1; seed <= 20; ++seed)
-      check(UndeclaredEffect::none, sigma, seed, t);
-  report("clean", t);
-  // Not vacuous: on clean data the loop corrects nothing in nearly every run (seeded: 60 of 60
-  // when this was written).
-  CHECK(t.nothing >= 50);
+  sweep(UndeclaredEffect::none, 0.05, t);
+  // Not vacuous: on clean data the loop corrects nothing in nearly every run (seeded: 20 of 20
+  // at each sigma when this was written).
+  CHECK(t.nothing >= 17);
+}
+
+TEST_CASE("clean data, seeds 1-20 at sigma 0.1 um: u_S, u_gamma never below the raw ones",
+          "[refine][sweep]") {
+  Tally t;
+  sweep(UndeclaredEffect::none, 0.1, t);
+  CHECK(t.nothing >= 17);
+}
+
+TEST_CASE("clean data, seeds 1-20 at sigma 0.2 um: u_S, u_gamma never below the raw ones",
+          "[refine][sweep]") {
+  Tally t;
+  sweep(UndeclaredEffect::none, 0.2, t);
+  CHECK(t.nothing >= 17);
+}
+
+// A drift of one configuration: detected, not identifiable from the single plan, declined
+// (errsep-refine-sweep: added in 65-70 % of runs, applied in none).
+TEST_CASE(
+    "a declined drift of one configuration, seeds 1-20 at sigma 0.05 um: u_S never below "
+    "the raw one",
+    "[refine][sweep]") {
+  Tally t;
+  sweep(UndeclaredEffect::drift_one, 0.05, t);
+  // Not vacuous: most runs detect the drift and decline it (seeded: 14 of 20 when written).
+  CHECK(t.declined >= 7);
 }
 
 TEST_CASE(
-    "a drift of one configuration (detected, not identifiable from the single plan, "
-    "declined): u_S never below the raw one",
+    "a declined drift of one configuration, seeds 1-20 at sigma 0.1 um: u_S never below "
+    "the raw one",
     "[refine][sweep]") {
   Tally t;
-  for (double sigma : {0.05, 0.1, 0.2})
-    for (std::uint64_t seed = 1; seed <= 20; ++seed)
-      check(UndeclaredEffect::drift_one, sigma, seed, t);
-  report("drift_one", t);
-  // Not vacuous: most runs detect the drift and decline it.
-  CHECK(t.declined >= 20);
+  sweep(UndeclaredEffect::drift_one, 0.1, t);
+  CHECK(t.declined >= 7);
+}
+
+TEST_CASE(
+    "a declined drift of one configuration, seeds 1-20 at sigma 0.2 um: u_S never below "
+    "the raw one",
+    "[refine][sweep]") {
+  Tally t;
+  sweep(UndeclaredEffect::drift_one, 0.2, t);
+  CHECK(t.declined >= 7);
 }
 
 TEST_CASE(
