@@ -635,9 +635,39 @@ FourSensorOptions linear_options(const FourSensorResult& sep, const FourSensorOp
 
 // The reported result for a model: which effects are applied (step_decision.hpp), the separation
 // of the readings corrected for them in the gauge of `before`, and the uncertainty they carry.
+// A term a step carries into the refined result's uncertainty: G·K·Gᵀ added to the covariance
+// of (S, γ, f), G = [G_S; G_γ; G_f] per unit of k parameters (µm, rad, µm), K (k × k) their
+// second moment.  Kept apart so that it can be carried again when a later step (the gross-error
+// removal, the non-linearity) separates the readings afresh: that separation's σ̂ and covariance
+// know nothing of what the steps before it carried.
+struct CarriedTerm {
+  Eigen::MatrixXd G_S, G_gamma_rad, G_f, K;
+  bool empty() const { return K.size() == 0; }
+};
+
+// Adds a carried term to a separation's u_S, u_γ, u_f (in quadrature) and to its covariance.
+// Returns what it added to u_S², pointwise (P; zeros for an empty term).
+Eigen::VectorXd carry(FourSensorResult& r, const CarriedTerm& t) {
+  const Eigen::Index P = r.S_um.size();
+  if (t.empty()) return Eigen::VectorXd::Zero(P);
+  auto var = [&](const Eigen::MatrixXd& G) {
+    return Eigen::VectorXd((G * t.K).cwiseProduct(G).rowwise().sum().cwiseMax(0.0));
+  };
+  const Eigen::VectorXd vS = var(t.G_S);
+  auto widen = [](Eigen::VectorXd& u, const Eigen::VectorXd& v) {
+    if (u.size() == v.size()) u = (u.array().square() + v.array()).sqrt();
+  };
+  widen(r.u_S_um, vS);
+  widen(r.u_gamma_rad, var(t.G_gamma_rad));
+  widen(r.u_f_um, var(t.G_f));
+  if (r.covariance) r.covariance->add_low_rank(t.G_S, t.G_gamma_rad, t.G_f, t.K);
+  return vS.size() == P ? vS : Eigen::VectorXd::Zero(P);
+}
+
 struct Reported {
   FourSensorResult sep;
   Eigen::MatrixXd m_c;  // the readings `sep` separates
+  CarriedTerm term;     // what the effects carried into `sep` (applied or not)
   std::vector<StepDecision> decisions;
   std::vector<StepDecision> at_zero;  // the same decisions linearised about zero (linear_at_zero)
   std::vector<bool> applied;
@@ -850,15 +880,8 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
   GS << D_S, D_S_gauge;
   Gg << D_g, D_g_gauge;
   Gf.leftCols(K) = D_f;
-  auto widen = [&](Eigen::VectorXd& u, const Eigen::MatrixXd& D, double scale) {
-    if (u.size() != D.rows()) return;
-    const Eigen::VectorXd var = (D * G).cwiseProduct(D).rowwise().sum();
-    u = (u.array().square() + (scale * scale) * var.array().max(0.0)).sqrt();
-  };
-  widen(after.u_S_um, GS, 1.0);
-  widen(after.u_gamma_rad, Gg, 1e-6);
-  widen(after.u_f_um, Gf, 1.0);
-  if (after.covariance) after.covariance->add_low_rank(GS, 1e-6 * Gg, Gf, G);
+  rep.term = CarriedTerm{GS, 1e-6 * Gg, Gf, G};
+  carry(after, rep.term);
   rep.sep = std::move(after);
   return rep;
 }
@@ -949,6 +972,74 @@ DeclaredTerm declared_term(const FourSensorConfig& cfg, const Model& M, const So
     c += k;
   }
   return out;
+}
+
+// The gauge floor.  The refined S and γ keep the raw separation's constant, line and bow of S
+// and constant and line of γ (report_model: a step never moves what the data cannot see), so
+// their error in those directions is the raw separation's error there, whatever the later
+// separations' σ̂: when a correction lowers the residual (an applied effect, a removed spike, a
+// corrected non-linearity), the fresh separation's σ̂ falls and its covariance, gauge directions
+// included, with it, but the gauge directions of the result did not get the correction.  So the
+// refined covariance of those five functionals, q = [Q_Sᵀ S (µm); Q_γᵀ γ (µrad)] with Q_S, Q_γ
+// orthonormal bases of the polynomials remove_polynomial removes, must be at least the raw
+// separation's: what it lacks, the positive part of K_raw − K_refined, is added.  When nothing
+// was corrected the refined covariance already holds the raw one (it is the raw separation plus
+// the declined effects' terms) and the floor adds nothing.  Measured (errsep-refine-sweep --plan
+// single, seeds 1-20 / 21-40): effect bump, seed 14, σ 0.05: three readings of the bump removed as
+// spikes, u_S 1.38 -> 0.54 um rms without the floor, 1.21 with it (raw 1.38; the shape's share
+// stays at the lower σ̂); no cell's coverage of u_S fell; pe1 at 0.05 rose 0.985 -> 0.998 and
+// 0.946 -> 0.998 (over 0.99: the raw σ̂ the gauge keeps holds PE1's misfit).
+Eigen::MatrixXd polynomial_basis(Eigen::Index n, int degree) {
+  const Eigen::Index m = std::min<Eigen::Index>(degree + 1, n);
+  Eigen::MatrixXd B(n, m);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const double t = n > 1 ? 2.0 * static_cast<double>(i) / static_cast<double>(n - 1) - 1.0 : 0.0;
+    double v = 1.0;
+    for (Eigen::Index d = 0; d < m; ++d, v *= t)
+      B(i, d) = v;
+  }
+  const Eigen::HouseholderQR<Eigen::MatrixXd> qr(B);
+  return qr.householderQ() * Eigen::MatrixXd::Identity(n, m);
+}
+
+CarriedTerm gauge_floor(const FourSensorConfig& cfg, const FourSensorResult& raw,
+                        const FourSensorResult& refined) {
+  const int P = cfg.positions(), N = cfg.N;
+  const Eigen::MatrixXd QS = polynomial_basis(P, 2), Qg = polynomial_basis(P, 1);
+  const Eigen::Index kS = QS.cols(), k = kS + Qg.cols();
+  // Functional j: a_j·S + b_j·γ (γ in rad, so b in 1e6 per rad for µrad).
+  Eigen::MatrixXd A = Eigen::MatrixXd::Zero(P, k), B = Eigen::MatrixXd::Zero(P, k);
+  A.leftCols(kS) = QS;
+  B.rightCols(k - kS) = 1e6 * Qg;
+  auto functionals = [&](FourSensorCovariance& c) {
+    Eigen::MatrixXd K(k, k);
+    Eigen::VectorXd v(k);
+    for (Eigen::Index i = 0; i < k; ++i)
+      v(i) = c.variance(A.col(i), B.col(i), {});
+    for (Eigen::Index i = 0; i < k; ++i) {
+      K(i, i) = v(i);
+      for (Eigen::Index j = i + 1; j < k; ++j)
+        K(i, j) = K(j, i) =
+            0.5 * (c.variance(A.col(i) + A.col(j), B.col(i) + B.col(j), {}) - v(i) - v(j));
+    }
+    return K;
+  };
+  const Eigen::MatrixXd Kr = functionals(*raw.covariance), Ka = functionals(*refined.covariance);
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Kr - Ka);
+  // Negative eigenvalues (the refined result already holds more there) and rounding are dropped.
+  const double tiny = 1e-9 * std::max(Kr.trace(), 1e-300);
+  Eigen::VectorXd ev = es.eigenvalues();
+  for (Eigen::Index i = 0; i < ev.size(); ++i)
+    if (!(ev(i) > tiny)) ev(i) = 0.0;
+  CarriedTerm t;
+  t.K = es.eigenvectors() * ev.asDiagonal() * es.eigenvectors().transpose();
+  t.G_S = Eigen::MatrixXd::Zero(P, k);
+  t.G_S.leftCols(kS) = QS;
+  t.G_gamma_rad = Eigen::MatrixXd::Zero(P, k);
+  t.G_gamma_rad.rightCols(k - kS) = 1e-6 * Qg;
+  t.G_f = Eigen::MatrixXd::Zero(N, k);
+  if (ev.maxCoeff() <= 0.0) t.K.resize(0, 0);
+  return t;
 }
 
 }  // namespace
@@ -1373,44 +1464,63 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
     res.trace = trace_residual(traced, cur.m_c, RecordedVariables{t_s, opts.recorded_direction, {}},
                                opts.trace);
   }
+  // Each step below separates the readings afresh, with its own σ̂ and covariance: what the
+  // steps before it carried (CarriedTerm) is carried again, as it is, not as the excess of the
+  // refined u over the raw one (that excess is negative, and the term was dropped, whenever the
+  // fresh σ̂ fell below the raw one: the gross errors' sizes under a non-linearity, the effects'
+  // covariance under a gross error).
+  Eigen::VectorXd v_effects = Eigen::VectorXd::Zero(P);
+  if (!M.effects.empty()) {
+    // report_model's term, pointwise, as it went into `after`.
+    const CarriedTerm& t = current.term;
+    if (!t.empty()) v_effects = (t.G_S * t.K).cwiseProduct(t.G_S).rowwise().sum().cwiseMax(0.0);
+  }
+  Eigen::VectorXd v_gross_S, v_gross_g, v_gross_f;  // what the gross-error step carried, pointwise
   if (res.gross.found() && opts.remove_gross_errors) {
     FourSensorResult without = separate_without_gross_errors(cfg, res.m_corrected_um, &res.gross,
                                                              res.after, opts.solve, opts.decision);
-    // What the effects added to u (their covariance, the size of those left out) stays: the
-    // excess of the refined u over the raw separation's, in quadrature.
-    auto keep = [](Eigen::VectorXd& u, const Eigen::VectorXd& refined,
-                   const Eigen::VectorXd& raw_u) {
-      if (u.size() != refined.size() || u.size() != raw_u.size()) return;
-      u = (u.array().square() + (refined.array().square() - raw_u.array().square()).max(0.0))
-              .sqrt();
-    };
-    keep(without.u_S_um, res.after.u_S_um, res.before.u_S_um);
-    keep(without.u_gamma_rad, res.after.u_gamma_rad, res.before.u_gamma_rad);
-    keep(without.u_f_um, res.after.u_f_um, res.before.u_f_um);
-    res.after = std::move(without);
     res.m_corrected_um -= res.gross.correction_um;
     res.gross_removed = true;
+    v_gross_S = without.u_S_um.array().square();
+    v_gross_g = without.u_gamma_rad.array().square();
+    v_gross_f = without.u_f_um.array().square();
+    carry(without, current.term);
+    res.after = std::move(without);
   }
   if (opts.correct_nonlinearity) {
     FourSensorResult without =
         separate_without_nonlinearity(cfg, res.m_corrected_um, res.trace, res.after, opts.solve,
                                       &res.nonlinearity, opts.decision);
     if (res.nonlinearity.detected) {
-      // As above: what the steps before added to u stays.
-      for (auto [u, refined, raw_u] :
-           {std::tuple{&without.u_S_um, &res.after.u_S_um, &res.before.u_S_um},
-            std::tuple{&without.u_gamma_rad, &res.after.u_gamma_rad, &res.before.u_gamma_rad},
-            std::tuple{&without.u_f_um, &res.after.u_f_um, &res.before.u_f_um}})
-        if (u->size() == refined->size() && u->size() == raw_u->size())
-          *u =
-              (u->array().square() + (refined->array().square() - raw_u->array().square()).max(0.0))
-                  .sqrt();
+      carry(without, current.term);
+      if (res.gross_removed) {
+        // The gross-error step's own term, pointwise: its u over the fresh separation of the
+        // same readings (its low-rank form stays inside gross_errors.cpp, so the covariance
+        // object does not get it here).
+        const FourSensorResult fresh = separate_four_sensor(cfg, res.m_corrected_um, opts.solve);
+        auto add = [](Eigen::VectorXd& u, const Eigen::VectorXd& with2,
+                      const Eigen::VectorXd& fresh_u) {
+          if (u.size() == with2.size() && u.size() == fresh_u.size())
+            u = (u.array().square() + (with2.array() - fresh_u.array().square()).max(0.0)).sqrt();
+        };
+        add(without.u_S_um, v_gross_S, fresh.u_S_um);
+        add(without.u_gamma_rad, v_gross_g, fresh.u_gamma_rad);
+        add(without.u_f_um, v_gross_f, fresh.u_f_um);
+      }
       if (res.nonlinearity.applied)
         res.m_corrected_um -=
             res.nonlinearity.c2_per_um *
             (res.m_corrected_um.array() - res.nonlinearity.mid_um).square().matrix();
       res.after = std::move(without);
     }
+  }
+  // The gauge floor (refine.hpp RefineResult::u_S_gauge_um).
+  res.u_S_effects_um = v_effects.cwiseSqrt();
+  res.u_S_gauge_um = Eigen::VectorXd::Zero(P);
+  if (res.after.covariance && res.before.covariance &&
+      res.after.covariance != res.before.covariance) {
+    const CarriedTerm floor = gauge_floor(cfg, res.before, res.after);
+    res.u_S_gauge_um = carry(res.after, floor).cwiseSqrt();
   }
   res.u_S_declared_um = Eigen::VectorXd::Zero(P);
   if (!opts.declared.empty()) {

@@ -233,8 +233,12 @@ struct RefineResult {
   /// raw readings' separation: a step never moves what the data cannot see), and u_S, u_γ, u_f
   /// (and the covariance) carrying the applied parameters' covariance, the fitted size of the
   /// effects left out, the part of each effect this plan cannot determine, and what every effect
-  /// did to the gauge directions of `before` (kept, so their error stays).
-  /// `before` when no effect was added.
+  /// did to the gauge directions of `before` (kept, so their error stays), and at least
+  /// `before`'s covariance of those gauge directions (u_S_gauge_um: a correction's fresh
+  /// separation has a lower σ̂, but the gauge directions kept did not get the correction).
+  /// `before` when no effect was added.  When nothing is corrected (no effect applied, no gross
+  /// error removed, no non-linearity corrected) S is `before`'s and u_S, u_γ are at least
+  /// `before`'s at every point (tests/core/refine_u_raw.cpp).
   FourSensorResult after;
   Eigen::MatrixXd m_corrected_um;  ///< the readings `after` separates (applied effects only)
   Eigen::MatrixXd t_s;             ///< reading times used
@@ -250,6 +254,13 @@ struct RefineResult {
   /// none is declared), and one line per declared bound saying what it added ("Type B").
   Eigen::VectorXd u_S_declared_um;
   std::vector<std::string> declared_notes;
+  /// P: terms of the refined u_S (in quadrature, µm): what the added effects carry (their
+  /// covariance if applied, their fitted size if not, the part the plan cannot determine and
+  /// what they did to the gauge directions; zeros when none was added), and the gauge floor:
+  /// what restores the raw separation's uncertainty of the constant, line and bow of S (and
+  /// constant and line of γ) that the refined result keeps, when a correction's fresh separation
+  /// (lower σ̂) holds less there (zeros when nothing was corrected).
+  Eigen::VectorXd u_S_effects_um, u_S_gauge_um;
   /// True when the final residual passes the whiteness test.  False means the model is still
   /// missing something even if no candidate in the library was significant.
   bool residual_white() const { return residual.whiteness.white; }
