@@ -70,10 +70,11 @@ bool RefineOptions::is_valid(std::string* why) const {
   return residual.is_valid(why);
 }
 
-Eigen::MatrixXd remove_polynomial(const Eigen::MatrixXd& D, int degree) {
-  const Eigen::Index n = D.rows();
+namespace {
+// An orthonormal basis (n × min(degree+1, n)) of the polynomials of up to `degree` on n equally
+// spaced points (Legendre-like abscissae in [-1, 1] for conditioning).
+Eigen::MatrixXd polynomial_basis(Eigen::Index n, int degree) {
   const Eigen::Index m = std::min<Eigen::Index>(degree + 1, n);
-  if (m <= 0 || D.cols() == 0) return D;
   Eigen::MatrixXd B(n, m);
   for (Eigen::Index i = 0; i < n; ++i) {
     const double t = n > 1 ? 2.0 * static_cast<double>(i) / static_cast<double>(n - 1) - 1.0 : 0.0;
@@ -82,7 +83,13 @@ Eigen::MatrixXd remove_polynomial(const Eigen::MatrixXd& D, int degree) {
       B(i, d) = v;
   }
   const Eigen::HouseholderQR<Eigen::MatrixXd> qr(B);
-  const Eigen::MatrixXd Q = qr.householderQ() * Eigen::MatrixXd::Identity(n, m);
+  return qr.householderQ() * Eigen::MatrixXd::Identity(n, m);
+}
+}  // namespace
+
+Eigen::MatrixXd remove_polynomial(const Eigen::MatrixXd& D, int degree) {
+  if (degree + 1 <= 0 || D.rows() == 0 || D.cols() == 0) return D;
+  const Eigen::MatrixXd Q = polynomial_basis(D.rows(), degree);
   return D - Q * (Q.transpose() * D);
 }
 
@@ -989,19 +996,6 @@ DeclaredTerm declared_term(const FourSensorConfig& cfg, const Model& M, const So
 // spikes, u_S 1.38 -> 0.54 um rms without the floor, 1.21 with it (raw 1.38; the shape's share
 // stays at the lower σ̂); no cell's coverage of u_S fell; pe1 at 0.05 rose 0.985 -> 0.998 and
 // 0.946 -> 0.998 (over 0.99: the raw σ̂ the gauge keeps holds PE1's misfit).
-Eigen::MatrixXd polynomial_basis(Eigen::Index n, int degree) {
-  const Eigen::Index m = std::min<Eigen::Index>(degree + 1, n);
-  Eigen::MatrixXd B(n, m);
-  for (Eigen::Index i = 0; i < n; ++i) {
-    const double t = n > 1 ? 2.0 * static_cast<double>(i) / static_cast<double>(n - 1) - 1.0 : 0.0;
-    double v = 1.0;
-    for (Eigen::Index d = 0; d < m; ++d, v *= t)
-      B(i, d) = v;
-  }
-  const Eigen::HouseholderQR<Eigen::MatrixXd> qr(B);
-  return qr.householderQ() * Eigen::MatrixXd::Identity(n, m);
-}
-
 CarriedTerm gauge_floor(const FourSensorConfig& cfg, const FourSensorResult& raw,
                         const FourSensorResult& refined) {
   const int P = cfg.positions(), N = cfg.N;
