@@ -13,6 +13,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cstring>
+#include <mutex>
 #include <stdexcept>
 #include <vector>
 
@@ -67,25 +68,44 @@ struct ModbusTcpServer::Impl {
   modbus_t* ctx = nullptr;
   int listen_fd = -1;
   std::vector<Connection> conns;
-  std::atomic<std::uint64_t> accepted{0}, requests{0}, evictions{0}, idle_timeouts{0},
-      frame_timeouts{0}, malformed{0}, closed_by_peer{0}, send_failures{0};
-  std::atomic<int> nconns{0};
+  // The counters and the open count change together under one lock, so that a snapshot taken
+  // from another thread always accounts for every connection admitted (a closing counted but
+  // not yet removed read as both open and closed).  The serving thread is not the sampling
+  // thread; it takes the lock once per connection event or request.
+  mutable std::mutex mu;
+  ModbusTcpServerStats counts;
 
   ~Impl() {
     close_all();
     if (listen_fd >= 0) ::close(listen_fd);
     if (ctx) modbus_free(ctx);
   }
-  void close_at(std::size_t i) {
+  void count(std::uint64_t ModbusTcpServerStats::*counter) {
+    const std::lock_guard lock(mu);
+    ++(counts.*counter);
+  }
+  /// Closes conns[i] and counts why, in one step.
+  void close_at(std::size_t i, std::uint64_t ModbusTcpServerStats::*reason) {
     ::close(conns[i].fd);
     conns.erase(conns.begin() + static_cast<std::ptrdiff_t>(i));
-    nconns.store(static_cast<int>(conns.size()));
+    const std::lock_guard lock(mu);
+    ++(counts.*reason);
+    counts.connections = static_cast<int>(conns.size());
   }
+  void admit(const Connection& c) {
+    conns.push_back(c);
+    const std::lock_guard lock(mu);
+    ++counts.accepted;
+    counts.connections = static_cast<int>(conns.size());
+  }
+  /// Closes every connection (on a handler's request, or at the end of run()): the server's own
+  /// close, counted under no reason (as before this lock was added).
   void close_all() {
     for (const auto& c : conns)
       ::close(c.fd);
     conns.clear();
-    nconns.store(0);
+    const std::lock_guard lock(mu);
+    counts.connections = 0;
   }
 };
 
@@ -153,21 +173,19 @@ void ModbusTcpServer::run(const std::atomic<bool>& stop) {
                              [fd](const Connection& c) { return c.fd == fd; });
       if (it == m.conns.end()) continue;
       auto idx = static_cast<std::size_t>(it - m.conns.begin());
-      bool closed = false;
+      std::uint64_t ModbusTcpServerStats::*closed_for = nullptr;
       bool close_all = false;
-      for (int served = 0; served < kRequestsPerWakeup && !closed;) {
+      for (int served = 0; served < kRequestsPerWakeup && !closed_for;) {
         Connection& c = m.conns[idx];
         const int want = needed(c);
         if (want < 0) {
-          m.malformed.fetch_add(1);
-          closed = true;
+          closed_for = &ModbusTcpServerStats::malformed;
           break;
         }
         const ssize_t got =
             ::recv(c.fd, c.buf.data() + c.have, static_cast<std::size_t>(want - c.have), 0);
         if (got == 0 || (got < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)) {
-          m.closed_by_peer.fetch_add(1);
-          closed = true;
+          closed_for = &ModbusTcpServerStats::closed_by_peer;
           break;
         }
         if (got < 0) break;  // nothing more now: keep what was gathered
@@ -180,7 +198,7 @@ void ModbusTcpServer::run(const std::atomic<bool>& stop) {
         c.have = 0;
         c.last_request = now;
         ++served;
-        m.requests.fetch_add(1);
+        m.count(&ModbusTcpServerStats::requests);
         modbus_set_socket(m.ctx, c.fd);
         const auto action = handler_(m.ctx, c.buf.data(), length);
         std::fill(c.buf.begin(), c.buf.end(), std::uint8_t{0});
@@ -188,16 +206,14 @@ void ModbusTcpServer::run(const std::atomic<bool>& stop) {
           close_all = true;
           break;
         }
-        if (action == ModbusConnectionAction::close) {
-          m.send_failures.fetch_add(1);
-          closed = true;
-        }
+        if (action == ModbusConnectionAction::close)
+          closed_for = &ModbusTcpServerStats::send_failures;
       }
       if (close_all) {
         m.close_all();
         break;
       }
-      if (closed) m.close_at(idx);
+      if (closed_for) m.close_at(idx, closed_for);
     }
 
     // Time-outs, only of connections with nothing waiting to be read: bytes that have come are
@@ -207,11 +223,9 @@ void ModbusTcpServer::run(const std::atomic<bool>& stop) {
       const Connection& c = m.conns[i];
       if (std::find(ready.begin(), ready.end(), c.fd) != ready.end()) continue;
       if (c.have > 0 && now - c.frame_start > frame_limit) {
-        m.frame_timeouts.fetch_add(1);
-        m.close_at(i);
+        m.close_at(i, &ModbusTcpServerStats::frame_timeouts);
       } else if (c.have == 0 && now - c.last_request > idle_limit) {
-        m.idle_timeouts.fetch_add(1);
-        m.close_at(i);
+        m.close_at(i, &ModbusTcpServerStats::idle_timeouts);
       }
     }
 
@@ -225,15 +239,13 @@ void ModbusTcpServer::run(const std::atomic<bool>& stop) {
                                                [](const Connection& a, const Connection& b) {
                                                  return a.last_request < b.last_request;
                                                });
-          m.evictions.fetch_add(1);
-          m.close_at(static_cast<std::size_t>(oldest - m.conns.begin()));
+          m.close_at(static_cast<std::size_t>(oldest - m.conns.begin()),
+                     &ModbusTcpServerStats::evictions);
         }
         Connection c;
         c.fd = fd;
         c.last_request = now;
-        m.conns.push_back(c);
-        m.accepted.fetch_add(1);
-        m.nconns.store(static_cast<int>(m.conns.size()));
+        m.admit(c);
       }
     }
   }
@@ -241,18 +253,8 @@ void ModbusTcpServer::run(const std::atomic<bool>& stop) {
 }
 
 ModbusTcpServerStats ModbusTcpServer::stats() const noexcept {
-  const Impl& m = *impl_;
-  ModbusTcpServerStats s;
-  s.accepted = m.accepted.load();
-  s.requests = m.requests.load();
-  s.evictions = m.evictions.load();
-  s.idle_timeouts = m.idle_timeouts.load();
-  s.frame_timeouts = m.frame_timeouts.load();
-  s.malformed = m.malformed.load();
-  s.closed_by_peer = m.closed_by_peer.load();
-  s.send_failures = m.send_failures.load();
-  s.connections = m.nconns.load();
-  return s;
+  const std::lock_guard lock(impl_->mu);
+  return impl_->counts;
 }
 
 }  // namespace errsep::drivers
