@@ -20,7 +20,8 @@ int main(int argc, char** argv) {
   CLI::App app{
       "errsep-refine-sweep: run the refinement loop (errsep-refine) over simulated four-sensor "
       "scans of random smooth profiles, each with one effect the model does not declare (every "
-      "effect of the library, plus a sensor non-linearity and a bump that it lacks), and print "
+      "effect of the library, plus a sensor non-linearity, a bump and a hysteresis that it "
+      "lacks; the sequence refine fits the hysteresis), and print "
       "per effect and noise level how often the effect is identified, the S and gamma errors "
       "before and after, how often the result was made worse and the coverage of u_S."};
   app.set_version_flag("--version", std::string("errsep ") + errsep::kVersion);
@@ -35,9 +36,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--seed0", seed0, "first seed")->capture_default_str();
   app.add_option("--sigma", sigmas, "noise levels, um")->delimiter(',')->capture_default_str();
-  app.add_option("--effects", effects,
-                 "effects (none, pe1, gain, drift_one, drift_all, pe2, periodic, thermal_one, "
-                 "thermal_all, traverse, nonlinearity, bump); default all")
+  std::string effect_names;
+  for (const auto e : errsep::core::all_undeclared_effects())
+    effect_names += std::string(effect_names.empty() ? "" : ", ") + errsep::core::to_string(e);
+  app.add_option("--effects", effects, "effects (" + effect_names + "); default all")
       ->delimiter(',');
   app.add_option("--size", size, "scale of the effects' drawn sizes")->capture_default_str();
   app.add_flag("--runs", per_run, "print every run");

@@ -269,6 +269,17 @@ PlanChoice identifying_plan(UndeclaredEffect effect, const FourSensorConfig& cfg
     return c;
   }
   switch (effect) {
+    case UndeclaredEffect::hysteresis:
+      // SequenceHysteresis is identifiable on any plan that reads a configuration both ways.
+      // The reversed plan reads every configuration both ways and averages the lag out of S
+      // (nothing to correct: the effect never doubles the error there); the serpentine reads
+      // configurations 2 and 4 one way only, so the lag biases S and h, determined by
+      // configuration 1's two directions, is what corrects it: the plan that shows the loop.
+      c.plan = ScanSequenceKind::serpentine;
+      c.why =
+          "SequenceHysteresis needs a configuration read both ways; serpentine (reversed "
+          "averages the lag out of S: nothing to correct)";
+      return c;
     case UndeclaredEffect::nonlinearity: {
       // SequenceNonlinearity is identifiable exactly on a plan that re-zeroes the sensor.
       for (const ScanSequenceKind k : {ScanSequenceKind::closing_pass, ScanSequenceKind::reversed,
@@ -405,6 +416,11 @@ SweepRun evaluate_sequence_run(UndeclaredEffect effect, const ScanSequence& seq,
       description = buf;
       break;
     }
+    case UndeclaredEffect::hysteresis:
+      fx.hysteresis_um = k * hysteresis_size_um(draw);
+      std::snprintf(buf, sizeof buf, "sensor hysteresis %.3g um", fx.hysteresis_um);
+      description = buf;
+      break;
     case UndeclaredEffect::nonlinearity: {
       // As simulate_undeclared: relative to the noise-free readings' range (all traverses, the
       // re-zeroed ones included), q of the half range at its ends.
@@ -450,9 +466,11 @@ SweepRun evaluate_sequence_run(UndeclaredEffect effect, const ScanSequence& seq,
   if (r.knock.fitted) run.model += std::string(run.model.empty() ? "" : "+") + "knock";
   if (r.nonlinearity.applied)
     run.model += std::string(run.model.empty() ? "" : "+") + "nonlinearity";
+  if (r.hysteresis.applied) run.model += std::string(run.model.empty() ? "" : "+") + "hysteresis";
   if (run.model.empty()) run.model = "base";
-  run.added = !r.added.empty() || r.knock.fitted || r.nonlinearity.applied;
-  run.applied = !r.added.empty() || r.knock.applied || r.nonlinearity.applied;
+  run.added = !r.added.empty() || r.knock.fitted || r.nonlinearity.applied || r.hysteresis.applied;
+  run.applied =
+      !r.added.empty() || r.knock.applied || r.nonlinearity.applied || r.hysteresis.applied;
   SequenceEffectKind kind{};
   if (sequence_kind_of(effect, &kind)) {
     for (const auto& a : r.added)
@@ -467,6 +485,12 @@ SweepRun evaluate_sequence_run(UndeclaredEffect effect, const ScanSequence& seq,
                       id.identifiable_from_plan ? "" : " (not identifiable)");
         run.identifiability = buf;
       }
+  } else if (effect == UndeclaredEffect::hysteresis) {
+    run.identified = r.hysteresis.detected;
+    run.identifiable_from_plan = r.hysteresis.identifiable;
+    run.identifiability = r.hysteresis.identifiable
+                              ? "hysteresis: the plan reads a configuration both ways"
+                              : "hysteresis: the plan reads every configuration one way";
   } else if (effect == UndeclaredEffect::nonlinearity) {
     run.identified = r.nonlinearity.detected;
     run.identifiable_from_plan = r.nonlinearity.identifiable;
@@ -519,7 +543,7 @@ SweepCell run_sweep_cell_on(ScanSequenceKind plan, UndeclaredEffect effect, doub
 MustShow must_show(const std::vector<SweepCell>& cells) {
   MustShow m;
   for (const auto& c : cells) {
-    const bool library = !library_effect_name(c.effect).empty();
+    const bool library = in_refine_library(c.effect, c.plan == ScanSequenceKind::single);
     for (const auto& r : c.runs) {
       m.points += r.points;
       m.covered += r.covered;

@@ -1,5 +1,6 @@
 #include "errsep/core/undeclared_effect_simulation.hpp"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -33,6 +34,7 @@ constexpr Name kNames[] = {
     {UndeclaredEffect::traverse, "traverse", "traverse"},
     {UndeclaredEffect::nonlinearity, "nonlinearity", ""},
     {UndeclaredEffect::bump, "bump", ""},
+    {UndeclaredEffect::hysteresis, "hysteresis", ""},
 };
 
 // Legendre P_k(u), k = 0..3.
@@ -73,6 +75,21 @@ std::string library_effect_name(UndeclaredEffect e) {
   for (const auto& n : kNames)
     if (n.e == e) return n.library;
   return {};
+}
+
+bool in_refine_library(UndeclaredEffect e, bool plan_is_single) {
+  if (plan_is_single) return !library_effect_name(e).empty();
+  switch (e) {
+    case UndeclaredEffect::drift_one:
+    case UndeclaredEffect::drift_all:
+    case UndeclaredEffect::thermal_one:
+    case UndeclaredEffect::thermal_all:
+    case UndeclaredEffect::traverse:
+    case UndeclaredEffect::hysteresis:
+      return true;
+    default:
+      return false;
+  }
 }
 
 RandomTruthOptions UndeclaredCaseOptions::wavy_reference() {
@@ -245,6 +262,23 @@ UndeclaredCase simulate_undeclared(UndeclaredEffect effect, const UndeclaredCase
       }
       std::snprintf(buf, sizeof buf, "bump on traverse %d: %.3g um, %.3g mm wide at %.4g mm", i + 1,
                     h, w, x0);
+      c.description = buf;
+      break;
+    }
+    case UndeclaredEffect::hysteresis: {
+      // The sensor reads r - h sign(dr/dt) (SequenceEffects::hysteresis_um): on one forward scan
+      // the sign of each configuration's noise-free reading's change along x.
+      (void)draw.pick(0, 3);  // as the sequence generator draws, so one seed gives the same h
+      const double h = k * hysteresis_size_um(draw);
+      FourSensorSimOptions s0 = so;
+      s0.sigma_um = 0;
+      const Eigen::MatrixXd r = simulate_four_sensor(cfg, truth, s0).m_um;
+      for (int i = 0; i < 4; ++i)
+        for (int n = 0; n < P; ++n) {
+          const double slope = r(std::min(n + 1, P - 1), i) - r(std::max(n - 1, 0), i);
+          c.m_um(n, i) -= h * (slope > 0 ? 1.0 : slope < 0 ? -1.0 : 0.0);
+        }
+      std::snprintf(buf, sizeof buf, "sensor hysteresis %.3g um", h);
       c.description = buf;
       break;
     }

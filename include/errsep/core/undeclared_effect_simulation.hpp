@@ -48,14 +48,20 @@ enum class UndeclaredEffect {
   traverse,
   nonlinearity,
   bump,
+  hysteresis,  ///< the sensor lags by h against the direction its reading changes
 };
 const char* to_string(UndeclaredEffect e);
 std::optional<UndeclaredEffect> undeclared_effect_from_string(std::string_view s);
 /// Every kind, none first.
 std::vector<UndeclaredEffect> all_undeclared_effects();
 /// The name of the library effect (model_effect.hpp) that describes it; empty for none and for
-/// the effects the library lacks (nonlinearity, bump).
+/// the effects the single-scan library lacks (nonlinearity, bump, hysteresis).
 std::string library_effect_name(UndeclaredEffect e);
+/// Whether the refine that runs on `plan_is_single` (one scan: refine_four_sensor; else the
+/// sequence refine) has a model of the effect: the single-scan library's effects on one scan;
+/// on a scan sequence those the sequence refine fits (drift, thermal drift, a non-repeating
+/// traverse, the hysteresis; its non-linearity test is a finding, not a library effect).
+bool in_refine_library(UndeclaredEffect e, bool plan_is_single);
 
 struct UndeclaredCaseOptions {
   FourSensorConfig cfg;  ///< Zhao 2019 Example 1 geometry by default (N = 69, s = 1, 1, 5)
@@ -86,6 +92,13 @@ class UndeclaredEffectDraws {
  private:
   std::mt19937_64 rng_;
 };
+
+/// A hysteresis's h (um) for one seed, on one scan and on a sequence alike: large enough to at
+/// least double the clean S error at the noise levels of real sensors (measured: see
+/// refine_sweep.cpp).
+inline double hysteresis_size_um(UndeclaredEffectDraws& draw) {
+  return draw.uni(0.5, 1.5);
+}
 
 /// The sensor noise's seed for an undeclared case of `seed` (the simulators' own stream).
 inline std::uint64_t undeclared_noise_seed(std::uint64_t seed) {
