@@ -125,6 +125,11 @@ struct TwoAxisResult {
   /// Predicted rms error of w's shape with and without Eqs. (22)-(27) (see above).
   double predicted_rms_on_um = std::numeric_limits<double>::quiet_NaN();
   double predicted_rms_off_um = std::numeric_limits<double>::quiet_NaN();
+  /// The terms of predicted_rms_off_um: the rotation terms' shape beyond their noise (B above)
+  /// and the noise of that shape (√(mean u²(b̂) − Var(mean b̂))), µm.  The refine
+  /// (displacement_refine.hpp) re-takes the automatic decision with them.
+  double rotation_bias_um = std::numeric_limits<double>::quiet_NaN();
+  double rotation_terms_noise_um = std::numeric_limits<double>::quiet_NaN();
   std::string rotation_note;  ///< the decision and both figures, one line
   std::string gauge;          ///< what the method cannot determine, said once
   double seconds = 0;         ///< time of the separation
