@@ -273,32 +273,41 @@ int decide_rotation(
                                              base.rotation_bias_um * base.rotation_bias_um);
   const double u_b2 = base.rotation_terms_noise_um * base.rotation_terms_noise_um;
 
-  // The explanations: the effects taken, and those with each identifiable family not taken
-  // (thermal: its variant that fits best).
+  // The explanations of the residual: the effects taken; those with one identifiable family not
+  // taken added (thermal: every τ of the library's grid); and a taken thermal drift at every τ of
+  // the grid (τ is poorly determined when the drift settles within a scan, and what the drift
+  // puts into b̂ changes with it: seed 1607 of the diagonal case, τ̂ 216 s, 120-400 s not
+  // rejected, the truth 374 s).  The first n_taken effects are corrected by the refine.
+  struct Explanation {
+    std::vector<const DisplacementEffect*> fx;
+    std::size_t n_taken = 0;
+  };
   std::vector<const DisplacementEffect*> taken;
   for (const auto& e : chosen)
     taken.push_back(&e);
-  std::vector<std::vector<const DisplacementEffect*>> explanations = {taken};
+  std::vector<Explanation> explanations = {{taken, taken.size()}};
   std::vector<std::string> families;
   for (const auto& e : lib.effects)
     if (e.identifiable && std::find(families.begin(), families.end(), e.family) == families.end())
       families.push_back(e.family);
+  for (std::size_t t = 0; t < taken.size(); ++t)
+    if (taken[t]->family == "thermal")
+      for (const auto& e : lib.effects)
+        if (e.family == "thermal" && e.identifiable) {
+          auto fx = taken;
+          fx[t] = &e;
+          explanations.push_back({fx, fx.size()});
+        }
   for (const auto& f : families) {
     if (std::any_of(chosen.begin(), chosen.end(),
                     [&](const DisplacementEffect& c) { return c.family == f; }))
       continue;
-    const DisplacementEffect* best = nullptr;
-    double best_rss = std::numeric_limits<double>::infinity();
     for (const auto& e : lib.effects) {
       if (e.family != f || !e.identifiable) continue;
       auto fx = taken;
       fx.push_back(&e);
-      const double rss = detail::least_squares(columns(fx), y).rss;
-      if (rss < best_rss) best_rss = rss, best = &e;
+      explanations.push_back({fx, taken.size()});
     }
-    auto fx = taken;
-    fx.push_back(best);
-    explanations.push_back(fx);
   }
 
   // Per explanation: its Akaike criterion (χ² of the whitened residual + 2 parameters, a
@@ -310,7 +319,7 @@ int decide_rotation(
   };
   std::vector<Explained> ex;
   const Eigen::Index N = b_hat.size();
-  for (const auto& fx : explanations) {
+  for (const auto& [fx, n_taken] : explanations) {
     // E_on = noise + what the artefacts do to w with Eqs. (22)-(27); E_off = noise + what they do
     // without + the share of b̂ they do not explain (taken to be a rotation).  The effects taken
     // are corrected by the refine (their fit's variance); an effect not taken is left in the
@@ -323,13 +332,18 @@ int decide_rotation(
       K += e->residual_columns.cols();
     const detail::LsFit fit = detail::least_squares(columns(fx), y);
     x.aic = fit.rss + 2.0 * static_cast<double>(K);
-    if (fx.size() > taken.size() && fx.back()->family == "thermal") x.aic += 2.0;
+    for (const auto* e : fx)  // τ chosen from the grid: one parameter more
+      if (e->family == "thermal" &&
+          std::find(e->parameters.begin(), e->parameters.end(), "dtau_s") == e->parameters.end())
+        x.aic += 2.0;
     if (K > 0) {
       const Eigen::MatrixXd X = columns(fx);
       const double scale = fit.rss / std::max(1.0, static_cast<double>(dof0 - K));
       const Eigen::MatrixXd C =
           scale * (X.transpose() * X).completeOrthogonalDecomposition().pseudoInverse();
-      const auto Kt = K - (fx.size() > taken.size() ? fx.back()->residual_columns.cols() : 0);
+      Eigen::Index Kt = 0;
+      for (std::size_t i = 0; i < n_taken; ++i)
+        Kt += fx[i]->residual_columns.cols();
       Eigen::MatrixXd D[2];
       for (int r = 0; r < 2; ++r) {
         D[r].resize(N, K);
@@ -388,7 +402,7 @@ int decide_rotation(
   // What the chosen branch's prediction holds beyond the separation's noise and the taken
   // effects' fit (which the refined u has): the effects not taken, and off the rotation share.
   if (rotation_bias_um2)
-    *rotation_bias_um2 = rotation_on ? avg.left[1] : avg.left[0] + avg.rotation;
+    *rotation_bias_um2 = rotation_on ? best->left[1] : best->left[0] + best->rotation;
   char buf[520];
   std::snprintf(buf, sizeof buf,
                 "rotation correction %s (auto, re-taken with the effects the redundancy sees; the "

@@ -43,7 +43,10 @@
 //   without E_off = mean u²(w_off) − Var(mean w_off) + B²,
 //   B² = mean (b̂ − mean b̂)² − (mean u²(b̂) − Var(mean b̂)),  b = m_wxe + m_wye (0 if negative)
 // Both figures are in the result (predicted_rms_on_um / _off_um).  With the row-by-row solver
-// automatic means on (no covariance to predict from).
+// automatic means on (no covariance to predict from).  The prediction counts the noise only: a
+// sensor drift puts into the rotation terms what a roll/pitch would, and the separation alone
+// cannot tell them apart; the refine re-takes the decision with the drift its redundancy sees
+// (displacement_refine.hpp, "Rotation correction").
 //
 // Grids: matrices are nx × ny with element (i, j) at (x_i, y_j).
 #include <Eigen/Core>
