@@ -5,6 +5,7 @@
 //     -std=c++20 ../tools/proto/rot_decision.cpp -o /tmp/rot_decision src/core/liberrsep_core.a \
 //     -lcholmod -lsuitesparseconfig
 //   /tmp/rot_decision [case] [sigma] [first] [last]   case: clean, drift34, driftall, roll
+//   (roll: 600 sigma urad peak to peak); env MERR=1, FITS=1, NOTE=1 print more per run.
 #include <Eigen/Dense>
 #include <cstdio>
 #include <cstdlib>
