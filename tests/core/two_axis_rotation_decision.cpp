@@ -115,6 +115,7 @@ TEST_CASE("two-axis refine: the automatic rotation decision is not fooled by a s
          {Case::clean, Case::thermal34, Case::thermal_all, Case::roll, Case::roll_small}) {
       Branch auto_new, old;
       std::vector<double> before;
+      double max_ratio = 0, max_worse = -1e300;  // largest w error / u(w), (e − e_other) / u
       int worse = 0, needed = 0;  // needed: w error without the correction >= 2x with it
       for (int s = 0; s < kSeeds; ++s) {
         const auto seed =
@@ -173,16 +174,18 @@ TEST_CASE("two-axis refine: the automatic rotation decision is not fooled by a s
         // Not worse than the other branch beyond its own stated u (RMS over the points).
         CHECK(e_a <= e_b + 2 * u_a);
         worse += e_a > e_b + 2 * u_a ? 1 : 0;
+        max_ratio = std::max(max_ratio, e_a / u_a);
+        max_worse = std::max(max_worse, (e_a - e_b) / u_a);
         // The stated u covers the run's own error.
         CHECK(e_a <= 4 * u_a);
       }
       std::printf(
           "%-5.2f %-12s %2d/%-6d %2d/%-6d %5.3f->%5.3f (%5.2f)    %5.3f (%5.2f)   %5.3f/%5.3f   "
-          "%d/%d      %d (needed %d)\n",
+          "%d/%d      %d (needed %d)  max e/u %.2f, (e - e_other)/u %.2f\n",
           sigma, name(c), old.on, kSeeds, auto_new.on, kSeeds, median(before), median(auto_new.err),
           *std::max_element(auto_new.err.begin(), auto_new.err.end()), median(old.err),
           *std::max_element(old.err.begin(), old.err.end()), old.cover(), auto_new.cover(),
-          old.over4u, auto_new.over4u, worse, needed);
+          old.over4u, auto_new.over4u, worse, needed, max_ratio, max_worse);
       CHECK(auto_new.cover() >= 0.90);
       CHECK(auto_new.over4u == 0);
       if (c == Case::roll) CHECK(auto_new.on >= 0.8 * kSeeds);  // the correction is needed there
