@@ -18,6 +18,7 @@
 #include "errsep/core/displacement_method.hpp"
 #include "errsep/core/displacement_refine.hpp"
 #include "errsep/core/displacement_residuals.hpp"
+#include "errsep/core/displacement_scan1_times.hpp"
 #include "errsep/core/three_point_method.hpp"
 #include "errsep/core/two_axis_displacement.hpp"
 #include "errsep/core/two_axis_yaw.hpp"
@@ -107,53 +108,19 @@ std::string scan1_plan_words(bool diagonal) {
                   : "a raster x fastest, then y (the paper's; --scan1-diagonal not given)";
 }
 
-/// Reading index of grid point (i, j) in scan 1 of a plan: core's TwoAxisScanOrder::time_s at
-/// one second per reading (so the order does not depend on the stated sample period).
-/// y_fastest: a raster y fastest, a plan the refine has no flag for, only named in the message.
-int scan1_index(int i, int j, int nx, int ny, bool diagonal, bool y_fastest) {
-  if (y_fastest) return i * ny + j;
-  errsep::core::TwoAxisScanOrder o;
-  o.diagonal_scan1 = diagonal;
-  return static_cast<int>(std::lround(o.time_s(1, i, j, nx, ny)));
-}
-
-/// The first pair of grid points whose recorded scan-1 times (t, nx × ny) do not increase along
-/// a plan's reading order; nullopt when they all do.
-struct TimeInversion {
-  int i0, j0, i1, j1;  ///< (i0, j0) is read before (i1, j1) in the plan, t not earlier
-};
-std::optional<TimeInversion> first_inversion(const Eigen::MatrixXd& t, bool diagonal,
-                                             bool y_fastest) {
-  const int nx = static_cast<int>(t.rows()), ny = static_cast<int>(t.cols());
-  std::vector<std::pair<int, int>> at(static_cast<std::size_t>(nx) * ny, {-1, -1});
-  for (int j = 0; j < ny; ++j)
-    for (int i = 0; i < nx; ++i)
-      at[static_cast<std::size_t>(scan1_index(i, j, nx, ny, diagonal, y_fastest))] = {i, j};
-  for (std::size_t k = 1; k < at.size(); ++k) {
-    const auto [i0, j0] = at[k - 1];
-    const auto [i1, j1] = at[k];
-    if (!(t(i1, j1) > t(i0, j0))) return TimeInversion{i0, j0, i1, j1};
-  }
-  return std::nullopt;
-}
-
-/// Issue 16 item 2: the refine builds its drift and thermal columns from the declared plan's
-/// reading times (core/displacement_effects.hpp), not from the file's, so a file whose recorded
-/// scan-1 times (t_scan1_s) read the grid in another order would be refined against the wrong
-/// times, silently.  Throws std::invalid_argument naming the file, the declared plan and what the
-/// times show.  Only the order is checked (an O(nx·ny) pass): the stated sample period and pause
-/// are taken as given.
+/// Issue 16 item 2: recorded scan-1 times that contradict the declared plan
+/// (core/displacement_scan1_times.hpp) refused before anything is written.  Throws
+/// std::invalid_argument naming the file, the declared plan and what the times show.
 void check_scan1_times(const std::string& file, const errsep::io::TwoAxisInput& in,
                        const errsep::core::TwoAxisScanOrder& order) {
-  const Eigen::MatrixXd& t = in.t_scan1_s;
-  if (t.size() == 0) return;
-  const auto bad = first_inversion(t, order.diagonal_scan1, false);
-  if (!bad) return;
+  using errsep::core::Scan1Order;
+  const auto f = errsep::core::check_scan1_times(in.t_scan1_s, order);
+  if (f.consistent) return;
   std::string shows;
-  if (!first_inversion(t, !order.diagonal_scan1, false))
+  if (f.recorded && *f.recorded != Scan1Order::raster_y_fastest)
     shows = "the times read scan 1 " + scan1_plan_words(!order.diagonal_scan1) + ": " +
             (order.diagonal_scan1 ? "leave out --scan1-diagonal" : "give --scan1-diagonal");
-  else if (!first_inversion(t, false, true))
+  else if (f.recorded)
     shows =
         "the times read scan 1 as a raster y fastest, then x, a plan the refine does not "
         "model: run without --refine";
@@ -163,15 +130,14 @@ void check_scan1_times(const std::string& file, const errsep::io::TwoAxisInput& 
         "diagonals): run without --refine, or correct t_scan1_s";
   const auto& x = in.scan.x_mm;
   const auto& y = in.scan.y_mm;
-  throw std::invalid_argument(file + ": t_scan1_s contradicts the declared scan-1 plan: declared " +
-                              scan1_plan_words(order.diagonal_scan1) + ", which reads (x " +
-                              fmt(x(bad->i0)) + ", y " + fmt(y(bad->j0)) + ") mm just before (x " +
-                              fmt(x(bad->i1)) + ", y " + fmt(y(bad->j1)) +
-                              ") mm, but t_scan1_s has them at " + fmt(t(bad->i0, bad->j0)) +
-                              " s and " + fmt(t(bad->i1, bad->j1)) +
-                              " s (the refine's drift and thermal columns follow the "
-                              "declared plan); " +
-                              shows);
+  throw std::invalid_argument(
+      file + ": t_scan1_s contradicts the declared scan-1 plan: declared " +
+      scan1_plan_words(order.diagonal_scan1) + ", which reads (x " + fmt(x(f.i0)) + ", y " +
+      fmt(y(f.j0)) + ") mm just before (x " + fmt(x(f.i1)) + ", y " + fmt(y(f.j1)) +
+      ") mm, but t_scan1_s has them at " + fmt(f.t0_s) + " s and " + fmt(f.t1_s) +
+      " s (the refine's drift and thermal columns follow the "
+      "declared plan); " +
+      shows);
 }
 
 }  // namespace
@@ -439,7 +405,8 @@ int main(int argc, char** argv) {
         t_scan1_s.resize(nx, ny);
         for (int j = 0; j < ny; ++j)
           for (int i = 0; i < nx; ++i)
-            t_scan1_s(i, j) = scan1_index(i, j, nx, ny, true, false);
+            t_scan1_s(i, j) =
+                errsep::core::scan1_reading_index(errsep::core::Scan1Order::diagonal, i, j, nx, ny);
       }
       const auto resid = errsep::core::displacement_residuals_two_axis(runs, ropt, t_scan1_s);
       const bool yaw = !yaw_off && (yaw_on || in.lateral.has_value());

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
@@ -240,6 +241,183 @@ std::vector<ConfoundedAlternative> confounded_alternatives(
   return out;
 }
 
+double shape_ms(const Eigen::VectorXd& v) {
+  return (v.array() - v.mean()).square().mean();
+}
+
+/// Columns centred (the gauge: w's constant removed).
+Eigen::MatrixXd centred(const Eigen::MatrixXd& d) {
+  return d.rowwise() - d.colwise().mean();
+}
+
+/// Mean over the points of diag(D C Dᵀ).
+double mean_var(const Eigen::MatrixXd& D, const Eigen::MatrixXd& C) {
+  return D.rows() ? (D * C).cwiseProduct(D).rowwise().sum().mean() : 0.0;
+}
+
+/// The automatic roll/pitch decision re-taken with the effects the redundancy sees
+/// (displacement_refine.hpp, "Rotation correction"): 1 = on.  *line: the decision and its figures.
+int decide_rotation(
+    const TwoAxisScan& scan, const TwoAxisOptions& separation, const TwoAxisResult& base,
+    const std::vector<DisplacementEffect>& chosen, const DisplacementEffectLibrary& lib,
+    const std::function<Eigen::MatrixXd(const std::vector<const DisplacementEffect*>&)>& columns,
+    const Eigen::VectorXd& y, int dof0, std::string* line, double* rotation_bias_um2) {
+  TwoAxisOptions on = separation;
+  on.rotation = RotationCorrection::on;
+  const TwoAxisResult sep_on = separate_two_axis(scan, on);
+  // b̂ = m_w(on) − m_w(off) = −(m_wxe + m_wye), per point (column major as the effects' d_w).
+  const Eigen::MatrixXd b_grid = -(sep_on.m_wxe_um + sep_on.m_wye_um);
+  const Eigen::VectorXd b_hat = Eigen::Map<const Eigen::VectorXd>(b_grid.data(), b_grid.size());
+  const double noise_on = base.predicted_rms_on_um * base.predicted_rms_on_um;
+  const double noise_off = std::max(0.0, base.predicted_rms_off_um * base.predicted_rms_off_um -
+                                             base.rotation_bias_um * base.rotation_bias_um);
+  const double u_b2 = base.rotation_terms_noise_um * base.rotation_terms_noise_um;
+
+  // The explanations of the residual: the effects taken; those with one identifiable family not
+  // taken added (thermal: every τ of the library's grid); and a taken thermal drift at every τ of
+  // the grid (τ is poorly determined when the drift settles within a scan, and what the drift
+  // puts into b̂ changes with it: seed 1607 of the diagonal case, τ̂ 216 s, 120-400 s not
+  // rejected, the truth 374 s).  The first n_taken effects are corrected by the refine.
+  struct Explanation {
+    std::vector<const DisplacementEffect*> fx;
+    std::size_t n_taken = 0;
+  };
+  std::vector<const DisplacementEffect*> taken;
+  for (const auto& e : chosen)
+    taken.push_back(&e);
+  std::vector<Explanation> explanations = {{taken, taken.size()}};
+  std::vector<std::string> families;
+  for (const auto& e : lib.effects)
+    if (e.identifiable && std::find(families.begin(), families.end(), e.family) == families.end())
+      families.push_back(e.family);
+  for (std::size_t t = 0; t < taken.size(); ++t)
+    if (taken[t]->family == "thermal")
+      for (const auto& e : lib.effects)
+        if (e.family == "thermal" && e.identifiable) {
+          auto fx = taken;
+          fx[t] = &e;
+          explanations.push_back({fx, fx.size()});
+        }
+  for (const auto& f : families) {
+    if (std::any_of(chosen.begin(), chosen.end(),
+                    [&](const DisplacementEffect& c) { return c.family == f; }))
+      continue;
+    for (const auto& e : lib.effects) {
+      if (e.family != f || !e.identifiable) continue;
+      auto fx = taken;
+      fx.push_back(&e);
+      explanations.push_back({fx, taken.size()});
+    }
+  }
+
+  // Per explanation: its Akaike criterion (χ² of the whitened residual + 2 parameters, a
+  // thermal τ counted as one more, as the selection ranks them) and its predicted errors.
+  struct Explained {
+    double aic = 0, e_on = 0, e_off = 0, rotation = 0, artefacts = 0, w = 0;
+    double left[2] = {0, 0};  ///< mean square an effect not taken leaves in w, off and on
+    std::string name;
+  };
+  std::vector<Explained> ex;
+  const Eigen::Index N = b_hat.size();
+  for (const auto& [fx, n_taken] : explanations) {
+    // E_on = noise + what the artefacts do to w with Eqs. (22)-(27); E_off = noise + what they do
+    // without + the share of b̂ they do not explain (taken to be a rotation).  The effects taken
+    // are corrected by the refine (their fit's variance); an effect not taken is left in the
+    // readings: its squared shape, estimated without its noise (D q̂ minus diag(D C Dᵀ)).
+    Explained x;
+    double B[2] = {0, 0};
+    x.rotation = base.rotation_bias_um * base.rotation_bias_um;
+    Eigen::Index K = 0;
+    for (const auto* e : fx)
+      K += e->residual_columns.cols();
+    const detail::LsFit fit = detail::least_squares(columns(fx), y);
+    x.aic = fit.rss + 2.0 * static_cast<double>(K);
+    for (const auto* e : fx)  // τ chosen from the grid: one parameter more
+      if (e->family == "thermal" &&
+          std::find(e->parameters.begin(), e->parameters.end(), "dtau_s") == e->parameters.end())
+        x.aic += 2.0;
+    if (K > 0) {
+      const Eigen::MatrixXd X = columns(fx);
+      const double scale = fit.rss / std::max(1.0, static_cast<double>(dof0 - K));
+      const Eigen::MatrixXd C =
+          scale * (X.transpose() * X).completeOrthogonalDecomposition().pseudoInverse();
+      Eigen::Index Kt = 0;
+      for (std::size_t i = 0; i < n_taken; ++i)
+        Kt += fx[i]->residual_columns.cols();
+      Eigen::MatrixXd D[2];
+      for (int r = 0; r < 2; ++r) {
+        D[r].resize(N, K);
+        Eigen::Index c = 0;
+        for (const auto* e : fx) {
+          D[r].middleCols(c, e->d_w[r].cols()) = centred(e->d_w[r]);
+          c += e->d_w[r].cols();
+        }
+        B[r] = mean_var(D[r].leftCols(Kt), C.topLeftCorner(Kt, Kt));
+        if (K > Kt) {
+          const Eigen::MatrixXd Dc = D[r].rightCols(K - Kt);
+          x.left[r] = std::max(0.0, shape_ms(Dc * fit.beta.tail(K - Kt)) -
+                                        mean_var(Dc, C.bottomRightCorner(K - Kt, K - Kt)));
+          B[r] += x.left[r];
+        }
+      }
+      // b of the artefacts: m_w(on) − m_w(off) of their readings = d_w[1] − d_w[0].
+      const Eigen::MatrixXd G = D[1] - D[0];
+      x.artefacts = shape_ms(G * fit.beta);
+      x.rotation = std::max(0.0, shape_ms(b_hat - G * fit.beta) - u_b2 - mean_var(G, C));
+    }
+    x.e_on = noise_on + B[1];
+    x.e_off = noise_off + B[0] + x.rotation;
+    for (const auto* e : fx)
+      x.name += (x.name.empty() ? "" : " + ") + e->name;
+    if (x.name.empty()) x.name = "noise alone";
+    ex.push_back(x);
+  }
+  // Averaged over the explanations with Akaike weights (exp(−ΔAIC/2)): an effect too weak for
+  // the selection's F-test still counts by how much better it fits (seed 1615 of the diagonal
+  // case: a thermal drift of sensors 3-4, ΔAIC −9, moves w by 3.4 um with Eqs. 22-27, 0.2 without).
+  double aic0 = std::numeric_limits<double>::infinity(), wsum = 0;
+  for (const auto& x : ex)
+    aic0 = std::min(aic0, x.aic);
+  Explained avg;
+  const Explained* best = &ex.front();
+  for (auto& x : ex) {
+    x.w = std::exp(-0.5 * (x.aic - aic0));
+    wsum += x.w;
+    if (x.w > best->w) best = &x;
+  }
+  for (const auto& x : ex) {
+    avg.e_on += x.w / wsum * x.e_on;
+    avg.e_off += x.w / wsum * x.e_off;
+    avg.rotation += x.w / wsum * x.rotation;
+    avg.artefacts += x.w / wsum * x.artefacts;
+    for (int r = 0; r < 2; ++r)
+      avg.left[r] += x.w / wsum * x.left[r];
+  }
+  // On only when the average says so and so does every explanation the data do not reject
+  // against the likeliest (relative likelihood exp(−ΔAIC/2) >= 0.05): a sensor artefact taken for
+  // a rotation is multiplied by the lever ratio, a rotation taken for an artefact is not.
+  bool rotation_on = avg.e_on < avg.e_off;
+  for (const auto& x : ex)
+    if (x.w >= 0.05) rotation_on = rotation_on && x.e_on < x.e_off;
+  // What the chosen branch's prediction holds beyond the separation's noise and the taken
+  // effects' fit (which the refined u has): the effects not taken, and off the rotation share.
+  if (rotation_bias_um2)
+    *rotation_bias_um2 = rotation_on ? best->left[1] : best->left[0] + best->rotation;
+  char buf[520];
+  std::snprintf(buf, sizeof buf,
+                "rotation correction %s (auto, re-taken with the effects the redundancy sees; the "
+                "separation's was %s): rotation terms' shape %.3g um (noise %.3g um), of it %.3g "
+                "um sensor artefacts and %.3g um rotation (averaged over the explanations, "
+                "Akaike weights; likeliest %s, %.2f); predicted rms error of w's shape %.3g um "
+                "with Eqs. (22)-(27), %.3g um without%s",
+                rotation_on ? "on" : "off", base.rotation_corrected ? "on" : "off",
+                std::sqrt(shape_ms(b_hat)), std::sqrt(u_b2), std::sqrt(avg.artefacts),
+                std::sqrt(avg.rotation), best->name.c_str(), best->w / wsum, std::sqrt(avg.e_on),
+                std::sqrt(avg.e_off), rotation_on ? "" : " (the rotation share carried in u)");
+  *line = buf;
+  return rotation_on ? 1 : 0;
+}
+
 }  // namespace
 
 bool DisplacementRefineOptions::is_valid(std::string* why) const {
@@ -433,9 +611,8 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
   DisplacementRefineResult out;
   out.not_identifiable = lib.not_identifiable;
   out.base = separate_two_axis(scan, separation);
-  const int rot = out.base.rotation_corrected ? 1 : 0;
+  int rot = out.base.rotation_corrected ? 1 : 0;  // re-taken below when automatic
   TwoAxisOptions fixed = separation;
-  fixed.rotation = rot ? RotationCorrection::on : RotationCorrection::off;
 
   // Whitened residual rows: a scan difference has variance 2σ² of its sensor kind.
   const Eigen::Index N = static_cast<Eigen::Index>(lib.nx) * lib.ny;
@@ -551,9 +728,34 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
       grp.push_back(static_cast<int>(k));
   }
 
-  out.refined = out.base;
+  // The automatic roll/pitch decision re-taken with what the redundancy sees (header).
+  std::string rotation_line;
+  double rotation_bias_um2 = 0;  // what auto's branch leaves in w beyond the refined u (below)
+  if (separation.rotation == RotationCorrection::automatic) {
+    rot = decide_rotation(scan, separation, out.base, chosen, lib, columns, y, dof0, &rotation_line,
+                          &rotation_bias_um2);
+    out.not_identifiable.push_back(rotation_line);
+  }
+  fixed.rotation = rot ? RotationCorrection::on : RotationCorrection::off;
+  // The separation in the decided rotation (the measured readings'), for the decisions' u.
+  const TwoAxisResult base_r =
+      rot == (out.base.rotation_corrected ? 1 : 0) ? out.base : separate_two_axis(scan, fixed);
+  out.refined = base_r;
+  if (!rotation_line.empty()) {
+    out.refined.rotation_requested = RotationCorrection::automatic;
+    out.refined.rotation_note = rotation_line;
+  }
+  // What auto's branch leaves in w beyond the separation's noise and the taken effects' fit: off,
+  // the share of the rotation terms no artefact explains; either, what effects too weak to be
+  // taken do to w.  Carried in u, the same at every point (an estimate of its mean square).
+  auto carry_rotation = [&](TwoAxisResult& r) {
+    if (!(rotation_bias_um2 > 0)) return;
+    r.u_w_um = (r.u_w_um.array().square() + rotation_bias_um2).sqrt();
+    r.u_m_w_um = (r.u_m_w_um.array().square() + rotation_bias_um2).sqrt();
+  };
   if (chosen.empty()) {
-    // Nothing taken: the refined result is the separation (rotation as decided on the data).
+    // Nothing taken: the refined result is the separation (rotation as decided above).
+    carry_rotation(out.refined);
     return out;
   }
   const Eigen::MatrixXd X = columns(pointers(chosen));
@@ -587,7 +789,7 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
   const Eigen::MatrixXd cov =
       out.sigma_scale * (X.transpose() * X).completeOrthogonalDecomposition().pseudoInverse();
 
-  const Eigen::VectorXd u_w0 = flatten(out.base.u_w_um), u_m0 = flatten(out.base.u_m_w_um);
+  const Eigen::VectorXd u_w0 = flatten(base_r.u_w_um), u_m0 = flatten(base_r.u_m_w_um);
   Eigen::MatrixXd Dw(N, K), Dm(N, K);
   std::vector<bool> applied(static_cast<std::size_t>(K), false);
   DisplacementDisturbance correction;
@@ -646,6 +848,10 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
     TwoAxisScan corrected = scan;
     add_disturbance(corrected, correction, lib.order);
     out.refined = separate_two_axis(corrected, fixed);
+    if (!rotation_line.empty()) {
+      out.refined.rotation_requested = RotationCorrection::automatic;
+      out.refined.rotation_note = rotation_line;
+    }
   }
   // The refined u: the separation's with the applied parameters' covariance and the bias of the
   // ones left out (step_decision.hpp), and for those also their fitted size's own scatter.  An
@@ -730,6 +936,7 @@ DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisO
   }
   out.refined.u_w_um = Eigen::Map<const Eigen::MatrixXd>(uw.data(), lib.nx, lib.ny);
   out.refined.u_m_w_um = Eigen::Map<const Eigen::MatrixXd>(um.data(), lib.nx, lib.ny);
+  carry_rotation(out.refined);
   return out;
 }
 

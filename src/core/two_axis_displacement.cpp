@@ -216,6 +216,8 @@ TwoAxisResult joint(const TwoAxisScan& scan, const TwoAxisOptions& opts) {
   const double e_off = off.var.mean() + s02 / n0 - off.var_mean - s02 / (n0 * N) + bias2;
   res.predicted_rms_on_um = std::sqrt(std::max(0.0, e_on));
   res.predicted_rms_off_um = std::sqrt(std::max(0.0, e_off));
+  res.rotation_bias_um = std::sqrt(bias2);
+  res.rotation_terms_noise_um = std::sqrt(std::max(0.0, b.var.mean() - b.var_mean));
   res.rotation_corrected = opts.rotation == RotationCorrection::on ||
                            (opts.rotation == RotationCorrection::automatic && e_on < e_off);
   {

@@ -43,7 +43,10 @@
 //   without E_off = mean u²(w_off) − Var(mean w_off) + B²,
 //   B² = mean (b̂ − mean b̂)² − (mean u²(b̂) − Var(mean b̂)),  b = m_wxe + m_wye (0 if negative)
 // Both figures are in the result (predicted_rms_on_um / _off_um).  With the row-by-row solver
-// automatic means on (no covariance to predict from).
+// automatic means on (no covariance to predict from).  The prediction counts the noise only: a
+// sensor drift puts into the rotation terms what a roll/pitch would, and the separation alone
+// cannot tell them apart; the refine re-takes the decision with the drift its redundancy sees
+// (displacement_refine.hpp, "Rotation correction").
 //
 // Grids: matrices are nx × ny with element (i, j) at (x_i, y_j).
 #include <Eigen/Core>
@@ -125,6 +128,11 @@ struct TwoAxisResult {
   /// Predicted rms error of w's shape with and without Eqs. (22)-(27) (see above).
   double predicted_rms_on_um = std::numeric_limits<double>::quiet_NaN();
   double predicted_rms_off_um = std::numeric_limits<double>::quiet_NaN();
+  /// The terms of predicted_rms_off_um: the rotation terms' shape beyond their noise (B above)
+  /// and the noise of that shape (√(mean u²(b̂) − Var(mean b̂))), µm.  The refine
+  /// (displacement_refine.hpp) re-takes the automatic decision with them.
+  double rotation_bias_um = std::numeric_limits<double>::quiet_NaN();
+  double rotation_terms_noise_um = std::numeric_limits<double>::quiet_NaN();
   std::string rotation_note;  ///< the decision and both figures, one line
   std::string gauge;          ///< what the method cannot determine, said once
   double seconds = 0;         ///< time of the separation
