@@ -154,7 +154,7 @@ TEST_CASE("a term the readings do not bound is held at 3x their RMS and said unb
 
 // Spikes: two far apart on different configurations are removed; two adjacent on one
 // configuration are a shape, found and carried in u, not removed.
-TEST_CASE("adjacent spikes of one configuration are a shape, not removed; isolated ones are") {
+TEST_CASE("spikes: adjacent ones of one configuration are a shape and stay, isolated ones go") {
   UndeclaredCaseOptions co;
   co.sigma_um = 0.1;
   co.seed = 5;
