@@ -114,9 +114,18 @@ TEST_CASE("bump, sigma 0.3, size 3: u_S never absurd without saying so", "[refin
   CHECK(c.runs == 20);
 }
 
-TEST_CASE("bump, sigma 0.05/0.1/0.2: u_S never absurd without saying so", "[refine][sweep]") {
-  const double sigma = GENERATE(0.05, 0.1, 0.2);
-  const Cell c = sweep(UndeclaredEffect::bump, sigma, 1.0, 1);
+TEST_CASE("bump, sigma 0.05: u_S never absurd without saying so", "[refine][sweep]") {
+  const Cell c = sweep(UndeclaredEffect::bump, 0.05, 1.0, 1);
+  CHECK(c.worse_beyond_u == 0);
+}
+
+TEST_CASE("bump, sigma 0.1: u_S never absurd without saying so", "[refine][sweep]") {
+  const Cell c = sweep(UndeclaredEffect::bump, 0.1, 1.0, 1);
+  CHECK(c.worse_beyond_u == 0);
+}
+
+TEST_CASE("bump, sigma 0.2: u_S never absurd without saying so", "[refine][sweep]") {
+  const Cell c = sweep(UndeclaredEffect::bump, 0.2, 1.0, 1);
   CHECK(c.worse_beyond_u == 0);
 }
 
