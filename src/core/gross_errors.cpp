@@ -509,7 +509,8 @@ GrossErrorScan find_gross_errors(const ResidualSpace& space_in, const Eigen::Mat
   // the bump's readings out and left the rest of the bump in, with the fresh, lower σ̂ for the
   // shape: S worse (errsep-refine-sweep --plan single --effect bump, σ 0.05, seed 14: S 2.59 ->
   // 2.79 um, u_S 1.38 -> 1.21 um; σ 0.3 --size 3 seed 26: 2.51 -> 4.33 um).  Left in, their
-  // fitted sizes go into u (finish: the bias of leaving an error in).  Two independent spikes on
+  // fitted sizes go into u (finish: the bias of leaving an error in): seed 14 S 2.59 um (the raw
+  // one), u_S 1.40; seed 26 S 2.51, u_S 7.5 (was 5.8).  Two independent spikes on
   // one configuration of P readings fall that close with probability about 2·cluster_positions/P
   // (7 % at P = 62): such a pair is carried in u instead of removed, which widens u, never
   // moves S.
