@@ -695,11 +695,17 @@ struct Reported {
 // the geometry to cancel two thirds of it at every reading; an undeclared instrument effect does
 // not track the geometry, so such a size is not one the data support: the fit left it undetermined
 // (it lies along what f, S, γ, e absorb) and only a declared bound can size it.  Measured
-// (errsep-refine-sweep --plan single --sigma 0.3 --size 3, seeds 21-40): the real effects' terms
-// stay within 0.1-2.6 times the readings' RMS, while the runs whose u_S was widened x2.4e4 (gain
-// seed 33: pe1 + traverse fitted to a 13 % gain, traverse 5.5e3 um at the readings) and x1.3e7
-// (bump seed 27: a thermal drift of 4.7e4 um among four effects fitted to a bump, 8.4e6 um at
-// the readings of 8.6 um RMS) carried 16-1e6 times.  RefineOptions::reading_bound, default 3.
+// (errsep-refine-sweep --plan single --sigma 0.3 --size 3, seeds 21-40): the runs whose u_S was
+// widened x2.4e4 (gain seed 33: pe1 + traverse fitted to a 13 % gain, the traverse's term 5.5e3
+// um at the readings of 6.2 um RMS) and x1.3e7 (bump seed 27: a thermal drift of 4.7e4 um among
+// four effects fitted to a bump, 8.4e6 um at readings of 8.6 um RMS).  At size 1, seeds 1-40,
+// σ 0.05-0.3, 12 effects (1920 runs): the bound holds a term in 23 runs (pe1 4, thermal_all 2,
+// traverse 3, bump 14), the largest u_S / raw u_S falls from 1.9e7 to 1.85e3 there (those runs
+// say "u_S unbounded"); outside the bump cells (which also got the spike rule, gross_errors.cpp)
+// no cell's coverage, S error or worse-beyond-u count changes.  It does not catch a
+// term that stays within the readings but that the separation amplifies onto S: u_S up to 23x
+// max(S error, raw u_S) without the line (pe1 σ 0.2, seeds 21-40).  RefineOptions::reading_bound,
+// default 3.
 
 // The covariance of the model's parameters from the linearisation about zero (the base model of
 // the raw readings, every effect absent), with the noise level s2 of the current fit.  For a
