@@ -64,6 +64,14 @@ int main(int argc, char** argv) {
                  "decide on the bias a correction removes at its lower confidence bound B - z "
                  "sd(B) (step_decision.hpp)")
       ->capture_default_str();
+  app.add_option("--reading-bound", refine.reading_bound,
+                 "hold an effect's term in u_S at this many times the readings' RMS and say u_S "
+                 "is unbounded beyond it; 0: off (refine.hpp RefineOptions::reading_bound)")
+      ->capture_default_str();
+  app.add_option("--spike-cluster", refine.gross.cluster_positions,
+                 "spikes of one configuration within this many positions are a shape, not "
+                 "removed; 0: off (gross_errors.hpp GrossErrorOptions::cluster_positions)")
+      ->capture_default_str();
   app.add_option("--apply-unidentifiable", refine.apply_unidentifiable,
                  "apply the determined part of an effect this plan cannot identify (refine.hpp)")
       ->capture_default_str();

@@ -49,6 +49,8 @@ bool RefineOptions::is_valid(std::string* why) const {
   if (!(identifiability_tol > 0 && identifiability_tol < 1))
     return fail("identifiability_tol must be in (0, 1)");
   if (!(speed_mm_per_s > 0)) return fail("speed_mm_per_s must be > 0");
+  if (!(reading_bound >= 0 && std::isfinite(reading_bound)))
+    return fail("reading_bound = " + std::to_string(reading_bound) + ": must be finite and >= 0");
   for (const auto& d : declared) {
     if (!(d.bound > 0 && std::isfinite(d.bound)))
       return fail("declared bound of '" + d.effect + "' = " + std::to_string(d.bound) +
@@ -681,7 +683,29 @@ struct Reported {
   std::vector<int> undetermined;
   std::vector<double> undetermined_S_um;
   std::vector<std::string> verdicts;
+  std::vector<std::string> unbounded;  // RefineResult::unbounded
 };
+
+// The readings' own bound on what an effect can be (RefineResult::unbounded,
+// RefineOptions::reading_bound).  The sensors read
+// m = (f, S, γ, e of Eq. 1) + c + noise, c = J·p the effect's change of the readings: an effect
+// whose term in u (its fitted size when declined, its covariance when applied, the part the plan
+// cannot determine, what it does to the gauge directions) changes the readings by more than
+// reading_bound (3) times what the sensors read at all (RMS about each sensor's mean) would need
+// the geometry to cancel two thirds of it at every reading; an undeclared instrument effect does
+// not track the geometry, so such a size is not one the data support: the fit left it undetermined
+// (it lies along what f, S, γ, e absorb) and only a declared bound can size it.  Measured
+// (errsep-refine-sweep --plan single --sigma 0.3 --size 3, seeds 21-40): the runs whose u_S was
+// widened x2.4e4 (gain seed 33: pe1 + traverse fitted to a 13 % gain, the traverse's term 5.5e3
+// um at the readings of 6.2 um RMS) and x1.3e7 (bump seed 27: a thermal drift of 4.7e4 um among
+// four effects fitted to a bump, 8.4e6 um at readings of 8.6 um RMS).  At size 1, seeds 1-40,
+// σ 0.05-0.3, 12 effects (1920 runs): the bound holds a term in 23 runs (pe1 4, thermal_all 2,
+// traverse 3, bump 14), the largest u_S / raw u_S falls from 1.9e7 to 1.85e3 there (those runs
+// say "u_S unbounded"); outside the bump cells (which also got the spike rule, gross_errors.cpp)
+// no cell's coverage, S error or worse-beyond-u count changes.  It does not catch a
+// term that stays within the readings but that the separation amplifies onto S: u_S up to 23x
+// max(S error, raw u_S) without the line (pe1 σ 0.2, seeds 21-40).  RefineOptions::reading_bound,
+// default 3.
 
 // The covariance of the model's parameters from the linearisation about zero (the base model of
 // the raw readings, every effect absent), with the noise level s2 of the current fit.  For a
@@ -775,6 +799,19 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
   // than the scan can show.
   Eigen::MatrixXd carried = Eigen::MatrixXd::Zero(K, K);
   Eigen::MatrixXd undetermined_part = Eigen::MatrixXd::Zero(K, K);  // the s²·ZZᵀ blocks of it
+  // The readings' bound (file comment above report_model): RMS of the raw readings about each
+  // sensor's mean, and each effect's change of the readings per unit parameter.
+  const Eigen::MatrixXd J_read = model_jacobian(M, cur.ctx);
+  const double read_rms_um = std::sqrt((m_raw.rowwise() - m_raw.colwise().mean()).squaredNorm() /
+                                       std::max<double>(1, m_raw.size()));
+  const double read_bound_um = opts.reading_bound > 0 ? opts.reading_bound * read_rms_um
+                                                      : std::numeric_limits<double>::infinity();
+  auto at_readings_um = [&](Eigen::Index c, Eigen::Index k, const Eigen::MatrixXd& Km) {
+    const Eigen::MatrixXd Je = J_read.middleCols(c, k);
+    return std::sqrt(std::max(0.0, (Je * Km).cwiseProduct(Je).sum()) /
+                     static_cast<double>(std::max<Eigen::Index>(1, Je.rows())));
+  };
+  Eigen::VectorXd scale = Eigen::VectorXd::Ones(K);  // per parameter: 1, or the bound's scale
   Model applied;
   Eigen::Index c0 = 0;
   for (std::size_t e = 0; e < M.effects.size(); ++e) {
@@ -837,6 +874,36 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
                    d.reason + ")";
       }
     }
+    // What the effect would carry into u, at the readings: the larger of its own term (applied:
+    // covariance; declined: fitted size; plus the undetermined part) and its gauge-direction term
+    // (fitted size, covariance and undetermined part).  Beyond the readings' bound the data do
+    // not determine it (RefineOptions::reading_bound): a correction whose own scatter is that large
+    // is not applied, and the term is held at the bound with the result saying u_S is unbounded.
+    const Eigen::MatrixXd K_und =
+        k0 > 0 ? Eigen::MatrixXd(s2_und * Z * Z.transpose()) : Eigen::MatrixXd::Zero(k, k);
+    const Eigen::MatrixXd K_gauge = pe * pe.transpose() + Ce + K_und;
+    auto term_at_readings = [&](bool apply) {
+      return std::max(
+          at_readings_um(c0, k, (apply ? Ce : Eigen::MatrixXd(pe * pe.transpose())) + K_und),
+          at_readings_um(c0, k, K_gauge));
+    };
+    double read_um = term_at_readings(d.apply);
+    const bool has_declared = declared_bound(opts, M.effects[e]->name()) > 0;
+    if (read_um > read_bound_um && d.apply) {
+      d.apply = false;
+      char buf[260];
+      std::snprintf(buf, sizeof buf,
+                    "not determined by the data: its term would change the readings by %.3g um "
+                    "rms, more than %.3g x their own %.3g um rms (%s)",
+                    read_um, opts.reading_bound, read_rms_um, d.reason.c_str());
+      d.reason = buf;
+      read_um = term_at_readings(false);
+    }
+    bool unbounded_here = false;
+    if (read_um > read_bound_um) {
+      scale.segment(c0, k).setConstant(read_bound_um / read_um);
+      unbounded_here = !has_declared;
+    }
     if (d.apply) {
       carried.block(c0, c0, k, k) = Ce;
       applied.effects.push_back(M.effects[e]);
@@ -845,8 +912,8 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
       carried.block(c0, c0, k, k) = pe * pe.transpose();
     }
     if (k0 > 0) {
-      carried.block(c0, c0, k, k) += s2_und * Z * Z.transpose();
-      undetermined_part.block(c0, c0, k, k) = s2_und * Z * Z.transpose();
+      carried.block(c0, c0, k, k) += K_und;
+      undetermined_part.block(c0, c0, k, k) = K_und;
     }
     rep.undetermined.push_back(static_cast<int>(k0));
     rep.undetermined_S_um.push_back(und);
@@ -860,6 +927,21 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
                     "a closing pass or reversed traverses determine them)",
                     static_cast<int>(k0), static_cast<int>(k), und);
       v += buf;
+    }
+    if (read_um > read_bound_um) {
+      char buf[300];
+      std::snprintf(buf, sizeof buf,
+                    "its term in u would change the readings by %.3g um rms, more than %.3g x "
+                    "their own %.3g um rms: the data do not bound it, u carries it at that bound",
+                    read_um, opts.reading_bound, read_rms_um);
+      if (unbounded_here) {
+        rep.unbounded.push_back("u_S unbounded: " + M.effects[e]->name() +
+                                " not determined by this plan; declare a bound (" + buf + ")");
+        v += "; " + rep.unbounded.back();
+      } else {
+        v +=
+            std::string("; held at the readings' bound although a bound is declared (") + buf + ")";
+      }
     }
     rep.verdicts.push_back(std::move(v));
     rep.applied.push_back(d.apply);
@@ -881,8 +963,11 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
   // the raw separation's bow.
   Eigen::MatrixXd G(2 * K, 2 * K);
   G.setZero();
-  G.topLeftCorner(K, K) = carried;
-  G.bottomRightCorner(K, K) = p * p.transpose() + C + undetermined_part;
+  // Each effect's rows and columns scaled to the readings' bound where it applies (a congruence:
+  // the second moment stays positive semi-definite).
+  G.topLeftCorner(K, K) = scale.asDiagonal() * carried * scale.asDiagonal();
+  G.bottomRightCorner(K, K) =
+      scale.asDiagonal() * (p * p.transpose() + C + undetermined_part) * scale.asDiagonal();
   Eigen::MatrixXd GS(P, 2 * K), Gg(P, 2 * K), Gf = Eigen::MatrixXd::Zero(N, 2 * K);
   GS << D_S, D_S_gauge;
   Gg << D_g, D_g_gauge;
@@ -1072,6 +1157,8 @@ std::string RefineResult::brief_report() const {
   for (const auto& f : gross.findings)
     out += "; " + f + (gross_removed ? "" : " (not removed: RefineOptions::remove_gross_errors)");
   if (nonlinearity.detected) out += "; " + nonlinearity.finding;
+  for (const auto& u : unbounded)
+    out += "; " + u;
   if (!model_complete()) out += "; model incomplete";
   return out;
 }
@@ -1445,6 +1532,7 @@ RefineResult refine_four_sensor(const FourSensorConfig& cfg, const Eigen::Matrix
   res.decisions = current.decisions;
   res.applied = current.applied;
   res.verdicts = current.verdicts;
+  res.unbounded = current.unbounded;
   res.m_corrected_um = current.m_c;
   res.after = M.effects.empty() ? res.before : current.sep;
   // Additive analyses of the final residual (issue 16 item 3): the trace is reported only; a

@@ -48,6 +48,7 @@ SweepRun evaluate_refine_run(UndeclaredEffect effect, const UndeclaredCaseOption
   for (bool a : r.applied)
     run.applied = run.applied || a;
   run.not_white = !r.model_complete();
+  run.unbounded = !r.unbounded.empty();
   if (!lib.empty())
     for (const auto& e : default_effect_library())
       if (e->name() == lib) {
@@ -159,15 +160,23 @@ std::string coverage_breakdown(const SweepCell& c) {
     if (r.u_S_before_um > 0 && r.u_S_after_um > 1.01 * r.u_S_before_um)
       ratio.push_back(r.u_S_after_um / r.u_S_before_um);
   std::sort(ratio.begin(), ratio.end());
-  char buf[512];
+  int unbounded = 0;
+  double bounded_max = 0.0;  // u_S / max(S error, raw u_S) of the runs not called unbounded
+  for (const auto& r : c.runs) {
+    if (r.unbounded)
+      ++unbounded;
+    else if (const double m = std::max(r.S_after_um, r.u_S_before_um); m > 0)
+      bounded_max = std::max(bounded_max, r.u_S_after_um / m);
+  }
+  char buf[640];
   std::snprintf(
       buf, sizeof buf,
       "%-12s %-12s %5.2f coverage within 2 u_S: %.3f; applied %.3f (%d runs), detected not "
       "applied %.3f (%d), nothing added %.3f (%d); u_S widened in %zu (median x%.2f, "
-      "max x%.2f)",
+      "max x%.2f); unbounded in %d, others u_S <= x%.2f max(S error, raw u_S)",
       to_string(c.effect), to_string(c.plan), c.sigma_um, c.coverage(), ca, na, cd, nd, cn, nn,
       ratio.size(), ratio.empty() ? 1.0 : ratio[ratio.size() / 2],
-      ratio.empty() ? 1.0 : ratio.back());
+      ratio.empty() ? 1.0 : ratio.back(), unbounded, bounded_max);
   return buf;
 }
 

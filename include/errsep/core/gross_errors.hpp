@@ -67,6 +67,10 @@ struct GrossErrorOptions {
   /// model first, whether or not this scan alone shows it, and is removed or carried like a found
   /// one (separate_without_gross_errors).
   std::vector<AttributedStep> attributed_steps;
+  /// Spikes of one configuration within this many positions of each other (a gap of at most
+  /// cluster_positions − 1 readings) are a shape along x, not electrical spikes, and are not
+  /// removed: their sizes go into u (find_gross_errors).  0: every spike stands alone.
+  int cluster_positions = 2;
   bool is_valid(std::string* why = nullptr) const;
 };
 

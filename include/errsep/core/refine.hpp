@@ -115,6 +115,12 @@ struct RefineOptions {
   /// it is not corrected); for an effect in the model the bound sizes the parameter combinations
   /// the plan cannot determine (RefineStep::undetermined), when it is larger than the data's guess.
   std::vector<DeclaredEffectBound> declared;
+  /// An effect's term in u (its fitted size or covariance, its undetermined part, what it does
+  /// to the gauge directions) may change the readings by at most this many times their own RMS
+  /// (about each sensor's mean); beyond it the data do not bound the effect: a correction is not
+  /// applied, the term is held at the bound and RefineResult::unbounded says u_S is unbounded
+  /// unless a bound is declared (refine.cpp kReadingBound).  0: no bound (u carries the fit).
+  double reading_bound = 3.0;
   bool is_valid(std::string* why = nullptr) const;
 };
 
@@ -226,6 +232,13 @@ struct RefineResult {
   std::vector<StepDecision> decisions;
   std::vector<bool> applied;
   std::vector<std::string> verdicts;
+  /// One line per effect whose term in u the data do not bound ("u_S unbounded: <effect> not
+  /// determined by this plan; declare a bound (...)"): what it carries (its fitted size,
+  /// covariance and undetermined part) would change the readings by more than
+  /// RefineOptions::reading_bound (3) times their own RMS,
+  /// so u_S holds it only at that size; a declared bound (RefineOptions::declared) sizes it.
+  /// Empty: every term of u_S is bounded by the data.
+  std::vector<std::string> unbounded;
   ResidualAnalysis residual;  ///< of the final model
   FourSensorResult before;    ///< separation of the raw readings (caller's options)
   /// The refined result: the separation of the readings corrected for the applied effects, with

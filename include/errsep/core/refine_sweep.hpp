@@ -31,6 +31,7 @@ struct SweepRun {
   bool applied = false;      ///< some correction was applied to the result
   bool not_white = false;    ///< the final model was reported incomplete (residual not white …)
   bool not_identifiable_reported = false;  ///< a verdict says "not identifiable from this plan"
+  bool unbounded = false;  ///< the refine said u_S is unbounded (RefineResult::unbounded)
   /// The injected effect's library counterpart identifiable from the plan used, computed from
   /// the design and σ̂ without the truth (effect_identifiability, refine.hpp); false for none and
   /// the effects the library lacks.  `identifiability` is its one-line brief.
@@ -154,7 +155,8 @@ std::string sweep_row(const SweepCell& c);
 /// One line per cell: the coverage of u_S split by what the refine did with the effect
 /// (applied / detected, not applied / nothing added), each with its number of runs: where a cell
 /// undercovers, and why; and in how many runs the refine widened u_S (RMS by more than 1 %),
-/// with the median and largest ratio of the refined to the raw u_S there.
+/// with the median and largest ratio of the refined to the raw u_S there; the runs whose u_S the
+/// refine called unbounded, and the largest u_S / max(S error, raw u_S) (RMS) of the others.
 std::string coverage_breakdown(const SweepCell& c);
 
 }  // namespace errsep::core
