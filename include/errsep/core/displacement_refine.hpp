@@ -76,11 +76,11 @@
 // scans, no rotation; seeds 1601-1620): the separation switched the correction on in 16/20, w's
 // error median 3.4 um against 0.48 off; the rotation terms' shape 0.9-6.2 um against a per-point
 // u of 1.3-1.5 um (their own significance cannot tell), σ̂ of the reference tracks 0.99-1.10 of
-// the truth (nor can the misfit).  What tells is the effect library: the refine explains the residual
-// by the effects taken, by each family not taken added (every τ of the thermal grid), and a taken
-// thermal drift at every τ of its grid; per explanation a least-squares fit q̂ (covariance C) of
-// its columns gives, with D_r = d_w of rotation off (r = 0) and on (1), G = D_1 − D_0 (what the
-// artefacts put into b̂), shapes (constant removed) and mean squares over the points:
+// the truth (nor can the misfit).  What tells is the effect library: the refine explains the
+// residual by the effects taken, by each family not taken added (every τ of the thermal grid), and
+// a taken thermal drift at every τ of its grid; per explanation a least-squares fit q̂ (covariance
+// C) of its columns gives, with D_r = d_w of rotation off (r = 0) and on (1), G = D_1 − D_0 (what
+// the artefacts put into b̂), shapes (constant removed) and mean squares over the points:
 //   E_on  = noise_on  + L_1,    E_off = noise_off + L_0 + R,
 //   L_r   = mean diag(D_r C D_rᵀ) for the effects taken (the refine corrects them) +
 //           max(0, ‖D_r q̂‖² − mean diag(D_r C D_rᵀ)) for an effect not taken (left in w),
@@ -189,8 +189,9 @@ struct DisplacementRefineResult {
 
 /// Separation, selection and decision (see above).  With RotationCorrection::automatic the
 /// rotation correction is re-taken with the effects the redundancy sees (above), and the refined
-/// separation uses that decision (base keeps the separation's own); on or off are kept as given.  Throws std::invalid_argument when
-/// the scan does not match the library's grid or sensor 0 repeat, or the options are invalid.
+/// separation uses that decision (base keeps the separation's own); on or off are kept as given.
+/// Throws std::invalid_argument when the scan does not match the library's grid or sensor 0 repeat,
+/// or the options are invalid.
 DisplacementRefineResult refine_two_axis(const TwoAxisScan& scan, const TwoAxisOptions& separation,
                                          const DisplacementEffectLibrary& library,
                                          const DisplacementRefineOptions& o = {});
