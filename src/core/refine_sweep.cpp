@@ -244,20 +244,25 @@ PlanChoice identifying_plan(UndeclaredEffect effect, const FourSensorConfig& cfg
   if (sequence_kind_of(effect, &kind)) {
     // Every redundant plan's identifiability of the effect (of both drift members for drift:
     // the refine takes whichever fits, so both must be identifiable), the smallest
-    // undetermined S gain winning.
+    // undetermined S gain winning (for the drift family the larger of the drift's and its
+    // form's: sequence_refine.hpp SequenceIdentifiability::form_undetermined_S_gain).
     double best = 0;
     int best_T = 0;
     bool found = false;
     std::string scores;
-    for (const ScanSequenceKind k : {ScanSequenceKind::closing_pass, ScanSequenceKind::reversed,
-                                     ScanSequenceKind::interleaved, ScanSequenceKind::rezeroed}) {
+    for (const ScanSequenceKind k :
+         {ScanSequenceKind::closing_pass, ScanSequenceKind::reversed, ScanSequenceKind::interleaved,
+          ScanSequenceKind::rezeroed, ScanSequenceKind::reversed_closing}) {
       const ScanSequence seq = ScanSequence::make(k, cfg);
       bool ok = true;
       double gain = 0;
       for (const auto& id : sequence_identifiability(cfg, seq, seq_opts))
         if (id.kind == kind || (drift_family(kind) && drift_family(id.kind))) {
+          // The drift family's form ranks the plans too (the refine takes a warm-up or a line,
+          // whichever fits, and takes S midway where it cannot tell them): among the plans that
+          // identify the drift, the one that best determines its form wins.
           ok = ok && id.identifiable_from_plan;
-          gain = std::max(gain, id.undetermined_S_gain);
+          gain = std::max({gain, id.undetermined_S_gain, id.form_undetermined_S_gain});
         }
       std::snprintf(buf, sizeof buf, "%s%s %.2g%s", scores.empty() ? "" : ", ", to_string(k), gain,
                     ok ? "" : " (no)");
@@ -272,7 +277,7 @@ PlanChoice identifying_plan(UndeclaredEffect effect, const FourSensorConfig& cfg
     std::snprintf(buf, sizeof buf,
                   "sequence_identifiability of %s%s, undetermined S gain per plan (<= %.2g "
                   "identifiable): %s",
-                  to_string(kind), drift_family(kind) ? " and its family" : "",
+                  to_string(kind), drift_family(kind) ? " and its family, the form's included" : "",
                   seq_opts.undetermined_S_max, scores.c_str());
     c.why = found ? buf : std::string(buf) + "; identifiable from none: single";
     return c;

@@ -20,12 +20,14 @@ const char* to_string(ScanSequenceKind k) {
       return "rezeroed";
     case ScanSequenceKind::serpentine:
       return "serpentine";
+    case ScanSequenceKind::reversed_closing:
+      return "reversed closing";
   }
   return "unknown";
 }
 
 const char* scan_sequence_kind_names() {
-  return "single, closing, reversed, interleaved, rezeroed, serpentine";
+  return "single, closing, reversed, interleaved, rezeroed, serpentine, reversed-closing";
 }
 
 ScanSequenceKind scan_sequence_kind_from_string(const std::string& name) {
@@ -35,6 +37,8 @@ ScanSequenceKind scan_sequence_kind_from_string(const std::string& name) {
   if (name == "interleaved") return ScanSequenceKind::interleaved;
   if (name == "rezeroed" || name == "re-zeroed") return ScanSequenceKind::rezeroed;
   if (name == "serpentine") return ScanSequenceKind::serpentine;
+  if (name == "reversed-closing" || name == "reversed closing")
+    return ScanSequenceKind::reversed_closing;
   throw std::invalid_argument("unknown scan plan '" + name + "': one of " +
                               scan_sequence_kind_names());
 }
@@ -106,9 +110,14 @@ ScanSequence ScanSequence::make(ScanSequenceKind kind, const FourSensorConfig& c
       order = {{0, D::forward}, {1, D::forward}, {2, D::forward}, {3, D::forward}, {0, D::forward}};
       break;
     case ScanSequenceKind::reversed:
+    case ScanSequenceKind::reversed_closing:
       for (int c = 0; c < 4; ++c) {
         order.push_back({c, D::forward});
         order.push_back({c, D::backward});
+      }
+      if (kind == ScanSequenceKind::reversed_closing) {
+        order.push_back({0, D::forward});
+        order.push_back({0, D::backward});
       }
       break;
     case ScanSequenceKind::interleaved:

@@ -577,9 +577,43 @@ struct SequenceModel::Impl {
             Eigen::JacobiSVD<Eigen::MatrixXd>(Sh).singularValues()(0) * std::sqrt(double(b.T));
       }
       id.identifiable_from_plan = id.undetermined_S_gain <= o.undetermined_S_max;
+      if (kind == SequenceEffectKind::thermal) {
+        id.form_undetermined_S_gain = form_undetermined_S_gain(F, i);
+      }
       out.push_back(id);
     }
     return out;
+  }
+
+  // The drift form, without data: a thermal drift's columns at τ (the family's representative,
+  // the grid's middle, as above) against the model with a linear drift (its seen directions),
+  // the alternative the refine weighs in drift_form_decision.  Directions of the warm-up that a
+  // line cannot mimic but the plan barely sees (relative singular value below
+  // weak_direction_sv) are what the two forms may disagree on in S; their gain is measured as
+  // undetermined_S_gain.  Measured over the τ grid of the paper's geometry (N = 69): reversed
+  // 0.0006-1.7 (1.7 at τ 21 s, 0.93 at the middle), reversed closing 0.001-0.13 (0.08 at the
+  // middle, 0.13 at τ 105 s), closing pass, interleaved, rezeroed 0.001-2.0.  Factorised here,
+  // not cached: the refine's cache depends on the identifiability computed here.
+  double form_undetermined_S_gain(Factor& F0, int thermal_candidate) {
+    const int d = candidates_of(SequenceEffectKind::drift).front();
+    const Projected pd = project(F0.Q, cands[static_cast<std::size_t>(d)].J, o.identifiability_tol,
+                                 o.weak_direction_sv);
+    if (pd.identifiable == 0) return 0.0;
+    const Factor Fd =
+        factorise(b,
+                  cands[static_cast<std::size_t>(d)].J * pd.D.cwiseInverse().asDiagonal() *
+                      pd.V.leftCols(pd.identifiable),
+                  false);
+    const Eigen::MatrixXd& J = cands[static_cast<std::size_t>(thermal_candidate)].J;
+    const Projected pj = project(Fd.Q, J, o.identifiability_tol, o.weak_direction_sv);
+    const Eigen::Index k0 = static_cast<Eigen::Index>(pj.D.size()) - pj.strong;
+    if (k0 <= 0) return 0.0;
+    const Eigen::MatrixXd toS =
+        Pi * Fd.R.triangularView<Eigen::Upper>()
+                 .solve(Fd.Q.transpose() * (J * pj.D.cwiseInverse().asDiagonal()))
+                 .middleRows(b.nf, b.P);
+    return Eigen::JacobiSVD<Eigen::MatrixXd>(toS * pj.V.rightCols(k0)).singularValues()(0) *
+           std::sqrt(double(b.T));
   }
 
   // What an effect with columns projected as `pj` (its S response toS) could do to S, as
@@ -1458,14 +1492,18 @@ SequenceRefineResult SequenceModel::Impl::refine_effects(const Eigen::MatrixXd& 
           // stands (τ's profile set is still carried in u_S below).
           if (half_rms > 0.1 * u_rms) {
             forms_midway = dS;
-            char line[500];
+            char line[700];
             std::snprintf(line, sizeof line,
                           "drift form not identifiable from this plan (%s): a linear drift and a "
                           "warm-up (tau %.3g s) fit the readings alike (F = %.3g on tau, p = %.2g "
                           "over the tau grid of %d), but their S differ by %.2g um RMS: S taken "
-                          "midway, half the difference (%.2g um RMS) carried in u_S",
+                          "midway, half the difference (%.2g um RMS) carried in u_S%s",
                           seq.name.c_str(), th.tau_s, F, p_grid, static_cast<int>(grid.size()),
-                          2.0 * half_rms, half_rms);
+                          2.0 * half_rms, half_rms,
+                          seq.name == to_string(ScanSequenceKind::reversed_closing)
+                              ? ""
+                              : " (measure configuration 1 forward and back again once the "
+                                "drift has settled: plan reversed-closing)");
             form_line = line;
             std::snprintf(note, sizeof note,
                           " (form not identifiable: S midway between the linear and thermal "
@@ -1529,7 +1567,7 @@ SequenceRefineResult SequenceModel::Impl::refine_effects(const Eigen::MatrixXd& 
     res.after.u_S_um = (res.after.u_S_um.cwiseAbs2() + res.u_S_declined_um).cwiseSqrt();
     res.u_S_declined_um = res.u_S_declined_um.cwiseSqrt();
   }
-  char buf[600];
+  char buf[900];
   for (const auto& a : res.added) {
     std::snprintf(buf, sizeof buf, "%s identified: %s, %d direction(s), F = %.3g, p = %.2g",
                   to_string(a.kind), a.description.c_str(), a.identifiable, a.F, a.p_value);
@@ -1586,7 +1624,9 @@ SequenceRefineResult SequenceModel::Impl::refine_effects(const Eigen::MatrixXd& 
                     // traverses shows in any repeated configuration.
                     id.kind == SequenceEffectKind::traverse
                         ? "a closing pass or reversed traverses"
-                        : "reversed traverses (each configuration forward and back)");
+                        : "reversed traverses (each configuration forward and back) and "
+                          "configuration 1 again at the end, which tells a warm-up from a line "
+                          "(plan reversed-closing)");
       res.report.push_back(buf);
     }
   // Every traverse's residual, with its direction and time (a hysteresis or a non-linearity shows

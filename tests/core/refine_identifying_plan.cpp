@@ -15,22 +15,26 @@
 //   - an effect of the library: in no run does the S or gamma error grow by more than its stated
 //     uncertainty (RMS of the refined u), except PE2 at sigma 0.2 (one run: printed);
 //   - drift (linear, one configuration and all) and the non-repeating traverse identified in
-//     >= 80 % of runs on their identifying plan (reversed, closing pass), and a thermal drift on
-//     all configurations;
+//     >= 80 % of runs on their identifying plan (reversed closing, closing pass), and a thermal
+//     drift on all configurations;
 //   - halved (S and gamma errors both at most half) in >= 80 % of the runs where the effect is
 //     identifiable from the plan used and at least doubled the clean S error, where it holds
-//     (the non-repeating traverse at sigma 0.05 and 0.1); printed for the others;
+//     (the non-repeating traverse at sigma 0.05 and 0.1, the drifts and the hysteresis at 0.05);
+//     printed for the others;
 //   - an effect not in the library reported as not white in >= 80 %: per sigma over the
 //     non-linearity's cell alone and over it with the bump's (the bump alone: 65-70 %, printed);
 //   - coverage of 2 u_S over each case's cells within 90-99 % (redundant plans; clean single
 //     plan); printed for the single plan's effect cells, some of which undercover (see there).
-// What does not hold (measured with these seeds; the app prints it): a thermal drift on the
-// reversed plan is halved in only 11 of 20 runs at sigma 0.1 (thermal_all), because in 6 of them
-// the first round keeps the linear form (tau's F test does not reject the line; S is then left as
-// it was and the two forms' S difference, 0.4-1.2 um RMS, is carried in u_S, which covers); a
-// thermal drift on one configuration changes S too little to double its clean error and is
-// identified in 40 % of runs at sigma 0.1; a linear drift on the reversed plan leaves S alone
-// (nothing to halve).  See each case's comment for the per-case figures.
+// What does not hold (measured with these seeds; the app prints it): a thermal drift on all
+// configurations on the reversed closing plan is halved in 11 of the 15 runs at sigma 0.1 (5 of 8
+// at 0.2) where it doubled the clean S error: S is halved in all of them (S after = the clean
+// scan's error, median 0.135 against 0.134 um), gamma is not in 4, where the drift had not
+// doubled gamma's clean error and gamma after is at its noise floor.  (On the reversed plan alone
+// the forms were not told apart in 6 of 20 runs: S midway, halved in 10 of 20; the closing pair
+// fixed that: scan_sequence.hpp.)  A thermal drift on one configuration changes S too little to
+// double its clean error and is identified in 40 % of runs at sigma 0.1; a linear drift on a
+// reversed plan leaves S alone (nothing to halve).  See each case's comment for the figures.
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cstdio>
 #include <string>
@@ -114,6 +118,27 @@ TEST_CASE("identifying plan: chosen from the library's identifiability") {
       for (const auto& id : sequence_identifiability(cfg, ScanSequence::make(c.plan, cfg)))
         identifies = identifies || (id.kind == k && id.identifiable_from_plan);
       CHECK(identifies);
+      // For a drift the plan also determines the drift's form best: no plan that identifies
+      // the drift has a smaller form gain (the reversed plan's 0.63 against 0.13).
+      if (k != SequenceEffectKind::traverse) {
+        auto form = [&](ScanSequenceKind plan, bool* drift_identified) {
+          double g = 0;
+          *drift_identified = true;
+          for (const auto& id : sequence_identifiability(cfg, ScanSequence::make(plan, cfg))) {
+            g = std::max(g, id.form_undetermined_S_gain);
+            if (id.kind != SequenceEffectKind::traverse)
+              *drift_identified = *drift_identified && id.identifiable_from_plan;
+          }
+          return g;
+        };
+        bool ok = false;
+        const double chosen = form(c.plan, &ok);
+        for (const auto other : {ScanSequenceKind::closing_pass, ScanSequenceKind::reversed,
+                                 ScanSequenceKind::interleaved, ScanSequenceKind::rezeroed,
+                                 ScanSequenceKind::serpentine, ScanSequenceKind::reversed_closing})
+          if (form(other, &ok) < chosen && ok)
+            FAIL_CHECK(to_string(other) << " tells the form better");
+      }
     } else if (e == UndeclaredEffect::nonlinearity) {
       CHECK(ScanSequence::make(c.plan, cfg).rezeroed());
     } else if (e == UndeclaredEffect::hysteresis) {
@@ -138,7 +163,7 @@ TEST_CASE("identifying plan: chosen from the library's identifiability") {
   int clean = 0;
   for (const auto& c : cells)
     clean += c.effect == UndeclaredEffect::none;
-  CHECK(clean >= 4);  // single, reversed, closing pass or rezeroed, serpentine
+  CHECK(clean >= 4);  // single, reversed closing, closing pass or rezeroed, serpentine
   // A fixed redundant plan leaves out what the sequence simulator does not model, and says so.
   std::vector<std::string> skipped;
   const auto rev = sweep_plan_cells("reversed", all_undeclared_effects(), &skipped);
@@ -157,7 +182,8 @@ std::vector<PlanChoice> redundant_cells(bool (*pred)(UndeclaredEffect)) {
   return cells;
 }
 
-// Clean scans on every redundant plan used (reversed, closing pass, re-zeroed, serpentine).
+// Clean scans on every redundant plan used (reversed closing, closing pass, re-zeroed,
+// serpentine).
 // Measured: the re-zeroed plan adds a non-linearity in 2 of 20 clean runs at every sigma (one
 // applied), the others nothing; pooled 2 of 80.
 void clean_redundant(double sigma) {
@@ -168,8 +194,11 @@ void clean_redundant(double sigma) {
   check_coverage(c.m);
 }
 
-// Drift and thermal drift (one configuration and all) on the reversed plan.
-void drift_redundant(double sigma) {
+// Drift and thermal drift (one configuration and all) on the reversed closing plan (the one
+// identifying_plan picks: it identifies the drift as the reversed plan does and determines its
+// form).  Halved where it doubled the clean S error: 18 of 21, 11 of 15, 5 of 8 at sigma 0.05,
+// 0.1, 0.2 (asserted at 0.05; the others are gamma at its noise floor: file comment).
+void drift_redundant(double sigma, bool halving_holds) {
   const Cells c =
       run_cells(redundant_cells([](UndeclaredEffect e) {
                   return e == UndeclaredEffect::drift_one || e == UndeclaredEffect::drift_all ||
@@ -180,11 +209,14 @@ void drift_redundant(double sigma) {
   CHECK(c.identified(UndeclaredEffect::drift_one) >= 0.8);
   CHECK(c.identified(UndeclaredEffect::drift_all) >= 0.8);
   CHECK(c.identified(UndeclaredEffect::thermal_all) >= 0.8);
-  // Not asserted: thermal_one identified (0.40 at sigma 0.1) and the halving (thermal_all 11 of
-  // 20 at sigma 0.1; the linear drifts leave S alone).
+  // Not asserted: thermal_one identified (0.40 at sigma 0.1).
   std::printf("  thermal_one identified in %.2f of runs (not asserted)\n",
               c.identified(UndeclaredEffect::thermal_one));
-  print_halved(c.m);
+  CHECK(c.m.library_identifiable_doubled > 0);
+  if (halving_holds)
+    CHECK(c.m.library_halved_doubled >= 0.8 * c.m.library_identifiable_doubled);
+  else
+    print_halved(c.m);
   check_coverage(c.m);
 }
 
@@ -256,14 +288,17 @@ TEST_CASE("identifying plan, clean scans on the redundant plans, sigma 0.1", "[s
 TEST_CASE("identifying plan, clean scans on the redundant plans, sigma 0.2", "[sweep]") {
   clean_redundant(0.2);
 }
-TEST_CASE("identifying plan, drift and thermal drift on the reversed plan, sigma 0.05", "[sweep]") {
-  drift_redundant(0.05);
+TEST_CASE("identifying plan, drift and thermal drift on the reversed closing plan, sigma 0.05",
+          "[sweep]") {
+  drift_redundant(0.05, true);
 }
-TEST_CASE("identifying plan, drift and thermal drift on the reversed plan, sigma 0.1", "[sweep]") {
-  drift_redundant(0.1);
+TEST_CASE("identifying plan, drift and thermal drift on the reversed closing plan, sigma 0.1",
+          "[sweep]") {
+  drift_redundant(0.1, false);
 }
-TEST_CASE("identifying plan, drift and thermal drift on the reversed plan, sigma 0.2", "[sweep]") {
-  drift_redundant(0.2);
+TEST_CASE("identifying plan, drift and thermal drift on the reversed closing plan, sigma 0.2",
+          "[sweep]") {
+  drift_redundant(0.2, false);
 }
 TEST_CASE("identifying plan, traverse and non-linearity, sigma 0.05", "[sweep]") {
   traverse_nonlinearity_redundant(0.05, true);

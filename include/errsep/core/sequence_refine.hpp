@@ -140,6 +140,12 @@ struct SequenceIdentifiability {
   Eigen::VectorXd relative_sv;
   double undetermined_S_gain = 0;  ///< file comment (µm of S RMS per µm of reading RMS)
   bool identifiable_from_plan = false;
+  /// Thermal drift only (0 for the other kinds): the same gain for its columns beyond a linear
+  /// drift's, at the τ grid's middle: what S may take from a warm-up that the plan cannot tell
+  /// from a line, the form drift_form_decision weighs.  A ranking, not a verdict: the reversed
+  /// plan 0.63, reversed closing 0.13 on the paper's geometry, and the refine tells the forms
+  /// apart on the latter (scan_sequence.hpp).
+  double form_undetermined_S_gain = 0;
 };
 
 struct SequenceRefineOptions {
