@@ -470,6 +470,29 @@ int main(int argc, char** argv) {
         table.add_column("yaw_urad", yaw_col);
         table.add_column("w_before_yaw_um", w_before);
       }
+      // The two-axis loop (issue 16 item 4) on the plan the options state, before the
+      // separation's file is written: where it re-takes the rotation decision the other way,
+      // that file says so (its w keeps the separation's decision, the refined file the loop's).
+      std::optional<errsep::core::DisplacementRefineResult> rr;
+      const std::filesystem::path op(output);
+      const auto stem = (op.parent_path() / op.stem()).string();
+      if (refine_two) {
+        order.reverse_scan2 = scan2_order == "backward";
+        order.y_fastest_scan2 = y_fastest_scan2;
+        if (!order.is_valid(&why)) throw std::invalid_argument("scan order: " + why);
+        errsep::core::DisplacementRefineOptions ro;
+        ro.alpha = ropt.whiteness.alpha;
+        const auto lib = errsep::core::make_displacement_effect_library(
+            scan.x_mm, scan.y_mm, scan.s0_2_um.size() > 0, order, o, ro);
+        rr = errsep::core::refine_two_axis(scan, o, lib, ro);
+        if (rr->refined.rotation_corrected != res.rotation_corrected)
+          table.set_meta("rotation_superseded",
+                         std::string("the refine re-took the rotation decision with the effects "
+                                     "its redundancy sees: ") +
+                             (rr->refined.rotation_corrected ? "on" : "off") + " in " + stem +
+                             ".refined.csv; this file keeps the separation's (" +
+                             (res.rotation_corrected ? "on" : "off") + ")");
+      }
       const auto rtable = errsep::io::displacement_residuals_csv(resid, true);
       errsep::io::write_csv(rpath, rtable);
       errsep::io::write_csv(output, table);
@@ -478,28 +501,19 @@ int main(int argc, char** argv) {
       std::cout << resid.brief_report() << "\n";
       if (yres) std::cout << yres->brief_report() << "\n";
       std::cout << "wrote " << output << " and " << rpath << "\n";
-      if (refine_two) {
-        // The two-axis loop (issue 16 item 4) on the plan the options state.
-        order.reverse_scan2 = scan2_order == "backward";
-        order.y_fastest_scan2 = y_fastest_scan2;
-        if (!order.is_valid(&why)) throw std::invalid_argument("scan order: " + why);
-        errsep::core::DisplacementRefineOptions ro;
-        ro.alpha = ropt.whiteness.alpha;
-        const auto lib = errsep::core::make_displacement_effect_library(
-            scan.x_mm, scan.y_mm, scan.s0_2_um.size() > 0, order, o, ro);
-        const auto rr = errsep::core::refine_two_axis(scan, o, lib, ro);
-        const std::filesystem::path op(output);
-        const auto stem = (op.parent_path() / op.stem()).string();
-        auto steps = errsep::io::displacement_refine_two_axis_csv(rr, order.plan_name());
+      if (rr) {
+        auto steps = errsep::io::displacement_refine_two_axis_csv(*rr, order.plan_name());
         steps.set_meta("source", input);
-        auto refined = errsep::io::two_axis_result_csv(scan, rr.refined);
+        auto refined = errsep::io::two_axis_result_csv(scan, rr->refined);
         refined.set_meta("source", input);
         refined.set_meta("refine", stem + ".refine.csv");
         errsep::io::write_csv(stem + ".refine.csv", steps);
         errsep::io::write_csv(stem + ".refined.csv", refined);
         std::cout << "refine plan: " << order.plan_name() << "\n"
-                  << rr.brief_report() << "wrote " << stem << ".refine.csv and " << stem
+                  << rr->brief_report() << "wrote " << stem << ".refine.csv and " << stem
                   << ".refined.csv\n";
+        if (const auto note = table.meta("rotation_superseded"))
+          std::cerr << "errsep-separate-displacement: warning: " << output << ": " << *note << "\n";
       }
     } else {
       const auto in = errsep::io::read_three_point_csv(inputs.front());
