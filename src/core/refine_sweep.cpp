@@ -574,6 +574,7 @@ MustShow must_show(const std::vector<SweepCell>& cells) {
           if (r.S_before_um >= 2.0 * r.S_clean_um) {
             ++m.library_identifiable_doubled;
             m.library_halved_doubled += r.halved();
+            m.library_halved_where_doubled += r.halved_where_doubled();
           }
         }
       } else {
@@ -586,16 +587,17 @@ MustShow must_show(const std::vector<SweepCell>& cells) {
 }
 
 std::string MustShow::brief() const {
-  char buf[900];
+  char buf[1100];
   std::snprintf(buf, sizeof buf,
                 "clean: added in %d of %d runs; library effects: worse beyond u in %d of %d, "
                 "halved in %d of the %d identifiable from the plan (%d of the %d where the effect "
-                "doubled the clean S error); not in the library: not white "
+                "doubled the clean S error; S halved and gamma too where the effect doubled "
+                "gamma's in %d); not in the library: not white "
                 "in %d of %d; u_S coverage (2 u_S) %ld of %ld points (%.3f), %.3f where something "
                 "was added (%ld points)",
                 clean_added, clean_runs, library_worse_beyond_u, library_runs, library_halved,
                 library_identifiable, library_halved_doubled, library_identifiable_doubled,
-                not_in_library_not_white, not_in_library_runs, covered, points, coverage(),
+                library_halved_where_doubled, not_in_library_not_white, not_in_library_runs, covered, points, coverage(),
                 points_found ? static_cast<double>(covered_found) / points_found : 0.0,
                 points_found);
   return buf;

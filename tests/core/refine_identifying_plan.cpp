@@ -91,9 +91,10 @@ void check_coverage(const MustShow& m) {
 void print_halved(const MustShow& m) {
   std::printf(
       "  halved (not asserted here): %d of the %d runs identifiable from the plan where the "
-      "effect doubled the clean S error (%d of %d identifiable)\n",
+      "effect doubled the clean S error (%d of %d identifiable; S halved and gamma too where "
+      "the effect doubled gamma's error in %d)\n",
       m.library_halved_doubled, m.library_identifiable_doubled, m.library_halved,
-      m.library_identifiable);
+      m.library_identifiable, m.library_halved_where_doubled);
 }
 
 }  // namespace

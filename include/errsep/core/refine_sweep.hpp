@@ -50,6 +50,14 @@ struct SweepRun {
   bool halved() const {
     return S_after_um <= 0.5 * S_before_um && gamma_after_urad <= 0.5 * gamma_before_urad;
   }
+  /// S halved, and gamma too unless the effect left gamma's error below twice its clean error
+  /// (then the refined gamma is at its noise floor and cannot halve: printed beside halved(),
+  /// which the tests assert).
+  bool halved_where_doubled() const {
+    return S_after_um <= 0.5 * S_before_um &&
+           (gamma_after_urad <= 0.5 * gamma_before_urad ||
+            gamma_before_urad < 2.0 * gamma_clean_urad);
+  }
 };
 
 /// Simulates one case and runs the refinement on it.
@@ -141,6 +149,7 @@ struct MustShow {
   /// issue's sizes: "each at a size that at least doubles the clean error"; a linear drift on the
   /// reversed plan leaves S alone, so there is nothing to halve), and of those the halved ones.
   int library_identifiable_doubled = 0, library_halved_doubled = 0;
+  int library_halved_where_doubled = 0;  ///< of those, SweepRun::halved_where_doubled
   int not_in_library_runs = 0, not_in_library_not_white = 0;  ///< nonlinearity, bump
   long points = 0, covered = 0;              ///< u_S coverage pooled over all cells
   long points_found = 0, covered_found = 0;  ///< ... over the runs where something was added
