@@ -538,6 +538,28 @@ core::YawTruth yaw_truth(const Eigen::VectorXd& c_urad) {
   return y;
 }
 
+// w's error at each point of a w column (column major, nx x ny) against the truth, its mean
+// removed (a constant of w is not determined).
+std::vector<double> shape_error(const std::vector<double>& w, const Eigen::MatrixXd& truth) {
+  std::vector<double> e(w.size());
+  double mean = 0;
+  for (std::size_t k = 0; k < w.size(); ++k) {
+    e[k] = w[k] - truth(static_cast<Eigen::Index>(k) % truth.rows(),
+                        static_cast<Eigen::Index>(k) / truth.rows());
+    mean += e[k] / static_cast<double>(w.size());
+  }
+  for (auto& v : e)
+    v -= mean;
+  return e;
+}
+
+double rms(const std::vector<double>& e) {
+  double s = 0;
+  for (const double v : e)
+    s += v * v / static_cast<double>(e.size());
+  return std::sqrt(s);
+}
+
 }  // namespace
 
 TEST_CASE("two-axis: the lateral pair columns switch on the yaw diagnosis, a yaw is found") {
@@ -731,24 +753,6 @@ TEST_CASE("two-axis --refine: a sensor drift is taken on the plan that identifie
     CHECK_THAT(out, Catch::Contains("displacement refine"));
     return sim;
   };
-  auto shape_error = [](const std::vector<double>& w, const Eigen::MatrixXd& truth) {
-    std::vector<double> e(w.size());
-    double mean = 0;
-    for (std::size_t k = 0; k < w.size(); ++k) {
-      e[k] = w[k] - truth(static_cast<Eigen::Index>(k) % truth.rows(),
-                          static_cast<Eigen::Index>(k) / truth.rows());
-      mean += e[k] / static_cast<double>(w.size());
-    }
-    for (auto& v : e)
-      v -= mean;
-    return e;
-  };
-  auto rms = [](const std::vector<double>& e) {
-    double s = 0;
-    for (const double v : e)
-      s += v * v / static_cast<double>(e.size());
-    return std::sqrt(s);
-  };
 
   // Five seeds (random stage, noise and drift signs; ~0.4 s each).
   int halved = 0;
@@ -836,24 +840,6 @@ TEST_CASE("two-axis --refine --scan1-diagonal: a thermal drift of sensors 3-4 on
   for (int j = 0; j < kN; ++j)
     for (int i = 0; i < kN; ++i)
       t1(i, j) = order.time_s(1, i, j, kN, kN);
-  auto shape_error = [](const std::vector<double>& w, const Eigen::MatrixXd& truth) {
-    std::vector<double> e(w.size());
-    double mean = 0;
-    for (std::size_t k = 0; k < w.size(); ++k) {
-      e[k] = w[k] - truth(static_cast<Eigen::Index>(k) % truth.rows(),
-                          static_cast<Eigen::Index>(k) / truth.rows());
-      mean += e[k] / static_cast<double>(w.size());
-    }
-    for (auto& v : e)
-      v -= mean;
-    return e;
-  };
-  auto rms = [](const std::vector<double>& e) {
-    double s = 0;
-    for (const double v : e)
-      s += v * v / static_cast<double>(e.size());
-    return std::sqrt(s);
-  };
   auto notes = [](const io::CsvTable& t) {
     std::vector<std::string> n;
     for (int i = 1; t.meta("note" + std::to_string(i)); ++i)
