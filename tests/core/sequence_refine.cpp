@@ -904,23 +904,21 @@ TEST_CASE("a hysteresis is found in the trace of every traverse of a reversed pl
 //   reversed    every configuration forward and back: the fit averages the two directions, so a
 //               hysteresis moves no estimate (its column flips between two traverses of the same
 //               points); it only inflates σ̂.  Asserted: identified in >= 80 %, S never worse
-//               than before by more than the refined u_S (RMS), coverage of 2u_S >= 90 % (the
-//               99 % upper bound does not hold: 0.998 with the sign term below, see the hidden
-//               "[unmet]" case).
+//               than before by more than the refined u_S (RMS), coverage of 2u_S 90-99 %.
 //   serpentine  1 forward, 2 back, 3 forward, 4 back, then 1 back (the slide does not return
 //               empty between configurations; a closing pass of configuration 1 the other way):
 //               configurations 2 and 4 read with the opposite lag, which S and γ absorb; h, one
 //               for the sensor, is determined by configuration 1's two directions.  h = 5-10 σ
 //               (at 3-6 σ it doubled the clean S error in only 14 of 20 runs per σ; the size
 //               must at least double it: asserted in >= 80 % of runs).  Asserted: identified
-//               >= 80 %, S error halved in >= 80 % of the runs where it doubled it at σ 0.05 and
-//               0.1 (at 0.2: 14 of 18, the hidden "[unmet]" case), never worse beyond u,
-//               coverage 90-99 %.
+//               >= 80 %, S error halved in >= 80 % of the runs where it doubled it, never worse
+//               beyond u, coverage 90-99 %.
 // Both: clean scans of the same seeds take a hysteresis in <= 5 % of runs; the single plan says
 // "not identifiable from this plan" and tests nothing.  u_S carries the column's sign uncertainty
-// where the profile turns (sequence_refine.cpp): serpentine coverage of 2u_S at sigma
-// 0.05/0.1/0.2 0.933/0.916/0.971 without it, 0.971/0.990/0.998 with it (pooled 0.987); reversed
-// 0.995 -> 0.998.
+// where the profile turns (sequence_refine.cpp), the sign weighed by the slope and by the
+// readings of the point and configuration (SequenceRefineOptions::hysteresis_signs_from_readings):
+// serpentine halved 17/18 at every σ, coverage 0.935; reversed 0.960.  With the slope's sign
+// alone: halved 17/18, 15/18, 14/18, coverage serpentine 0.971/0.990/0.998, reversed 0.998.
 namespace {
 
 ScanSequence serpentine_plan(const FourSensorConfig& cfg) {
@@ -944,8 +942,7 @@ HysteresisRun simulate_hysteresis(const FourSensorConfig& cfg, const ScanSequenc
   return out;
 }
 
-// `unmet`: also assert the two targets that do not hold today (the hidden test case below).
-void hysteresis_cells(const ScanSequence& seq, bool expect_bias, bool unmet = false) {
+void hysteresis_cells(const ScanSequence& seq, bool expect_bias) {
   const FourSensorConfig cfg;
   SequenceModel model(cfg, seq);
   double covered_all = 0, points_all = 0;
@@ -1006,8 +1003,9 @@ void hysteresis_cells(const ScanSequence& seq, bool expect_bias, bool unmet = fa
     CHECK(clean_added * 20 <= kRuns);
     if (expect_bias) {
       CHECK(doubled * 10 >= 8 * kRuns);
-      // Measured: 17/18, 15/18, 14/18 at σ 0.05/0.1/0.2 (the σ 0.2 cell misses 80 %).
-      if (unmet || sigma < 0.15) CHECK(halved * 10 >= 8 * doubled);
+      // Measured: 17/18 at each σ 0.05/0.1/0.2 (17/18, 15/18, 14/18 with the slope's sign alone,
+      // before SequenceRefineOptions::hysteresis_signs_from_readings).
+      CHECK(halved * 10 >= 8 * doubled);
     }
     covered_all += covered;
     points_all += points;
@@ -1016,10 +1014,10 @@ void hysteresis_cells(const ScanSequence& seq, bool expect_bias, bool unmet = fa
   std::printf("hysteresis, %s plan: coverage of 2u_S over the three sigma %.3f\n", seq.name.c_str(),
               coverage);
   CHECK(coverage >= 0.90);
-  // Measured: reversed 0.990/0.998/0.998 per σ (clean runs of the same seeds 0.959): u_S is
-  // conservative after the hysteresis is taken in; not yet explained (the effects loop reading
-  // what the model leaves of the hysteresis where the profile turns is suspected).
-  if (unmet || expect_bias) CHECK(coverage <= 0.99);
+  // Measured: reversed 0.960, serpentine 0.935 (clean runs of the same seeds 0.959, 0.951).  With
+  // the slope's sign alone the reversed plan covered 0.990-0.998: the sign term of u_S carried
+  // the turns' readings at h²(1 − s²) though the readings themselves tell their sign.
+  CHECK(coverage <= 0.99);
 }
 
 }  // namespace
@@ -1028,15 +1026,6 @@ TEST_CASE("a hysteresis on the reversed plan: identified, taken into the fit, S 
           "[sweep]") {
   const FourSensorConfig cfg;
   hysteresis_cells(ScanSequence::make(ScanSequenceKind::reversed, cfg), false);
-}
-
-// The targets that do not hold yet (reversed plan: coverage of 2u_S above 0.99; serpentine plan,
-// σ 0.2: S error halved in 14 of 18 doubled runs): not run by ctest, run by hand to see them.
-TEST_CASE("hysteresis: the targets not met yet (coverage <= 0.99 on reversed, halved at 0.2)",
-          "[.][unmet]") {
-  const FourSensorConfig cfg;
-  hysteresis_cells(ScanSequence::make(ScanSequenceKind::reversed, cfg), false, true);
-  hysteresis_cells(serpentine_plan(cfg), true, true);
 }
 
 TEST_CASE("a hysteresis on a serpentine plan: identified, S error halved, u_S covers", "[sweep]") {

@@ -214,6 +214,10 @@ struct SequenceRefineOptions {
   /// Test the sensor's hysteresis on plans that read a configuration both ways and take it into
   /// the fit when decide_step expects S, γ, f to improve (SequenceHysteresis).
   bool fit_hysteresis = true;
+  /// Where the fitted slope leaves a reading's lag sign uncertain (the profile turns), weigh it
+  /// by the reading itself too: the two signs differ by 2h in that reading, h ≫ σ in the cases
+  /// that matter (SequenceRefine's refine_hysteresis).  Off: the slope's sign alone.
+  bool hysteresis_signs_from_readings = true;
   bool is_valid(std::string* why = nullptr) const;
 };
 
