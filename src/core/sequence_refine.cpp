@@ -591,9 +591,10 @@ struct SequenceModel::Impl {
   // line cannot mimic but the plan barely sees (relative singular value below
   // weak_direction_sv) are what the two forms may disagree on in S; their gain is measured as
   // undetermined_S_gain.  Measured over the τ grid of the paper's geometry (N = 69): reversed
-  // 0.0006-1.7 (1.7 at τ 21 s, 0.93 at the middle), reversed closing 0.001-0.13 (0.08 at the
-  // middle, 0.13 at τ 105 s), closing pass, interleaved, rezeroed 0.001-2.0.  Factorised here,
-  // not cached: the refine's cache depends on the identifiability computed here.
+  // 0.0006-1.7 (1.7 at τ 21 s, 0.63 at the grid's middle, τ 84 s), reversed closing 0.001-0.13
+  // (0.13 at its middle, τ 105 s, its largest), closing pass, interleaved, rezeroed 0.001-2.0.
+  // Factorised here, not cached: the refine's cache depends on the identifiability computed
+  // here.
   double form_undetermined_S_gain(Factor& F0, int thermal_candidate) {
     const int d = candidates_of(SequenceEffectKind::drift).front();
     const Projected pd = project(F0.Q, cands[static_cast<std::size_t>(d)].J, o.identifiability_tol,
