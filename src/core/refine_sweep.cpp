@@ -597,7 +597,8 @@ std::string MustShow::brief() const {
                 "was added (%ld points)",
                 clean_added, clean_runs, library_worse_beyond_u, library_runs, library_halved,
                 library_identifiable, library_halved_doubled, library_identifiable_doubled,
-                library_halved_where_doubled, not_in_library_not_white, not_in_library_runs, covered, points, coverage(),
+                library_halved_where_doubled, not_in_library_not_white, not_in_library_runs,
+                covered, points, coverage(),
                 points_found ? static_cast<double>(covered_found) / points_found : 0.0,
                 points_found);
   return buf;

@@ -54,9 +54,8 @@ struct SweepRun {
   /// (then the refined gamma is at its noise floor and cannot halve: printed beside halved(),
   /// which the tests assert).
   bool halved_where_doubled() const {
-    return S_after_um <= 0.5 * S_before_um &&
-           (gamma_after_urad <= 0.5 * gamma_before_urad ||
-            gamma_before_urad < 2.0 * gamma_clean_urad);
+    return S_after_um <= 0.5 * S_before_um && (gamma_after_urad <= 0.5 * gamma_before_urad ||
+                                               gamma_before_urad < 2.0 * gamma_clean_urad);
   }
 };
 
