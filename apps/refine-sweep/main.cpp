@@ -79,6 +79,11 @@ int main(int argc, char** argv) {
                  "apply a correction only where effect_identifiability says the plan lets it "
                  "halve the errors (refine.hpp)")
       ->capture_default_str();
+  errsep::core::SequenceRefineOptions seq_opts;
+  app.add_option("--hysteresis-signs-from-readings", seq_opts.hysteresis_signs_from_readings,
+                 "a scan sequence's hysteresis: weigh the lag's sign at the profile's turns by "
+                 "the readings too; 0: the fitted slope's sign alone (sequence_refine.hpp)")
+      ->capture_default_str();
   std::vector<std::string> declared;
   app.add_option("--declare", declared,
                  "declared bounds (Type B) as effect=bound, e.g. drift=0.03,thermal=5: every "
@@ -131,8 +136,8 @@ int main(int argc, char** argv) {
     long points = 0, covered = 0, halved = 0, identifiable = 0;
     for (const auto& pc : cells)
       for (const double s : sigmas) {
-        const auto cell =
-            errsep::core::run_sweep_cell_on(pc.plan, pc.effect, s, seeds, seed0, refine, base);
+        const auto cell = errsep::core::run_sweep_cell_on(pc.plan, pc.effect, s, seeds, seed0,
+                                                          refine, base, seq_opts);
         breakdown.push_back(errsep::core::coverage_breakdown(cell));
         all_cells.push_back(cell);
         halved += cell.halved_identifiable_runs();
