@@ -684,6 +684,9 @@ struct Reported {
   std::vector<double> undetermined_S_um;
   std::vector<std::string> verdicts;
   std::vector<std::string> unbounded;  // RefineResult::unbounded
+  // RMS over the points of what the applied corrections' linearisation misses on S and γ (the
+  // last column of `term`, report_model).
+  double nonlinear_S_um = 0, nonlinear_gamma_urad = 0;
 };
 
 // The readings' own bound on what an effect can be (RefineResult::unbounded,
@@ -961,17 +964,50 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
   // pointwise u_S did not cover where an effect was applied and halved the shape error (periodic
   // error at σ = 0.05 µm: 0.45 of the points within 2 u_S, the shape 0.96): the effect had moved
   // the raw separation's bow.
-  Eigen::MatrixXd G(2 * K, 2 * K);
-  G.setZero();
+  //
+  // The terms above map the parameters' second moment onto S, γ, f through the sensitivities at
+  // the fit, i.e. the correction linearised there.  For an effect that moves where f is sampled
+  // (PE1, PE2, the periodic error) by millimetres on a wavy reference the correction is far from
+  // linear over the step (PE2 at σ = 0.2 µm, seed 15 of errsep-refine-sweep: the applied
+  // correction changed γ by 217 µrad rms where the linearisation predicts 96, and γ's error went
+  // 30 -> 224 µrad with u_γ 134), so the linear terms understate what an error of the parameters
+  // does.  What the linearisation misses over the step, the separation (at before's λ) of the
+  // correction's remainder c(p) − J·p, is carried as one more term (Type B, in quadrature): zero
+  // for the effects linear in their parameters (gain, drift, a traverse).
+  Eigen::VectorXd nl_S = Eigen::VectorXd::Zero(P), nl_g = Eigen::VectorXd::Zero(P);
+  Eigen::VectorXd nl_f = Eigen::VectorXd::Zero(N);
+  if (!applied.effects.empty()) {
+    Eigen::VectorXd pa = Eigen::VectorXd::Zero(K);  // the applied parameters, the rest zero
+    Eigen::Index ca = 0;
+    for (std::size_t e = 0; e < M.effects.size(); ++e) {
+      if (rep.applied[e]) pa.segment(ca, M.p[e].size()) = M.p[e];
+      ca += M.p[e].size();
+    }
+    const Eigen::VectorXd Jp = J_read * pa;
+    Eigen::MatrixXd remainder = rep.m_c - m_raw;  // −c(p), plus J·p: what is not linear
+    for (int n = 0; n < P; ++n)
+      for (int i = 0; i < 4; ++i)
+        remainder(n, i) += Jp(4 * n + i);
+    const FourSensorResult r =
+        separate_four_sensor(cfg, remainder, linear_options(before, opts.solve));
+    nl_S = remove_polynomial(r.S_um, 2);
+    nl_g = 1e6 * remove_polynomial(r.gamma_rad, 1);
+    nl_f = r.f_um;
+    rep.nonlinear_S_um = std::sqrt(nl_S.squaredNorm() / P);
+    rep.nonlinear_gamma_urad = std::sqrt(nl_g.squaredNorm() / P);
+  }
+  Eigen::MatrixXd G = Eigen::MatrixXd::Zero(2 * K + 1, 2 * K + 1);
   // Each effect's rows and columns scaled to the readings' bound where it applies (a congruence:
   // the second moment stays positive semi-definite).
   G.topLeftCorner(K, K) = scale.asDiagonal() * carried * scale.asDiagonal();
-  G.bottomRightCorner(K, K) =
+  G.block(K, K, K, K) =
       scale.asDiagonal() * (p * p.transpose() + C + undetermined_part) * scale.asDiagonal();
-  Eigen::MatrixXd GS(P, 2 * K), Gg(P, 2 * K), Gf = Eigen::MatrixXd::Zero(N, 2 * K);
-  GS << D_S, D_S_gauge;
-  Gg << D_g, D_g_gauge;
+  G(2 * K, 2 * K) = 1.0;
+  Eigen::MatrixXd GS(P, 2 * K + 1), Gg(P, 2 * K + 1), Gf = Eigen::MatrixXd::Zero(N, 2 * K + 1);
+  GS << D_S, D_S_gauge, nl_S;
+  Gg << D_g, D_g_gauge, nl_g;
   Gf.leftCols(K) = D_f;
+  Gf.col(2 * K) = nl_f;
   rep.term = CarriedTerm{GS, 1e-6 * Gg, Gf, G};
   carry(after, rep.term);
   rep.sep = std::move(after);

@@ -317,9 +317,11 @@ namespace {
 //   - the halving where identifiable: 5 of 6 (pe1, 0.05), 0 of 1 (pe1, 0.1), 1 of 1 (gain,
 //     0.05), 1 of 1 (pe2, 0.05), 13 of 14 (periodic, 0.05), 2 of 2 (periodic, 0.1);
 //   - the coverage of the effect cells: pe2 0.848 / 0.894 (0.05 / 0.1), periodic 0.844 / 0.802
-//     (0.1 / 0.2) (pooled over every cell of the identifying plan it is in band: the app);
-//   - PE2 at sigma 0.2 makes one run worse beyond u (S 1.08 -> 4.00 um: `worse_holds` false).
-void single_plan_cell(UndeclaredEffect e, double sigma, bool worse_holds = true) {
+//     (0.1 / 0.2) (pooled over every cell of the identifying plan it is in band: the app).
+// PE2 at sigma 0.2, seed 15, made gamma worse beyond u (30 -> 224 urad, u 134) until the
+// correction's remainder beyond its linearisation was carried in u (core/refine.cpp
+// report_model): u_gamma 220 now; S 0.48 -> 4.0 um with u_S 11.
+void single_plan_cell(UndeclaredEffect e, double sigma) {
   const Cells c = run_cells({{e, ScanSequenceKind::single, "single"}}, sigma);
   if (e == UndeclaredEffect::none) {
     CHECK(c.m.clean_added <= 0.05 * c.m.clean_runs);
@@ -327,11 +329,7 @@ void single_plan_cell(UndeclaredEffect e, double sigma, bool worse_holds = true)
   } else {
     std::printf("  u_S coverage %.3f (not asserted per single-plan effect cell)\n", c.m.coverage());
   }
-  if (worse_holds)
-    CHECK(c.m.library_worse_beyond_u == 0);
-  else
-    std::printf("  worse beyond u in %d of %d runs (not asserted: does not hold)\n",
-                c.m.library_worse_beyond_u, c.m.library_runs);
+  CHECK(c.m.library_worse_beyond_u == 0);
   if (!library_effect_name(e).empty()) print_halved(c.m);
 }
 
@@ -387,7 +385,7 @@ TEST_CASE("identifying plan, single plan: pe2 at sigma 0.1", "[sweep]") {
   single_plan_cell(UndeclaredEffect::pe2, 0.1);
 }
 TEST_CASE("identifying plan, single plan: pe2 at sigma 0.2", "[sweep]") {
-  single_plan_cell(UndeclaredEffect::pe2, 0.2, false);
+  single_plan_cell(UndeclaredEffect::pe2, 0.2);
 }
 TEST_CASE("identifying plan, single plan: periodic at sigma 0.05", "[sweep]") {
   single_plan_cell(UndeclaredEffect::periodic, 0.05);
