@@ -45,7 +45,7 @@ SequenceSimData simulate_four_sensor_sequence(const FourSensorConfig& cfg,
   for (int k = 0; k < T; ++k) {
     const Traverse& tr = seq.traverses[static_cast<std::size_t>(k)];
     const auto c = static_cast<std::size_t>(tr.configuration);
-    const double dir = tr.direction == TraverseDirection::forward ? 1.0 : -1.0;
+    const double dir = direction_sign(tr.direction);
     for (int n = 0; n < P; ++n)
       r_clean(n) = four_sensor_reading_um(truth, n * cfg.dx_mm, O[c]);
     for (int n = 0; n < P; ++n) {

@@ -250,10 +250,9 @@ PlanChoice identifying_plan(UndeclaredEffect effect, const FourSensorConfig& cfg
     int best_T = 0;
     bool found = false;
     std::string scores;
-    for (const ScanSequenceKind k :
-         {ScanSequenceKind::closing_pass, ScanSequenceKind::reversed, ScanSequenceKind::interleaved,
-          ScanSequenceKind::rezeroed, ScanSequenceKind::reversed_closing}) {
+    for (const ScanSequenceKind k : all_scan_sequence_kinds()) {
       const ScanSequence seq = ScanSequence::make(k, cfg);
+      if (!seq.redundant()) continue;
       bool ok = true;
       double gain = 0;
       for (const auto& id : sequence_identifiability(cfg, seq, seq_opts))
@@ -296,8 +295,7 @@ PlanChoice identifying_plan(UndeclaredEffect effect, const FourSensorConfig& cfg
       return c;
     case UndeclaredEffect::nonlinearity: {
       // SequenceNonlinearity is identifiable exactly on a plan that re-zeroes the sensor.
-      for (const ScanSequenceKind k : {ScanSequenceKind::closing_pass, ScanSequenceKind::reversed,
-                                       ScanSequenceKind::interleaved, ScanSequenceKind::rezeroed})
+      for (const ScanSequenceKind k : all_scan_sequence_kinds())
         if (ScanSequence::make(k, cfg).rezeroed()) {
           c.plan = k;
           break;

@@ -26,6 +26,28 @@ const char* to_string(ScanSequenceKind k) {
   return "unknown";
 }
 
+const std::vector<ScanSequenceKind>& all_scan_sequence_kinds() {
+  static const std::vector<ScanSequenceKind> kinds = {
+      ScanSequenceKind::single,      ScanSequenceKind::closing_pass,
+      ScanSequenceKind::reversed,    ScanSequenceKind::reversed_closing,
+      ScanSequenceKind::interleaved, ScanSequenceKind::rezeroed,
+      ScanSequenceKind::serpentine};
+  return kinds;
+}
+
+const char* to_string(TraverseDirection d) {
+  return d == TraverseDirection::forward ? "forward" : "backward";
+}
+
+bool traverse_direction_from_string(const std::string& name, TraverseDirection* d) {
+  for (const auto k : {TraverseDirection::forward, TraverseDirection::backward})
+    if (name == to_string(k)) {
+      *d = k;
+      return true;
+    }
+  return false;
+}
+
 const char* scan_sequence_kind_names() {
   return "single, closing, reversed, interleaved, rezeroed, serpentine, reversed-closing";
 }
@@ -50,7 +72,7 @@ Eigen::MatrixXd ScanSequence::times_s(const FourSensorConfig& cfg) const {
   for (int k = 0; k < size(); ++k) {
     const Traverse& tr = traverses[static_cast<std::size_t>(k)];
     for (int n = 0; n < P; ++n) {
-      const int steps = tr.direction == TraverseDirection::forward ? n : P - 1 - n;
+      const int steps = direction_sign(tr.direction) > 0 ? n : P - 1 - n;
       t(n, k) = tr.start_s + steps * cfg.dx_mm / speed_mm_per_s;
     }
   }

@@ -294,9 +294,7 @@ Eigen::VectorXd hysteresis_column(const ScanSequence& seq, const Eigen::MatrixXd
   const Eigen::Index P = fitted.rows();
   Eigen::VectorXd col(fitted.size());
   for (Eigen::Index k = 0; k < fitted.cols(); ++k) {
-    const double dir =
-        seq.traverses[static_cast<std::size_t>(k)].direction == TraverseDirection::forward ? 1.0
-                                                                                           : -1.0;
+    const double dir = direction_sign(seq.traverses[static_cast<std::size_t>(k)].direction);
     for (Eigen::Index n = 0; n < P; ++n) {
       const double slope =
           fitted(std::min(n + 1, P - 1), k) - fitted(std::max<Eigen::Index>(n - 1, 0), k);
@@ -567,15 +565,7 @@ struct SequenceModel::Impl {
       id.identifiable = pj.identifiable;
       id.strong = pj.strong;
       id.relative_sv = pj.sv;
-      // A unit column spread over the P·T readings has RMS 1/sqrt(P·T); the RMS change of S it
-      // causes is |toS·v|/sqrt(P): the gain from the effect's reading RMS to S's is
-      // |toS·v|·sqrt(T).
-      const Eigen::Index k0 = id.parameters - pj.strong;
-      if (k0 > 0) {
-        const Eigen::MatrixXd Sh = to_S(F, i) * pj.V.rightCols(k0);
-        id.undetermined_S_gain =
-            Eigen::JacobiSVD<Eigen::MatrixXd>(Sh).singularValues()(0) * std::sqrt(double(b.T));
-      }
+      id.undetermined_S_gain = undetermined_S_gain(F, i);
       id.identifiable_from_plan = id.undetermined_S_gain <= o.undetermined_S_max;
       if (kind == SequenceEffectKind::thermal) {
         id.form_undetermined_S_gain = form_undetermined_S_gain(F, i);
@@ -600,21 +590,23 @@ struct SequenceModel::Impl {
     const Projected pd = project(F0.Q, cands[static_cast<std::size_t>(d)].J, o.identifiability_tol,
                                  o.weak_direction_sv);
     if (pd.identifiable == 0) return 0.0;
-    const Factor Fd =
-        factorise(b,
-                  cands[static_cast<std::size_t>(d)].J * pd.D.cwiseInverse().asDiagonal() *
-                      pd.V.leftCols(pd.identifiable),
-                  false);
-    const Eigen::MatrixXd& J = cands[static_cast<std::size_t>(thermal_candidate)].J;
-    const Projected pj = project(Fd.Q, J, o.identifiability_tol, o.weak_direction_sv);
+    Factor Fd = factorise(b,
+                          cands[static_cast<std::size_t>(d)].J * pd.D.cwiseInverse().asDiagonal() *
+                              pd.V.leftCols(pd.identifiable),
+                          false);
+    return undetermined_S_gain(Fd, thermal_candidate);
+  }
+
+  // The largest RMS change of S per unit RMS change of the readings along the directions of
+  // candidate i that model F does not determine well (SequenceIdentifiability::
+  // undetermined_S_gain): a unit column spread over the P·T readings has RMS 1/sqrt(P·T), the
+  // RMS change of S it causes is |toS·v|/sqrt(P), so the gain is |toS·v|·sqrt(T).
+  double undetermined_S_gain(Factor& F, int i) {
+    const Projected& pj = projection(F, i);
     const Eigen::Index k0 = static_cast<Eigen::Index>(pj.D.size()) - pj.strong;
     if (k0 <= 0) return 0.0;
-    const Eigen::MatrixXd toS =
-        Pi * Fd.R.triangularView<Eigen::Upper>()
-                 .solve(Fd.Q.transpose() * (J * pj.D.cwiseInverse().asDiagonal()))
-                 .middleRows(b.nf, b.P);
-    return Eigen::JacobiSVD<Eigen::MatrixXd>(toS * pj.V.rightCols(k0)).singularValues()(0) *
-           std::sqrt(double(b.T));
+    return Eigen::JacobiSVD<Eigen::MatrixXd>(to_S(F, i) * pj.V.rightCols(k0)).singularValues()(0) *
+           std::sqrt(static_cast<double>(b.T));
   }
 
   // What an effect with columns projected as `pj` (its S response toS) could do to S, as
@@ -1069,9 +1061,7 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
       const Eigen::VectorXd lev = F0.Q.rowwise().squaredNorm();
       Eigen::MatrixXd prior = Eigen::MatrixXd::Zero(b.P, 4), evidence = prior, count = prior;
       auto dir_of = [&](int k) {
-        return seq.traverses[static_cast<std::size_t>(k)].direction == TraverseDirection::forward
-                   ? 1.0
-                   : -1.0;
+        return direction_sign(seq.traverses[static_cast<std::size_t>(k)].direction);
       };
       constexpr double kCertain = 1.0 - 1e-12;
       for (int k = 0; k < b.T; ++k) {
@@ -1289,7 +1279,7 @@ SequenceRefineResult SequenceModel::Impl::refine_with_knock(const Eigen::MatrixX
                 "knocked sensor: configuration %d, traverse %d (%s%s), %+.3g +- %.2g um from x = "
                 "%.4g mm on (named by its two traverses: z = %.3g, p = %.2g): %s%s",
                 rs.configuration + 1, A.K + 1,
-                tr.direction == TraverseDirection::forward ? "forward" : "backward", alt_txt,
+                to_string(tr.direction), alt_txt,
                 A.size, A.u_size, rs.x_mm, rs.z, rs.p_value,
                 d.apply ? "removed" : "not removed, carried in u_S", add_txt);
   k.finding = buf;
@@ -1683,7 +1673,7 @@ SequenceRefineResult SequenceModel::Impl::refine_effects(const Eigen::MatrixXd& 
   ti.t_s = seq.times_s(cfg);
   for (const auto& tr : seq.traverses) {
     ti.configuration.push_back(tr.configuration);
-    ti.direction.push_back(tr.direction == TraverseDirection::forward ? 1 : -1);
+    ti.direction.push_back(static_cast<int>(direction_sign(tr.direction)));
   }
   ti.dx_mm = cfg.dx_mm;
   ResidualTraceOptions to;

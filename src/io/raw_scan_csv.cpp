@@ -130,7 +130,7 @@ RawSequence read_sequence(const CsvTable& t, const std::filesystem::path& file, 
     int used = 0;
     if (std::sscanf(v->c_str(), "configuration %d, %15[a-z], start_s %lf%n", &c, dir, &start,
                     &used) != 3 ||
-        c < 1 || c > 4 || (std::string(dir) != "forward" && std::string(dir) != "backward"))
+        c < 1 || c > 4 || !core::traverse_direction_from_string(dir, &tr.direction))
       throw CsvError(file, line,
                      "metadata '" + key + ": " + *v +
                          "': expected 'configuration 1..4, forward|backward, start_s <s>[, "
@@ -148,8 +148,6 @@ RawSequence read_sequence(const CsvTable& t, const std::filesystem::path& file, 
                            rest + "'");
     }
     tr.configuration = c - 1;
-    tr.direction = std::string(dir) == "forward" ? core::TraverseDirection::forward
-                                                 : core::TraverseDirection::backward;
     tr.start_s = start;
     q.traverses.push_back(tr);
     const std::string m = "k" + std::to_string(k), mc = m + "_um", tc = m + "_t_s";
@@ -219,7 +217,7 @@ CsvTable to_csv_table(const RawFourSensorScan& scan) {
       const std::string K = std::to_string(k + 1);
       t.set_meta("traverse_" + K,
                  "configuration " + std::to_string(tr.configuration + 1) + ", " +
-                     (tr.direction == core::TraverseDirection::forward ? "forward" : "backward") +
+                     core::to_string(tr.direction) +
                      ", start_s " + fmt(tr.start_s) +
                      (tr.zero_shift_um != 0.0 ? ", zero_shift_um " + fmt(tr.zero_shift_um) : ""));
       check_len(q.m_um[k], n, "k" + K + "_um");

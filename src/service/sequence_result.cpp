@@ -77,7 +77,7 @@ void describe_sequence_result(const core::FourSensorConfig& cfg, const core::Sca
     tr.t_s = seq.times_s(g);
     for (const auto& t : seq.traverses) {
       tr.configuration.push_back(t.configuration + 1);
-      tr.direction.push_back(t.direction == core::TraverseDirection::forward ? 1 : -1);
+      tr.direction.push_back(static_cast<int>(core::direction_sign(t.direction)));
     }
     info.traverses = std::move(tr);
   }

@@ -49,6 +49,14 @@
 namespace errsep::core {
 
 enum class TraverseDirection { forward, backward };
+/// "forward" or "backward" (the raw file's and the reports' word).
+const char* to_string(TraverseDirection d);
+/// The inverse of to_string; false (d untouched) for any other text.
+bool traverse_direction_from_string(const std::string& name, TraverseDirection* d);
+/// The sign of the slide's velocity on such a traverse: +1 forward (x increasing), −1 backward.
+inline double direction_sign(TraverseDirection d) {
+  return d == TraverseDirection::forward ? 1.0 : -1.0;
+}
 
 struct Traverse {
   int configuration = 0;  ///< 0..3: configuration 1..4 of Eq. (1)
@@ -71,6 +79,9 @@ enum class ScanSequenceKind {
   reversed_closing
 };
 const char* to_string(ScanSequenceKind k);
+/// Every kind, single first, then the redundant plans in the order of the file comment (for
+/// whatever goes through the plans: the sweep's choice of an identifying plan, its checks).
+const std::vector<ScanSequenceKind>& all_scan_sequence_kinds();
 /// The plan names a config or command line gives: "single", "closing" (or "closing pass"),
 /// "reversed", "interleaved", "rezeroed", "serpentine", "reversed-closing" (or "reversed
 /// closing").  Throws std::invalid_argument naming the
