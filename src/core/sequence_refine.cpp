@@ -1278,10 +1278,9 @@ SequenceRefineResult SequenceModel::Impl::refine_with_knock(const Eigen::MatrixX
   std::snprintf(buf, sizeof buf,
                 "knocked sensor: configuration %d, traverse %d (%s%s), %+.3g +- %.2g um from x = "
                 "%.4g mm on (named by its two traverses: z = %.3g, p = %.2g): %s%s",
-                rs.configuration + 1, A.K + 1,
-                to_string(tr.direction), alt_txt,
-                A.size, A.u_size, rs.x_mm, rs.z, rs.p_value,
-                d.apply ? "removed" : "not removed, carried in u_S", add_txt);
+                rs.configuration + 1, A.K + 1, to_string(tr.direction), alt_txt, A.size, A.u_size,
+                rs.x_mm, rs.z, rs.p_value, d.apply ? "removed" : "not removed, carried in u_S",
+                add_txt);
   k.finding = buf;
   res.report.insert(res.report.begin(), k.finding);
   return res;

@@ -217,8 +217,7 @@ CsvTable to_csv_table(const RawFourSensorScan& scan) {
       const std::string K = std::to_string(k + 1);
       t.set_meta("traverse_" + K,
                  "configuration " + std::to_string(tr.configuration + 1) + ", " +
-                     core::to_string(tr.direction) +
-                     ", start_s " + fmt(tr.start_s) +
+                     core::to_string(tr.direction) + ", start_s " + fmt(tr.start_s) +
                      (tr.zero_shift_um != 0.0 ? ", zero_shift_um " + fmt(tr.zero_shift_um) : ""));
       check_len(q.m_um[k], n, "k" + K + "_um");
       check_len(q.t_s[k], n, "k" + K + "_t_s");
