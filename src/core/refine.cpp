@@ -756,6 +756,34 @@ Sensitivities sensitivities(const FourSensorConfig& cfg, const Eigen::MatrixXd& 
   return out;
 }
 
+// What the linearisation misses of the change the correction of model A (at its parameters)
+// makes to S (µm, gauge removed), γ (µrad, gauge removed) and f (µm): the separation at `lin`
+// (linear in the readings) of −c(p) + J·p, J = model_jacobian(A, ctx).  Zero for an effect
+// linear in its parameters (gain, drift, a traverse); for PE1, PE2 and the periodic error,
+// millimetre shifts of where a wavy f is sampled, it can exceed the linear change itself (PE2 at
+// σ = 0.2 µm, seed 15 of errsep-refine-sweep: γ changed by 217 µrad rms where the linearisation
+// predicts 96).
+struct Remainder {
+  Eigen::VectorXd S, g, f;
+};
+Remainder linearisation_remainder(const FourSensorConfig& cfg, const Model& A,
+                                  const EffectContext& ctx, const FourSensorOptions& lin) {
+  const int P = cfg.positions();
+  Remainder out{Eigen::VectorXd::Zero(P), Eigen::VectorXd::Zero(P), Eigen::VectorXd::Zero(cfg.N)};
+  if (A.effects.empty()) return out;
+  const Eigen::VectorXd Jp = model_jacobian(A, ctx) * concat(A);
+  Eigen::MatrixXd r = corrected(A, ctx) - ctx.m_um;
+  for (int n = 0; n < P; ++n)
+    for (int i = 0; i < 4; ++i)
+      r(n, i) += Jp(4 * n + i);
+  if (r.cwiseAbs().maxCoeff() == 0.0) return out;
+  const FourSensorResult s = separate_four_sensor(cfg, r, lin);
+  out.S = remove_polynomial(s.S_um, 2);
+  out.g = 1e6 * remove_polynomial(s.gamma_rad, 1);
+  out.f = s.f_um;
+  return out;
+}
+
 // The declared bound of an effect (RefineOptions::declared), 0 when none.
 double declared_bound(const RefineOptions& opts, const std::string& effect) {
   double b = 0.0;
@@ -775,8 +803,8 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
   // Sensitivities of S (µm), γ (µrad), f (µm) to every parameter: the separation at before's λ
   // of the readings' change −∂c/∂p (the correction is subtracted), with the gauge directions
   // removed: a step keeps before's constant, line and bow of S and constant and line of γ.
-  const Sensitivities sens =
-      sensitivities(cfg, model_jacobian(M, cur.ctx), linear_options(before, opts.solve));
+  const FourSensorOptions lin = linear_options(before, opts.solve);
+  const Sensitivities sens = sensitivities(cfg, model_jacobian(M, cur.ctx), lin);
   Eigen::MatrixXd D_S = sens.S, D_g = sens.g;
   const Eigen::MatrixXd& D_f = sens.f;
   // The part of those changes in the gauge directions (constant, line and bow of S; constant
@@ -819,9 +847,13 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
   Eigen::Index c0 = 0;
   for (std::size_t e = 0; e < M.effects.size(); ++e) {
     const Eigen::Index k = M.p[e].size();
-    const std::vector<QuantityImpact> q = {{"S", "um", D_S.middleCols(c0, k), uS},
-                                           {"gamma", "urad", D_g.middleCols(c0, k), ug},
-                                           {"f", "um", D_f.middleCols(c0, k), uf}};
+    Model alone;
+    alone.effects.push_back(M.effects[e]);
+    alone.p.push_back(M.p[e]);
+    const Remainder rem = linearisation_remainder(cfg, alone, cur.ctx, lin);
+    const std::vector<QuantityImpact> q = {{"S", "um", D_S.middleCols(c0, k), uS, rem.S},
+                                           {"gamma", "urad", D_g.middleCols(c0, k), ug, rem.g},
+                                           {"f", "um", D_f.middleCols(c0, k), uf, rem.f}};
     const Eigen::VectorXd pe = p.segment(c0, k);
     const Eigen::MatrixXd Ce = C.block(c0, c0, k, k);
     StepDecision d = decide_step(pe, Ce, q, opts.decision);
@@ -966,36 +998,13 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
   // the raw separation's bow.
   //
   // The terms above map the parameters' second moment onto S, γ, f through the sensitivities at
-  // the fit, i.e. the correction linearised there.  For an effect that moves where f is sampled
-  // (PE1, PE2, the periodic error) by millimetres on a wavy reference the correction is far from
-  // linear over the step (PE2 at σ = 0.2 µm, seed 15 of errsep-refine-sweep: the applied
-  // correction changed γ by 217 µrad rms where the linearisation predicts 96, and γ's error went
-  // 30 -> 224 µrad with u_γ 134), so the linear terms understate what an error of the parameters
-  // does.  What the linearisation misses over the step, the separation (at before's λ) of the
-  // correction's remainder c(p) − J·p, is carried as one more term (Type B, in quadrature): zero
-  // for the effects linear in their parameters (gain, drift, a traverse).
-  Eigen::VectorXd nl_S = Eigen::VectorXd::Zero(P), nl_g = Eigen::VectorXd::Zero(P);
-  Eigen::VectorXd nl_f = Eigen::VectorXd::Zero(N);
-  if (!applied.effects.empty()) {
-    Eigen::VectorXd pa = Eigen::VectorXd::Zero(K);  // the applied parameters, the rest zero
-    Eigen::Index ca = 0;
-    for (std::size_t e = 0; e < M.effects.size(); ++e) {
-      if (rep.applied[e]) pa.segment(ca, M.p[e].size()) = M.p[e];
-      ca += M.p[e].size();
-    }
-    const Eigen::VectorXd Jp = J_read * pa;
-    Eigen::MatrixXd remainder = rep.m_c - m_raw;  // −c(p), plus J·p: what is not linear
-    for (int n = 0; n < P; ++n)
-      for (int i = 0; i < 4; ++i)
-        remainder(n, i) += Jp(4 * n + i);
-    const FourSensorResult r =
-        separate_four_sensor(cfg, remainder, linear_options(before, opts.solve));
-    nl_S = remove_polynomial(r.S_um, 2);
-    nl_g = 1e6 * remove_polynomial(r.gamma_rad, 1);
-    nl_f = r.f_um;
-    rep.nonlinear_S_um = std::sqrt(nl_S.squaredNorm() / P);
-    rep.nonlinear_gamma_urad = std::sqrt(nl_g.squaredNorm() / P);
-  }
+  // the fit, i.e. the correction linearised there; what that misses over the step of the applied
+  // corrections (linearisation_remainder: PE1, PE2, the periodic error) is carried as one more
+  // term (Type B, in quadrature), as the decision counted it in V.  Before it was (PE2 at
+  // σ = 0.2 µm, seed 15): γ 30 -> 224 µrad with u_γ 134.
+  const Remainder nl = linearisation_remainder(cfg, applied, cur.ctx, lin);
+  rep.nonlinear_S_um = std::sqrt(nl.S.squaredNorm() / P);
+  rep.nonlinear_gamma_urad = std::sqrt(nl.g.squaredNorm() / P);
   Eigen::MatrixXd G = Eigen::MatrixXd::Zero(2 * K + 1, 2 * K + 1);
   // Each effect's rows and columns scaled to the readings' bound where it applies (a congruence:
   // the second moment stays positive semi-definite).
@@ -1004,10 +1013,10 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
       scale.asDiagonal() * (p * p.transpose() + C + undetermined_part) * scale.asDiagonal();
   G(2 * K, 2 * K) = 1.0;
   Eigen::MatrixXd GS(P, 2 * K + 1), Gg(P, 2 * K + 1), Gf = Eigen::MatrixXd::Zero(N, 2 * K + 1);
-  GS << D_S, D_S_gauge, nl_S;
-  Gg << D_g, D_g_gauge, nl_g;
+  GS << D_S, D_S_gauge, nl.S;
+  Gg << D_g, D_g_gauge, nl.g;
   Gf.leftCols(K) = D_f;
-  Gf.col(2 * K) = nl_f;
+  Gf.col(2 * K) = nl.f;
   rep.term = CarriedTerm{GS, 1e-6 * Gg, Gf, G};
   carry(after, rep.term);
   rep.sep = std::move(after);

@@ -44,26 +44,32 @@ StepDecision decide_step(const Eigen::VectorXd& p, const Eigen::MatrixXd& cov,
   bool any_too_bad = false;
   std::string worst;
   for (const auto& q : quantities) {
-    if (q.sensitivity.cols() != k || q.sensitivity.rows() != q.u_base.size())
+    if (q.sensitivity.cols() != k || q.sensitivity.rows() != q.u_base.size() ||
+        (q.remainder.size() != 0 && q.remainder.size() != q.u_base.size()))
       throw std::invalid_argument("decide_step: quantity '" + q.name +
-                                  "' needs an n x k sensitivity and n base uncertainties");
+                                  "' needs an n x k sensitivity, n base uncertainties and an "
+                                  "empty or n-point remainder");
     QuantityEffect e;
     e.name = q.name;
     e.unit = q.unit;
     const Eigen::VectorXd change = q.sensitivity * p;
     const Eigen::VectorXd var = (q.sensitivity * cov).cwiseProduct(q.sensitivity).rowwise().sum();
+    // The linearisation's remainder: with the scatter in V (and in what applying adds to u), not
+    // in B's variance correction.
+    const Eigen::VectorXd rem2 = q.remainder.size() ? Eigen::VectorXd(q.remainder.array().square())
+                                                    : Eigen::VectorXd::Zero(q.u_base.size());
     double n = 0, sv = 0, sb = 0, u2 = 0, c2 = 0, v2 = 0, b2 = 0;
     const double umax = q.u_base.size() ? q.u_base.maxCoeff() : 0.0;
     for (Eigen::Index i = 0; i < q.u_base.size(); ++i) {
       const double u = q.u_base(i);
       c2 += change(i) * change(i);
-      v2 += var(i);
+      v2 += var(i) + rem2(i);
       b2 += change(i) * change(i) - var(i);
       u2 += u * u;
       if (!(u > 1e-9 * umax) || !(u > 0)) continue;  // pinned by the gauge: no error to weigh
       n += 1;
       M += q.sensitivity.row(i).transpose() * q.sensitivity.row(i) / (u * u);
-      sv += var(i) / (u * u);
+      sv += (var(i) + rem2(i)) / (u * u);
       sb += (change(i) * change(i) - var(i)) / (u * u);
     }
     const auto m = static_cast<double>(std::max<Eigen::Index>(1, q.u_base.size()));

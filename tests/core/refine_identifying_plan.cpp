@@ -316,9 +316,9 @@ namespace {
 //     0.05), 1 of 1 (pe2, 0.05), 13 of 14 (periodic, 0.05), 2 of 2 (periodic, 0.1);
 //   - the coverage of the effect cells: pe2 0.848 / 0.894 (0.05 / 0.1), periodic 0.844 / 0.802
 //     (0.1 / 0.2) (pooled over every cell of the identifying plan it is in band: the app).
-// PE2 at sigma 0.2, seed 15, made gamma worse beyond u (30 -> 224 urad, u 134) until the
-// correction's remainder beyond its linearisation was carried in u (core/refine.cpp
-// report_model): u_gamma 220 now; S 0.48 -> 4.0 um with u_S 11.
+// PE2 at sigma 0.2, seed 15, was applied and made gamma worse beyond u (30 -> 224 urad, u 134)
+// until what the correction's linearisation misses counted in the decision and in u
+// (core/refine.cpp linearisation_remainder): declined now.
 void single_plan_cell(UndeclaredEffect e, double sigma) {
   const Cells c = run_cells({{e, ScanSequenceKind::single, "single"}}, sigma);
   if (e == UndeclaredEffect::none) {

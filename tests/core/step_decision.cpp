@@ -44,6 +44,28 @@ TEST_CASE("step decision: a well determined effect is applied, a poorly determin
   CHECK_THROWS_AS(decide_step(Eigen::VectorXd::Ones(2), C, q), std::invalid_argument);
 }
 
+TEST_CASE("step decision: what the linearisation misses counts with the scatter") {
+  auto q = one_quantity(10, 1.0);
+  const Eigen::MatrixXd C = Eigen::MatrixXd::Constant(1, 1, 0.01);
+  const Eigen::VectorXd p = Eigen::VectorXd::Constant(1, 1.0);
+  // Without a remainder: V = 0.1, B = 9.9 (the case above), applied.
+  REQUIRE(decide_step(p, C, q).apply);
+  // A remainder of 0.8 u at every point (the correction at p changes the quantity by 1.8 or 0.2
+  // where its linearisation says 1): V = 0.1 + 10 * 0.64 = 6.5 > 0.5 B: not applied; B as before.
+  q.front().remainder = Eigen::VectorXd::Constant(10, 0.8);
+  const StepDecision d = decide_step(p, C, q);
+  CHECK(d.variance_sum == Approx(6.5));
+  CHECK(d.bias_sum == Approx(9.9));
+  CHECK_FALSE(d.apply);
+  CHECK(d.quantity("S")->rms_added_u == Approx(std::sqrt(0.01 + 0.64)));
+  // A small one leaves the decision: 0.1 + 10 * 0.01 = 0.2.
+  q.front().remainder = Eigen::VectorXd::Constant(10, 0.1);
+  CHECK(decide_step(p, C, q).variance_sum == Approx(0.2));
+  CHECK(decide_step(p, C, q).apply);
+  q.front().remainder = Eigen::VectorXd::Constant(3, 0.1);  // not one per point
+  CHECK_THROWS_AS(decide_step(p, C, q), std::invalid_argument);
+}
+
 TEST_CASE("step decision: the refined u carries the applied parameters' covariance") {
   const Eigen::VectorXd u = Eigen::VectorXd::Constant(3, 0.3);
   Eigen::MatrixXd D(3, 2);

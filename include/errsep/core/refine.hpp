@@ -89,10 +89,11 @@ struct RefineOptions {
   bool apply_unidentifiable = false;
   /// Whether a correction is applied only when effect_identifiability (below) says the plan lets
   /// it halve the errors of S and γ (the effect refitted alone to the raw readings, at its fit
-  /// and linearised about zero), on top of the decision.  Off by default: it stops PE2 at
+  /// and linearised about zero), on top of the decision.  Off by default: it stopped PE2 at
   /// σ = 0.2 µm, seed 15 of errsep-refine-sweep (c2 = 3094 ± 540 µm for a true 795 at the global
   /// least-squares minimum, V/B = 0.015 while the plan predicts S 1.16 -> 0.67 µm: applied, S
-  /// 0.48 -> 4.0 µm, γ 30 -> 224 µrad, beyond u), but it also stops corrections that help: PE1
+  /// 0.48 -> 4.0 µm, γ 30 -> 224 µrad, beyond u; the decision now declines it itself, counting
+  /// what the correction's linearisation misses), but it also stops corrections that help: PE1
   /// at σ = 0.02 µm (γ 43 -> 6.7 µrad, f 1.15 -> 0.19 µm, S only 0.25 -> 0.16 µm: not "halved"),
   /// a 5 % gain, a periodic error at 0.1 µm, PE1 with a periodic error (core/refine_effects,
   /// core/refine_clean fail with it), and in the sweep (seeds 1-20, σ 0.05/0.1/0.2) halved runs

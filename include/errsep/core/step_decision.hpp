@@ -24,6 +24,11 @@
 // goes into the uncertainty instead: u² + (D p̂)², which covers the bias of leaving it out
 // (conservatively: by its own variance).
 //
+// For an effect non-linear in its parameters (the reference sampled at shifted points) D is the
+// linearisation at p̂, and the change the correction really makes differs from D·p̂ by a
+// remainder r (QuantityImpact::remainder): neither V nor B sees it, so it is added to V, the
+// expected squared error with the correction (the result carries it in u too, refine.cpp).
+//
 // B is estimated from the same p̂ whose significance chose the effect, so it is too large on
 // average exactly when a decision is needed (winner's curse: an effect added because its fit
 // came out 3–4 standard deviations from zero on noise alone has B ≈ 10 V; a poorly determined
@@ -47,6 +52,10 @@ struct QuantityImpact {
   /// n: the quantity's standard uncertainty (k = 1) without the correction.  Points with u = 0
   /// (pinned by the gauge) do not count.
   Eigen::VectorXd u_base;
+  /// n or empty: what the linearised change D·p̂ misses of the change the correction at p̂
+  /// really makes (an effect non-linear in its parameters).  The linearisation that sizes V and
+  /// B is off by it either way, so it counts with the scatter: V += Σ r²/u² (file comment).
+  Eigen::VectorXd remainder = Eigen::VectorXd();
 };
 
 struct StepDecisionOptions {
@@ -67,7 +76,7 @@ struct QuantityEffect {
   std::string name, unit;
   double rms_u_base = 0;   ///< of the separation alone
   double rms_change = 0;   ///< of D·p̂: what applying the correction changes
-  double rms_added_u = 0;  ///< sqrt(mean diag(DCDᵀ)): what applying adds to u, in quadrature
+  double rms_added_u = 0;  ///< sqrt(mean(diag(DCDᵀ) + r²)): what applying adds to u (quadrature)
   /// sqrt(max(0, mean((D p̂)² − diag(DCDᵀ)))): estimated RMS bias of leaving the effect out.
   double rms_bias = 0;
   /// Expected mean squared error with the correction over without it, per point in u² units:
