@@ -684,9 +684,6 @@ struct Reported {
   std::vector<double> undetermined_S_um;
   std::vector<std::string> verdicts;
   std::vector<std::string> unbounded;  // RefineResult::unbounded
-  // RMS over the points of what the applied corrections' linearisation misses on S and γ (the
-  // last column of `term`, report_model).
-  double nonlinear_S_um = 0, nonlinear_gamma_urad = 0;
 };
 
 // The readings' own bound on what an effect can be (RefineResult::unbounded,
@@ -954,6 +951,17 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
     rep.undetermined_S_um.push_back(und);
     std::string v =
         describe_decision(M.effects[e]->name(), M.effects[e]->parameter_names(), pe, cur.u[e], d);
+    // Where the linearisation the decision and u rest on misses more than a tenth of u_S over
+    // the step, the user is told by how much (it is in V, and in u when applied).
+    const double rem_S_um = std::sqrt(rem.S.squaredNorm() / P);
+    if (rem_S_um > 0.1 * d.quantity("S")->rms_u_base) {
+      char buf[300];
+      std::snprintf(buf, sizeof buf,
+                    "; not linear in its parameters over the step: the correction changes S by "
+                    "%.3g um rms, gamma by %.3g urad rms beyond its linearisation (counted in V)",
+                    rem_S_um, std::sqrt(rem.g.squaredNorm() / P));
+      v += buf;
+    }
     if (unidentifiable) {
       char buf[300];
       std::snprintf(buf, sizeof buf,
@@ -1003,8 +1011,6 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
   // term (Type B, in quadrature), as the decision counted it in V.  Before it was (PE2 at
   // σ = 0.2 µm, seed 15): γ 30 -> 224 µrad with u_γ 134.
   const Remainder nl = linearisation_remainder(cfg, applied, cur.ctx, lin);
-  rep.nonlinear_S_um = std::sqrt(nl.S.squaredNorm() / P);
-  rep.nonlinear_gamma_urad = std::sqrt(nl.g.squaredNorm() / P);
   Eigen::MatrixXd G = Eigen::MatrixXd::Zero(2 * K + 1, 2 * K + 1);
   // Each effect's rows and columns scaled to the readings' bound where it applies (a congruence:
   // the second moment stays positive semi-definite).

@@ -322,6 +322,7 @@ TEST_CASE("undeclared effects: PE2 at a far minimum is not applied, gated or not
     CHECK(run.gauge_change_um <= 1e-9 * std::max(1.0, run.S_before_um));
     REQUIRE(run.added);  // detected: it is the decision that declines it
     CHECK(run.verdicts.find("pe2 detected") != std::string::npos);
+    CHECK(run.verdicts.find("not linear in its parameters over the step") != std::string::npos);
     CHECK(run.u_S_after_um > run.u_S_before_um);
   }
 }
