@@ -773,7 +773,9 @@ Remainder linearisation_remainder(const FourSensorConfig& cfg, const Model& A,
   for (int n = 0; n < P; ++n)
     for (int i = 0; i < 4; ++i)
       r(n, i) += Jp(4 * n + i);
-  if (r.cwiseAbs().maxCoeff() == 0.0) return out;
+  // An effect linear in its parameters leaves only rounding here: no separation for it.
+  const double scale_um = ctx.m_um.cwiseAbs().maxCoeff() + Jp.cwiseAbs().maxCoeff();
+  if (r.cwiseAbs().maxCoeff() <= 1e-12 * scale_um) return out;
   const FourSensorResult s = separate_four_sensor(cfg, r, lin);
   out.S = remove_polynomial(s.S_um, 2);
   out.g = 1e6 * remove_polynomial(s.gamma_rad, 1);
@@ -841,6 +843,7 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
   };
   Eigen::VectorXd scale = Eigen::VectorXd::Ones(K);  // per parameter: 1, or the bound's scale
   Model applied;
+  Remainder applied_alone;  // the remainder of the one applied effect (reused below)
   Eigen::Index c0 = 0;
   for (std::size_t e = 0; e < M.effects.size(); ++e) {
     const Eigen::Index k = M.p[e].size();
@@ -940,6 +943,7 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
       carried.block(c0, c0, k, k) = Ce;
       applied.effects.push_back(M.effects[e]);
       applied.p.push_back(M.p[e]);
+      applied_alone = rem;
     } else {
       carried.block(c0, c0, k, k) = pe * pe.transpose();
     }
@@ -1010,7 +1014,12 @@ Reported report_model(const FourSensorConfig& cfg, const Eigen::MatrixXd& m_raw,
   // corrections (linearisation_remainder: PE1, PE2, the periodic error) is carried as one more
   // term (Type B, in quadrature), as the decision counted it in V.  Before it was (PE2 at
   // σ = 0.2 µm, seed 15): γ 30 -> 224 µrad with u_γ 134.
-  const Remainder nl = linearisation_remainder(cfg, applied, cur.ctx, lin);
+  // With one effect applied (the usual case) it is that effect's own remainder, computed for its
+  // decision above; the remainders of two applied effects do not add, so theirs is computed
+  // jointly.
+  const Remainder nl = applied.effects.size() == 1
+                           ? std::move(applied_alone)
+                           : linearisation_remainder(cfg, applied, cur.ctx, lin);
   Eigen::MatrixXd G = Eigen::MatrixXd::Zero(2 * K + 1, 2 * K + 1);
   // Each effect's rows and columns scaled to the readings' bound where it applies (a congruence:
   // the second moment stays positive semi-definite).

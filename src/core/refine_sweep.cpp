@@ -123,6 +123,16 @@ int SweepCell::halved_identifiable_runs() const {
   }));
 }
 
+int SweepCell::doubled_runs() const {
+  return static_cast<int>(
+      std::count_if(runs.begin(), runs.end(), [](const SweepRun& r) { return r.doubled(); }));
+}
+
+int SweepCell::identified_doubled_runs() const {
+  return static_cast<int>(std::count_if(
+      runs.begin(), runs.end(), [](const SweepRun& r) { return r.doubled() && r.identified; }));
+}
+
 double SweepCell::coverage() const {
   long in = 0, all = 0;
   for (const auto& r : runs)
@@ -569,7 +579,7 @@ MustShow must_show(const std::vector<SweepCell>& cells) {
         if (r.identifiable_from_plan) {
           ++m.library_identifiable;
           m.library_halved += r.halved();
-          if (r.S_before_um >= 2.0 * r.S_clean_um) {
+          if (r.doubled()) {
             ++m.library_identifiable_doubled;
             m.library_halved_doubled += r.halved();
             m.library_halved_where_doubled += r.halved_where_doubled();
@@ -606,16 +616,17 @@ std::string sweep_header() {
   char buf[512];
   std::snprintf(buf, sizeof buf,
                 "%-12s %-12s %5s %4s | %5s %5s %5s %5s %5s | %6s %6s %6s %6s %6s | %6s %6s %6s "
-                "%6s | %5s %5s %5s | %5s %5s | %7s",
+                "%6s | %5s %5s %5s | %5s %5s | %7s %7s",
                 "effect", "plan", "sigma", "runs", "added", "ident", "appl", "!wht", "!idp",
                 "S_cln", "S_bef", "S_aft", "Sbef^", "Saft^", "g_bef", "g_aft", "gbef^", "gaft^",
-                "worse", ">u", "half", "cov", "covsh", "hlf/idf");
+                "worse", ">u", "half", "cov", "covsh", "hlf/idf", "idf/dbl");
   return std::string(buf) +
          "\n  (fractions of runs; errors RMS in um / urad, median and ^ worst; S_cln: the same "
          "scan without the effect; worse: S or gamma error grew; >u: by more than its stated u; "
          "half: both at most halved; cov, covsh: points within 2u, pointwise and shape; hlf/idf: "
          "halved runs of those where the effect is identifiable from the plan, computed without "
-         "the truth)";
+         "the truth; idf/dbl: runs where the effect was identified of those where it doubled the "
+         "clean S error)";
 }
 
 std::string sweep_row(const SweepCell& c) {
@@ -623,7 +634,7 @@ std::string sweep_row(const SweepCell& c) {
   std::snprintf(
       buf, sizeof buf,
       "%-12s %-12s %5.2f %4zu | %5.2f %5.2f %5.2f %5.2f %5.2f | %6.3f %6.3f %6.3f %6.3f %6.3f | "
-      "%6.1f %6.1f %6.1f %6.1f | %5.2f %5.2f %5.2f | %5.3f %5.3f | %3d/%-3d",
+      "%6.1f %6.1f %6.1f %6.1f | %5.2f %5.2f %5.2f | %5.3f %5.3f | %3d/%-3d %3d/%-3d",
       to_string(c.effect), to_string(c.plan), c.sigma_um, c.runs.size(),
       c.fraction([](const SweepRun& r) { return r.added; }),
       c.fraction([](const SweepRun& r) { return r.identified; }),
@@ -642,7 +653,8 @@ std::string sweep_row(const SweepCell& c) {
       c.fraction([](const SweepRun& r) { return r.worse_S() || r.worse_gamma(); }),
       c.fraction([](const SweepRun& r) { return r.worse_beyond_u(); }),
       c.fraction([](const SweepRun& r) { return r.halved(); }), c.coverage(), c.coverage_shape(),
-      c.halved_identifiable_runs(), c.identifiable_runs());
+      c.halved_identifiable_runs(), c.identifiable_runs(), c.identified_doubled_runs(),
+      c.doubled_runs());
   return buf;
 }
 

@@ -132,9 +132,10 @@ RawSequence read_sequence(const CsvTable& t, const std::filesystem::path& file, 
                     &used) != 3 ||
         c < 1 || c > 4 || !core::traverse_direction_from_string(dir, &tr.direction))
       throw CsvError(file, line,
-                     "metadata '" + key + ": " + *v +
-                         "': expected 'configuration 1..4, forward|backward, start_s <s>[, "
-                         "zero_shift_um <um>]'");
+                     "metadata '" + key + ": " + *v + "': expected 'configuration 1..4, " +
+                         to_string(core::TraverseDirection::forward) + "|" +
+                         to_string(core::TraverseDirection::backward) +
+                         ", start_s <s>[, zero_shift_um <um>]'");
     // A re-zeroed traverse (the rezeroed plan) states its zero shift; absent = 0.
     const std::string rest = v->substr(static_cast<std::size_t>(used));
     if (!rest.empty()) {

@@ -179,6 +179,19 @@ std::string text_table(const std::vector<Row>& rows, double k) {
   return o.str();
 }
 
+// A refine step's file: DIR is its result (errsep-refine --out, OUT/refine), or a scan's set
+// holds it in refine/ (errsep-scan --refine).  The path found, relative to dir (none: empty).
+fs::path find_refine_file(const fs::path& dir, const std::string& name) {
+  for (const fs::path& rel : {fs::path(name), fs::path("refine") / name})
+    if (fs::exists(dir / rel)) return rel;
+  return {};
+}
+
+// Where the report's page links a file of dir (the page is written into output_subdir when set).
+fs::path linked_from_report(const ScanReportOptions& opts, const fs::path& rel) {
+  return (opts.output_subdir.empty() ? fs::path() : fs::path("..")) / rel;
+}
+
 }  // namespace
 
 bool ReportParticulars::is_valid(std::string* why) const {
@@ -796,21 +809,18 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
                 "Workpiece profile w(x) and table motion error m(x) (cf. Haramiishi et al. "
                 "2024, Figs. 8-9)");
       // The loop's account (service::DisplacementPipeline with refine on, issue 16 item 4).
-      for (const fs::path& rel :
-           {fs::path("displacement_refine.csv"), fs::path("refine") / "displacement_refine.csv"}) {
+      if (const fs::path rel = find_refine_file(dir, "displacement_refine.csv"); !rel.empty()) {
         const fs::path rf = dir / rel;
-        if (!fs::exists(rf)) continue;
         // No rows when nothing was taken and the plan leaves nothing unidentifiable (scan 2
         // backwards on clean data): the table says so.
         const auto t = read_csv(rf, {.allow_non_finite = true, .min_rows = 0});
         HtmlTable rt = displacement_refine_table(t, rf);
         rt.caption = rel.string() + ": " + rt.caption;
         html.tables.push_back(std::move(rt));
-        html.files.emplace_back(
-            (opts.output_subdir.empty() ? fs::path() : fs::path("..")) / rel,
-            "the displacement loop's account; the refined w, m with their u in " +
-                (rel.parent_path() / "displacement.csv").string());
-        break;
+        html.files.emplace_back(linked_from_report(opts, rel),
+                                "the displacement loop's account; the refined w, m with their u "
+                                "in " +
+                                    (rel.parent_path() / "displacement.csv").string());
       }
     }
   }
@@ -864,18 +874,15 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     html.files.emplace_back("verification.csv",
                             "before, predicted and measured residual at machine positions");
   }
-  // The refine step: DIR is its result (errsep-refine --out, OUT/refine), or a scan's set holds
-  // it in refine/ (errsep-scan --refine).  The base step has no parameters: nan there.
-  for (const fs::path& rel :
-       {fs::path("refine_steps.csv"), fs::path("refine") / "refine_steps.csv"}) {
+  // The refine step (find_refine_file).  The base step has no parameters: nan there.
+  if (const fs::path rel = find_refine_file(dir, "refine_steps.csv"); !rel.empty()) {
     const fs::path rf = dir / rel;
-    if (!fs::exists(rf)) continue;
     const auto t = read_csv(rf, {.allow_non_finite = true, .min_rows = 1});
     HtmlTable rt = refine_steps_table(t, rf);
     rt.caption = rel.string() + ": " + rt.caption;
     html.tables.push_back(std::move(rt));
     html.files.emplace_back(
-        (opts.output_subdir.empty() ? fs::path() : fs::path("..")) / rel,
+        linked_from_report(opts, rel),
         "the refine step table; the refined S, gamma, f are in " +
             (rel.has_parent_path() ? std::string("refine/motion.csv, refine/reference.csv")
                                    : std::string("motion.csv, reference.csv of this folder")));
@@ -883,20 +890,16 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
       res.warnings.push_back(rf.string() +
                              ": the refined model is incomplete (residual not white or implausible "
                              "effects rejected): see refine_report.txt beside it.");
-    break;
   }
   // A scan sequence's findings (service::FourSensorPipeline with refine on): what drift or
   // non-repeat the redundant traverses show, and what the plan could not identify.
-  for (const fs::path& rel :
-       {fs::path("sequence_refine.csv"), fs::path("refine") / "sequence_refine.csv"}) {
+  if (const fs::path rel = find_refine_file(dir, "sequence_refine.csv"); !rel.empty()) {
     const fs::path sf = dir / rel;
-    if (!fs::exists(sf)) continue;
     const auto t = read_csv(sf, {.allow_non_finite = true, .min_rows = 1});
     html.tables.push_back(sequence_findings_table(t, sf));
     html.files.emplace_back(
-        (opts.output_subdir.empty() ? fs::path() : fs::path("..")) / rel,
+        linked_from_report(opts, rel),
         "the scan sequence's fit: S and u_S before and after its refine, and its findings");
-    break;
   }
   // The particulars a customer's report states; what the inputs do not say is said to be unknown.
   const ReportParticulars& pt = opts.particulars;

@@ -47,6 +47,11 @@ struct SweepRun {
     return S_after_um > S_before_um + u_S_after_um ||
            gamma_after_urad > gamma_before_urad + u_gamma_after_urad;
   }
+  /// The injected effect at least doubled the clean S error (the issue's size: "each at a size
+  /// that at least doubles the clean error").  A random draw can miss it: a warm-up on one
+  /// configuration that the plan reads after the warm-up has settled is a constant there, which
+  /// the zero adjustment takes (thermal_one on the reversed closing plan, configurations 3 and 4).
+  bool doubled() const { return S_before_um >= 2.0 * S_clean_um; }
   bool halved() const {
     return S_after_um <= 0.5 * S_before_um && gamma_after_urad <= 0.5 * gamma_before_urad;
   }
@@ -74,6 +79,10 @@ struct SweepCell {
   /// Runs where the effect is identifiable from the plan, and of those, the halved ones.
   int identifiable_runs() const;
   int halved_identifiable_runs() const;
+  /// Runs where the effect doubled the clean S error (SweepRun::doubled), and of those, the ones
+  /// in which it was identified.
+  int doubled_runs() const;
+  int identified_doubled_runs() const;
   double coverage() const;        ///< pointwise, pooled over the runs
   double coverage_shape() const;  ///< shape, pooled
   /// Pointwise coverage pooled over the runs that satisfy `pred` (0 points: -1), and their number.
