@@ -52,6 +52,11 @@ CsvTable refine_csv(const core::RefineResult& r) {
   }
   for (std::size_t i = 0; i < r.implausible_kept.size(); ++i)
     t.set_meta("implausible_kept" + std::to_string(i), r.implausible_kept[i]);
+  // A u_S term the data do not bound (RefineResult::unbounded): the refined u_S holds it at the
+  // readings' bound, a finite number that is not a measured bound; the file says so, so the
+  // report can warn beside the figures.
+  for (std::size_t i = 0; i < r.unbounded.size(); ++i)
+    t.set_meta("u_S_unbounded" + std::to_string(i), r.unbounded[i]);
   // The errors before and after are those of two separations with the same solver options; the
   // λ rule may regularise one and not the other (an undeclared effect can give the L-curve a
   // corner that the corrected readings no longer have), so both λ go with them.

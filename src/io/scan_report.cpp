@@ -890,6 +890,12 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
       res.warnings.push_back(rf.string() +
                              ": the refined model is incomplete (residual not white or implausible "
                              "effects rejected): see refine_report.txt beside it.");
+    // io::refine_csv's u_S_unbounded<i>: the refined u_S is held at the readings' bound.
+    for (int i = 0; t.meta("u_S_unbounded" + std::to_string(i)); ++i)
+      res.warnings.push_back(rf.string() +
+                             ": the refined u_S is not bounded by the data (held at the "
+                             "readings' bound, not a measured uncertainty): " +
+                             *t.meta("u_S_unbounded" + std::to_string(i)));
   }
   // A scan sequence's findings (service::FourSensorPipeline with refine on): what drift or
   // non-repeat the redundant traverses show, and what the plan could not identify.

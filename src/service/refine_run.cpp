@@ -205,6 +205,13 @@ RefineRunResult run_refine(const io::FourSensorInputs& in, const fs::path& out_d
                            {"model", r.model_name},
                            {"refine_residual_white", r.residual_white() ? "true" : "false"},
                            {"refine_stop_reason", r.stop_reason}};
+    // The refined u_S holds a term the data do not bound at the readings' bound: the result file
+    // says so beside its u_S_um column (refine_steps.csv names the effect).
+    if (!r.unbounded.empty()) {
+      info.extra_metadata.emplace_back("u_S_bounded_by_data", "false");
+      for (const auto& line : r.unbounded)
+        info.summary_notes.push_back(line);
+    }
     io::write_four_sensor_result(stage.dir(), r.after, info);
   }
   {

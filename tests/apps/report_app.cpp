@@ -46,6 +46,7 @@ TEST_CASE("errsep-report evaluates a bow and a sine tilt exactly and writes ever
   const double h = 6.0, tilt = 0.01, a_deg = 0.002;
   spec.S_um = [&](double x) { return 4 * h * (x / 300) * (1 - x / 300) + tilt * x - 1; };
   spec.gamma_deg = [&](double x) { return a_deg * std::sin(2 * kPi * x / 300); };
+  spec.refine_unbounded = "u_S unbounded: pe2 not determined by this plan; declare a bound";
   errsep::test::write_four_sensor_result(dir, spec);
   errsep::test::write_grid_csv(
       dir / "surface.csv", 13, 9, 10.0,
@@ -114,6 +115,9 @@ TEST_CASE("errsep-report evaluates a bow and a sine tilt exactly and writes ever
     CHECK_THAT(rt, !Catch::Contains("nan"));
     CHECK_THAT(rt, !Catch::Contains("error vs truth"));  // no truth in this run: no such column
   }
+  // A refined u_S the data do not bound is said so beside the figures, naming the effect.
+  CHECK_THAT(html, Catch::Contains("the refined u_S is not bounded by the data"));
+  CHECK_THAT(html, Catch::Contains("pe2 not determined by this plan"));
   // The particulars a customer's report states; what the inputs do not say is said so.
   CHECK_THAT(html, Catch::Contains("<table id=\"measurement\">"));
   CHECK_THAT(html, Catch::Contains("ISO 230-1:2012"));

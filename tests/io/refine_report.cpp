@@ -69,6 +69,16 @@ TEST_CASE("refine report: implausible candidates are listed as rejected, the mod
   CHECK(text.find("NOT ADDED") != std::string::npos);
   CHECK(text.find("rejected: implausible parameters (") != std::string::npos);
   CHECK(text.find("model is incomplete") != std::string::npos);
+  // A u_S term the data do not bound (RefineResult::unbounded) goes into the file, one key per
+  // line, and nothing when there is none.
+  CHECK_FALSE(t.meta("u_S_unbounded0"));
+  core::RefineResult ru = r;
+  ru.unbounded = {"u_S unbounded: pe1 not determined by this plan; declare a bound (...)",
+                  "u_S unbounded: gain not determined by this plan; declare a bound (...)"};
+  const io::CsvTable tu = io::refine_csv(ru);
+  CHECK(tu.meta("u_S_unbounded0") == std::optional<std::string>(ru.unbounded[0]));
+  CHECK(tu.meta("u_S_unbounded1") == std::optional<std::string>(ru.unbounded[1]));
+  CHECK_FALSE(tu.meta("u_S_unbounded2"));
 }
 
 // The errors before and after come from two separations with the same λ rule, and an undeclared

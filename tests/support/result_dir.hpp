@@ -24,6 +24,8 @@ struct ResultDirSpec {
   double u_S_um = 0.15, u_gamma_urad = 2.0, u_f_um = 0.1;
   std::string source = "/data/scans/simulated-demo-scan.csv";
   bool lcurve = true, residuals = true, refine = true;
+  /// With refine: the refine table's u_S_unbounded0 line (io::refine_csv); empty: none.
+  std::string refine_unbounded;
 };
 
 inline void write_four_sensor_result(const std::filesystem::path& dir, ResultDirSpec spec = {}) {
@@ -126,6 +128,7 @@ inline void write_four_sensor_result(const std::filesystem::path& dir, ResultDir
     t.set_meta("step0_effect", "zhao2019-eq1");
     t.set_meta("step1_effect", "gain");
     t.set_meta("step1_verdict", "applied: the gain changes S by 0.4 um");
+    if (!spec.refine_unbounded.empty()) t.set_meta("u_S_unbounded0", spec.refine_unbounded);
     for (int j = 0; j < 3; ++j)
       t.set_meta("step1_parameter" + std::to_string(j), "g" + std::to_string(j + 2));
     t.columns = io::refine_csv_columns();
