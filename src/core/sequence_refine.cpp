@@ -1129,19 +1129,30 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
     // covariance factor (the readings' signs independent).  Measured: the paper's Example 1 on
     // the serpentine plan, h 0.8 um, σ 0.1 um: S 0.5-1.6 um off at x 130-175 mm with u_S
     // 0.37-0.42 um without it (4.4 u_S at x = 155 mm).
+    // The same share enters u_γ through what the fit puts into γ̂ from a reading (µrad per µm);
+    // it was in u_S only.  It does not cover the run that showed the gap (errsep-refine-sweep,
+    // serpentine plan, σ 0.2 µm, seed 60, h 1.46 µm: γ's error 107 -> 149 µrad while S's halved,
+    // u_γ 35.3 -> 37.5 µrad with this term): readings whose sign the data settle wrongly add no
+    // variance here.
     const Factor Fh = factorise(b, Eigen::MatrixXd(col));
     const Eigen::MatrixXd toS = Pi * Fh.Rinv_S * Fh.Q.transpose();  // P × (P·T)
+    const Eigen::MatrixXd toG = Fh.R.triangularView<Eigen::Upper>()
+                                    .solve(Eigen::MatrixXd::Identity(Fh.R.cols(), Fh.R.cols()))
+                                    .middleRows(b.nf + b.P, b.P) *
+                                Fh.Q.transpose();
     Eigen::MatrixXd& G = res.after.S_covariance_factor_um;
-    Eigen::VectorXd var_sign = Eigen::VectorXd::Zero(b.P);
+    Eigen::VectorXd var_sign = Eigen::VectorXd::Zero(b.P), var_sign_g = var_sign;
     for (Eigen::Index j = 0; j < col.size(); ++j) {
       const double sd = std::abs(hy.h_um) * std::sqrt(std::max(0.0, 1.0 - col(j) * col(j)));
       if (sd < 1e-9) continue;
       G.conservativeResize(Eigen::NoChange, G.cols() + 1);
       G.col(G.cols() - 1) = toS.col(j) * sd;
       var_sign += (toS.col(j) * sd).cwiseAbs2();
+      var_sign_g += (toG.col(j) * sd).cwiseAbs2();
     }
     hy.u_S_added_um = var_sign.cwiseSqrt();
     res.after.u_S_um = (res.after.u_S_um.cwiseAbs2() + var_sign).cwiseSqrt();
+    res.after.u_gamma_rad = (res.after.u_gamma_rad.cwiseAbs2() + 1e-12 * var_sign_g).cwiseSqrt();
   } else {
     res = refine_knock(m_um);
     // Left out: u_S carries its bias, the change taking it in would make (step_decision.hpp).
@@ -1151,6 +1162,9 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
     G.col(G.cols() - 1) = G_add;
     hy.u_S_added_um = G_add.cwiseAbs();
     res.after.u_S_um = (res.after.u_S_um.cwiseAbs2() + G_add.cwiseAbs2()).cwiseSqrt();
+    // ... and u_γ the bias it leaves in γ (q[1]: µrad per µm of h).
+    const Eigen::VectorXd g_add_rad = 1e-6 * q[1].sensitivity * hy.h_um;
+    res.after.u_gamma_rad = (res.after.u_gamma_rad.cwiseAbs2() + g_add_rad.cwiseAbs2()).cwiseSqrt();
   }
   char buf[600];
   std::snprintf(buf, sizeof buf,
