@@ -1040,58 +1040,79 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
   // configurations one way only), which moves the slope's sign where the profile turns: the
   // column again at the fitted readings without the hysteresis term, û − ĥ·z, until its signs
   // settle (serpentine plan, h 3-6 σ: |ĥ − h|/u median 0.86-1.13 with the first column alone).
-  for (int it = 0; it < 4; ++it) {
-    Eigen::MatrixXd fitted = m_um - with_h.residual_um;
-    for (int k = 0; k < b.T; ++k)
-      fitted.col(k) -= hy.h_um * col.segment(static_cast<Eigen::Index>(k) * b.P, b.P);
-    Eigen::VectorXd next = hysteresis_column(seq, fitted, slope_sd(with_h.sigma_um));
-    if (o.hysteresis_signs_from_readings && with_h.sigma_um > 0) {
-      // The slope's sign is the prior; the readings' residuals under either sign the evidence:
-      // e(c) = e + ĥ·(col − c)·(1 − H_jj), c = ±1 the column's value with that sign, variance
-      // σ̂²(1 − H_jj) (the fit absorbs the share H_jj, the reading's leverage, of any change to
-      // one reading); the column is the posterior mean of c (a two-point mixture, E step).
-      // Where the profile turns the two signs differ by 2ĥ in that reading, so with ĥ of a few
-      // σ̂ the readings decide (serpentine, σ 0.05/0.1/0.2, seeds 1-20: S error halved in
-      // 17/13/11 of 20 with the slope alone, the rest left 0.6-0.9 um off by a few readings of
-      // wrong sign at the turns).  The sign belongs to the point and the configuration (the lag
-      // follows dr/dx times the direction of travel): every traverse of a configuration adds
-      // its evidence to the same sign, so a configuration read both ways keeps a column that
-      // flips between its directions and puts nothing into S (the reversed plan).
-      const Eigen::VectorXd e = flatten(with_h.residual_um);
-      const Eigen::VectorXd lev = F0.Q.rowwise().squaredNorm();
-      Eigen::MatrixXd prior = Eigen::MatrixXd::Zero(b.P, 4), evidence = prior, count = prior;
-      auto dir_of = [&](int k) {
-        return direction_sign(seq.traverses[static_cast<std::size_t>(k)].direction);
-      };
-      constexpr double kCertain = 1.0 - 1e-12;
-      for (int k = 0; k < b.T; ++k) {
-        const int c = seq.traverses[static_cast<std::size_t>(k)].configuration;
-        for (Eigen::Index n = 0; n < b.P; ++n) {
-          const Eigen::Index j = static_cast<Eigen::Index>(k) * b.P + n;
-          const double keep = std::max(1.0 - lev(j), 1e-6);
-          const double ep = e(j) + hy.h_um * (col(j) - 1.0) * keep,
-                       em = e(j) + hy.h_um * (col(j) + 1.0) * keep;
-          // In the sign of dr/dx: c = −dir·s.
-          const double s0 = std::clamp(-dir_of(k) * next(j), -kCertain, kCertain);
-          prior(n, c) += std::log1p(s0) - std::log1p(-s0);
-          evidence(n, c) +=
-              -dir_of(k) * (em * em - ep * ep) / (2.0 * with_h.sigma_um * with_h.sigma_um * keep);
-          count(n, c) += 1.0;
+  // `from_readings`: the readings' evidence weighs the signs too (the option; below: off for the
+  // comparison fit).  Updates the column z and its fit in place.
+  auto settle_signs = [&](Eigen::VectorXd& z, SequenceFit& fit, bool from_readings) {
+    for (int it = 0; it < 4; ++it) {
+      Eigen::MatrixXd fitted = m_um - fit.residual_um;
+      for (int k = 0; k < b.T; ++k)
+        fitted.col(k) -= hy.h_um * z.segment(static_cast<Eigen::Index>(k) * b.P, b.P);
+      Eigen::VectorXd next = hysteresis_column(seq, fitted, slope_sd(fit.sigma_um));
+      if (from_readings && fit.sigma_um > 0) {
+        // The slope's sign is the prior; the readings' residuals under either sign the evidence:
+        // e(c) = e + ĥ·(z − c)·(1 − H_jj), c = ±1 the column's value with that sign, variance
+        // σ̂²(1 − H_jj) (the fit absorbs the share H_jj, the reading's leverage, of any change to
+        // one reading); the column is the posterior mean of c (a two-point mixture, E step).
+        // Where the profile turns the two signs differ by 2ĥ in that reading, so with ĥ of a few
+        // σ̂ the readings decide (serpentine, σ 0.05/0.1/0.2, seeds 1-20: S error halved in
+        // 17/13/11 of 20 with the slope alone, the rest left 0.6-0.9 um off by a few readings of
+        // wrong sign at the turns).  The sign belongs to the point and the configuration (the lag
+        // follows dr/dx times the direction of travel): every traverse of a configuration adds
+        // its evidence to the same sign, so a configuration read both ways keeps a column that
+        // flips between its directions and puts nothing into S (the reversed plan).
+        const Eigen::VectorXd e = flatten(fit.residual_um);
+        const Eigen::VectorXd lev = F0.Q.rowwise().squaredNorm();
+        Eigen::MatrixXd prior = Eigen::MatrixXd::Zero(b.P, 4), evidence = prior, count = prior;
+        auto dir_of = [&](int k) {
+          return direction_sign(seq.traverses[static_cast<std::size_t>(k)].direction);
+        };
+        constexpr double kCertain = 1.0 - 1e-12;
+        for (int k = 0; k < b.T; ++k) {
+          const int c = seq.traverses[static_cast<std::size_t>(k)].configuration;
+          for (Eigen::Index n = 0; n < b.P; ++n) {
+            const Eigen::Index j = static_cast<Eigen::Index>(k) * b.P + n;
+            const double keep = std::max(1.0 - lev(j), 1e-6);
+            const double ep = e(j) + hy.h_um * (z(j) - 1.0) * keep,
+                         em = e(j) + hy.h_um * (z(j) + 1.0) * keep;
+            // In the sign of dr/dx: c = −dir·s.
+            const double s0 = std::clamp(-dir_of(k) * next(j), -kCertain, kCertain);
+            prior(n, c) += std::log1p(s0) - std::log1p(-s0);
+            evidence(n, c) +=
+                -dir_of(k) * (em * em - ep * ep) / (2.0 * fit.sigma_um * fit.sigma_um * keep);
+            count(n, c) += 1.0;
+          }
+        }
+        for (int k = 0; k < b.T; ++k) {
+          const int c = seq.traverses[static_cast<std::size_t>(k)].configuration;
+          for (Eigen::Index n = 0; n < b.P; ++n) {
+            const Eigen::Index j = static_cast<Eigen::Index>(k) * b.P + n;
+            if (std::abs(next(j)) >= 1.0) continue;  // the slope is certain
+            next(j) = -dir_of(k) * std::tanh(0.5 * (prior(n, c) / count(n, c) + evidence(n, c)));
+          }
         }
       }
-      for (int k = 0; k < b.T; ++k) {
-        const int c = seq.traverses[static_cast<std::size_t>(k)].configuration;
-        for (Eigen::Index n = 0; n < b.P; ++n) {
-          const Eigen::Index j = static_cast<Eigen::Index>(k) * b.P + n;
-          if (std::abs(next(j)) >= 1.0) continue;  // the slope is certain
-          next(j) = -dir_of(k) * std::tanh(0.5 * (prior(n, c) / count(n, c) + evidence(n, c)));
-        }
-      }
+      if ((next - z).cwiseAbs().maxCoeff() < 1e-3) break;
+      z = next;
+      fit = fit_h(z);
     }
-    if ((next - col).cwiseAbs().maxCoeff() < 1e-3) break;
-    col = next;
-    with_h = fit_h(col);
+  };
+  // The two sign rules (the slope's sign alone; weighed by the readings too) can settle a turn's
+  // signs differently, and where they do, neither fit is known to be the right one: the
+  // readings' evidence halves more (serpentine, seeds 1-20, sigma 0.05-0.3: 52 vs 41 of 55 runs
+  // where the hysteresis doubled the clean S error) but settles some turns confidently and
+  // wrongly (sigma 0.2, seed 60: gamma 107 -> 149 urad against u_gamma 37.5; the slope alone:
+  // 75 urad).  The slope-alone fit is kept for comparison; half the difference between the two
+  // fits' S and gamma enters u_S and u_gamma below (as the drift form's two members).
+  Eigen::VectorXd col_slope;
+  SequenceFit with_h_slope;
+  if (o.hysteresis_signs_from_readings) {
+    col_slope = col;
+    with_h_slope = with_h;
+    const SequenceHysteresis first = hy;
+    settle_signs(col_slope, with_h_slope, false);
+    hy = first;  // fit_h's h, u, F, p are the kept fit's
   }
+  settle_signs(col, with_h, o.hysteresis_signs_from_readings);
   // Whether taking it into the fit helps S, γ and f (step_decision.hpp), as the knock's: their
   // change per µm of h is what the fit without it puts into them from the column.
   const Eigen::VectorXd beta_col =
@@ -1130,10 +1151,11 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
     // the serpentine plan, h 0.8 um, σ 0.1 um: S 0.5-1.6 um off at x 130-175 mm with u_S
     // 0.37-0.42 um without it (4.4 u_S at x = 155 mm).
     // The same share enters u_γ through what the fit puts into γ̂ from a reading (µrad per µm);
-    // it was in u_S only.  It does not cover the run that showed the gap (errsep-refine-sweep,
-    // serpentine plan, σ 0.2 µm, seed 60, h 1.46 µm: γ's error 107 -> 149 µrad while S's halved,
-    // u_γ 35.3 -> 37.5 µrad with this term): readings whose sign the data settle wrongly add no
-    // variance here.
+    // it was in u_S only.  Alone it does not cover the run that showed the gap
+    // (errsep-refine-sweep, serpentine plan, σ 0.2 µm, seed 60, h 1.46 µm: γ's error 107 -> 149
+    // µrad while S's halved, u_γ 35.3 -> 37.5 µrad with this term): readings whose sign the data
+    // settle wrongly add no variance here.  The sign rules' half-difference (below) does: u_γ
+    // 67.3 µrad there.
     const Factor Fh = factorise(b, Eigen::MatrixXd(col));
     const Eigen::MatrixXd toS = Pi * Fh.Rinv_S * Fh.Q.transpose();  // P × (P·T)
     const Eigen::MatrixXd toG = Fh.R.triangularView<Eigen::Upper>()
@@ -1149,6 +1171,18 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
       G.col(G.cols() - 1) = toS.col(j) * sd;
       var_sign += (toS.col(j) * sd).cwiseAbs2();
       var_sign_g += (toG.col(j) * sd).cwiseAbs2();
+    }
+    // The sign rules' half-difference (above): a column of G, as the drift form's.
+    if (col_slope.size() == col.size()) {
+      const Eigen::VectorXd half_dS = 0.5 * Pi * (with_h_slope.S_um - with_h.S_um);
+      const Eigen::VectorXd half_dg_urad = 0.5e6 * (with_h_slope.gamma_rad - with_h.gamma_rad);
+      if (half_dS.cwiseAbs().maxCoeff() > 1e-9) {
+        G.conservativeResize(Eigen::NoChange, G.cols() + 1);
+        G.col(G.cols() - 1) = half_dS;
+      }
+      var_sign += half_dS.cwiseAbs2();
+      hy.sign_rules_dS_rms_um = 2.0 * std::sqrt(half_dS.squaredNorm() / static_cast<double>(b.P));
+      var_sign_g += half_dg_urad.cwiseAbs2();
     }
     hy.u_S_added_um = var_sign.cwiseSqrt();
     res.after.u_S_um = (res.after.u_S_um.cwiseAbs2() + var_sign).cwiseSqrt();
@@ -1166,14 +1200,20 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
     const Eigen::VectorXd g_add_rad = 1e-6 * q[1].sensitivity * hy.h_um;
     res.after.u_gamma_rad = (res.after.u_gamma_rad.cwiseAbs2() + g_add_rad.cwiseAbs2()).cwiseSqrt();
   }
-  char buf[600];
+  char signs[200] = "";
+  if (hy.sign_rules_dS_rms_um > 0)
+    std::snprintf(signs, sizeof signs,
+                  "; its signs where the profile turns, weighed by the readings or from the slope "
+                  "alone, move S by %.2g um RMS: half carried in u_S and u_gamma",
+                  hy.sign_rules_dS_rms_um);
+  char buf[800];
   std::snprintf(buf, sizeof buf,
                 "hysteresis of the sensor (it lags by h in the direction its reading changes): "
                 "h = %.3g +- %.2g um (F = %.3g, p = %.2g), determined by the configurations read "
-                "both ways: %s: %s",
+                "both ways: %s: %s%s",
                 hy.h_um, hy.u_h_um, hy.F, hy.p_value,
                 hy.applied ? "taken into the fit, h carried in u_S" : "not applied, carried in u_S",
-                hy.decision.c_str());
+                hy.decision.c_str(), signs);
   hy.finding = buf;
   res.hysteresis = hy;
   res.report.insert(res.report.begin(), hy.finding);

@@ -254,7 +254,8 @@ void traverse_nonlinearity_redundant(double sigma, bool halving_holds) {
 // identifying_plan picks: configuration 1 read both ways determines h, configurations 2 and 4
 // read back only carry the lag into S).  Measured with these seeds: identified 20/20 at every
 // sigma, worse beyond u 0; halved in 19 of 20, 18 of 19, 15 of 16 of the runs where it doubled
-// the clean S error at sigma 0.05, 0.1, 0.2; coverage of 2 u_S 0.971/0.973/0.974.  With the
+// the clean S error at sigma 0.05, 0.1, 0.2; coverage of 2 u_S 0.977/0.977/0.976 (0.971/0.973/
+// 0.974 before the two sign rules' half-difference entered u_S, sequence_refine.cpp).  With the
 // slope's sign alone at the turns (before SequenceRefineOptions::hysteresis_signs_from_readings):
 // 17 of 20, 13 of 19, 11 of 16, coverage 0.997/0.998/0.992.  Asserted: identified >= 80 %, never
 // worse beyond u, coverage 90-99 %, the halving.

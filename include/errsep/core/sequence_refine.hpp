@@ -315,8 +315,14 @@ struct SequenceHysteresis {
   double h_um = 0, u_h_um = 0;
   double F = 0, p_value = 1;
   std::string decision;  ///< decide_step's reason (or why it was taken in without changing S)
-  /// P: what it adds to u_S when detected and not applied (its bias); zeros otherwise.
+  /// P: what it adds to u_S when detected: its bias when not applied; when applied, the spread
+  /// of its sign at the profile's turns (the sign's variance and the two sign rules' half
+  /// difference); zeros otherwise.
   Eigen::VectorXd u_S_added_um;
+  /// Applied with the readings weighing the signs: the RMS of the difference in S between that
+  /// fit and the fit with the slope's sign alone (half of it is carried in u_S and u_γ); 0
+  /// otherwise.
+  double sign_rules_dS_rms_um = 0;
   /// One line when detected (also in SequenceRefineResult::report), or, on a plan that reads
   /// every configuration one way only, "hysteresis: not identifiable from this plan (...)" (not
   /// in the report: a clean run says nothing).
