@@ -140,8 +140,10 @@ int main(int argc, char** argv) {
                                                           refine, base, seq_opts);
         breakdown.push_back(errsep::core::coverage_breakdown(cell));
         all_cells.push_back(cell);
-        halved += cell.halved_identifiable_runs();
-        identifiable += cell.identifiable_runs();
+        halved += cell.count(
+            [](const errsep::core::SweepRun& r) { return r.identifiable_from_plan && r.halved(); });
+        identifiable +=
+            cell.count([](const errsep::core::SweepRun& r) { return r.identifiable_from_plan; });
         for (const auto& r : cell.runs)
           points += r.points, covered += r.covered;
         std::cout << errsep::core::sweep_row(cell) << std::endl;

@@ -18,6 +18,14 @@ double rms(const Eigen::VectorXd& v) {
   return v.size() ? std::sqrt(v.squaredNorm() / static_cast<double>(v.size())) : 0.0;
 }
 
+// γ's points within 2u_γ, the error about its constant and line (what one scan cannot see, as
+// the errors gamma_*_urad).
+int covered_within_2u(const Eigen::VectorXd& gamma_rad, const Eigen::VectorXd& truth_rad,
+                      const Eigen::VectorXd& u_rad) {
+  const Eigen::VectorXd dev = remove_polynomial(gamma_rad - truth_rad, 1);
+  return static_cast<int>((dev.array().abs() <= 2.0 * u_rad.array()).count());
+}
+
 }  // namespace
 
 SweepRun evaluate_refine_run(UndeclaredEffect effect, const UndeclaredCaseOptions& cases,
@@ -76,6 +84,7 @@ SweepRun evaluate_refine_run(UndeclaredEffect effect, const UndeclaredCaseOption
   run.points = static_cast<int>(dS.size());
   for (Eigen::Index n = 0; n < dS.size(); ++n)
     if (std::abs(dS(n)) <= 2.0 * r.after.u_S_um(n)) ++run.covered;
+  run.covered_gamma = covered_within_2u(r.after.gamma_rad, c.gamma_rad, r.after.u_gamma_rad);
   if (r.after.covariance) {
     std::vector<int> all(static_cast<std::size_t>(dS.size()));
     for (std::size_t n = 0; n < all.size(); ++n)
@@ -112,31 +121,21 @@ double SweepCell::worst(double (*get)(const SweepRun&)) const {
   return w;
 }
 
-int SweepCell::identifiable_runs() const {
-  return static_cast<int>(std::count_if(
-      runs.begin(), runs.end(), [](const SweepRun& r) { return r.identifiable_from_plan; }));
-}
-
-int SweepCell::halved_identifiable_runs() const {
-  return static_cast<int>(std::count_if(runs.begin(), runs.end(), [](const SweepRun& r) {
-    return r.identifiable_from_plan && r.halved();
-  }));
-}
-
-int SweepCell::doubled_runs() const {
-  return static_cast<int>(
-      std::count_if(runs.begin(), runs.end(), [](const SweepRun& r) { return r.doubled(); }));
-}
-
-int SweepCell::identified_doubled_runs() const {
-  return static_cast<int>(std::count_if(
-      runs.begin(), runs.end(), [](const SweepRun& r) { return r.doubled() && r.identified; }));
+int SweepCell::count(bool (*pred)(const SweepRun&)) const {
+  return static_cast<int>(std::count_if(runs.begin(), runs.end(), pred));
 }
 
 double SweepCell::coverage() const {
   long in = 0, all = 0;
   for (const auto& r : runs)
     in += r.covered, all += r.points;
+  return all ? static_cast<double>(in) / static_cast<double>(all) : 0.0;
+}
+
+double SweepCell::coverage_gamma() const {
+  long in = 0, all = 0;
+  for (const auto& r : runs)
+    in += r.covered_gamma, all += r.points;
   return all ? static_cast<double>(in) / static_cast<double>(all) : 0.0;
 }
 
@@ -538,6 +537,7 @@ SweepRun evaluate_sequence_run(UndeclaredEffect effect, const ScanSequence& seq,
   for (Eigen::Index n = 0; n < dev.size(); ++n)
     if (std::abs(dev(n)) <= 2.0 * r.after.u_S_um(n)) ++run.covered;
   run.covered_shape = run.covered;
+  run.covered_gamma = covered_within_2u(r.after.gamma_rad, d.gamma_rad, r.after.u_gamma_rad);
   return run;
 }
 
@@ -569,6 +569,7 @@ MustShow must_show(const std::vector<SweepCell>& cells) {
     for (const auto& r : c.runs) {
       m.points += r.points;
       m.covered += r.covered;
+      m.covered_gamma += r.covered_gamma;
       if (r.added) m.points_found += r.points, m.covered_found += r.covered;
       if (c.effect == UndeclaredEffect::none) {
         ++m.clean_runs;
@@ -602,13 +603,14 @@ std::string MustShow::brief() const {
                 "doubled the clean S error; S halved and gamma too where the effect doubled "
                 "gamma's in %d); not in the library: not white "
                 "in %d of %d; u_S coverage (2 u_S) %ld of %ld points (%.3f), %.3f where something "
-                "was added (%ld points)",
+                "was added (%ld points); u_gamma coverage (2 u_gamma, gamma about its constant and "
+                "line) %.3f",
                 clean_added, clean_runs, library_worse_beyond_u, library_runs, library_halved,
                 library_identifiable, library_halved_doubled, library_identifiable_doubled,
                 library_halved_where_doubled, not_in_library_not_white, not_in_library_runs,
                 covered, points, coverage(),
                 points_found ? static_cast<double>(covered_found) / points_found : 0.0,
-                points_found);
+                points_found, coverage_gamma());
   return buf;
 }
 
@@ -616,14 +618,15 @@ std::string sweep_header() {
   char buf[512];
   std::snprintf(buf, sizeof buf,
                 "%-12s %-12s %5s %4s | %5s %5s %5s %5s %5s | %6s %6s %6s %6s %6s | %6s %6s %6s "
-                "%6s | %5s %5s %5s | %5s %5s | %7s %7s",
+                "%6s | %5s %5s %5s | %5s %5s %5s | %7s %7s",
                 "effect", "plan", "sigma", "runs", "added", "ident", "appl", "!wht", "!idp",
                 "S_cln", "S_bef", "S_aft", "Sbef^", "Saft^", "g_bef", "g_aft", "gbef^", "gaft^",
-                "worse", ">u", "half", "cov", "covsh", "hlf/idf", "idf/dbl");
+                "worse", ">u", "half", "cov", "covsh", "covg", "hlf/idf", "idf/dbl");
   return std::string(buf) +
          "\n  (fractions of runs; errors RMS in um / urad, median and ^ worst; S_cln: the same "
          "scan without the effect; worse: S or gamma error grew; >u: by more than its stated u; "
-         "half: both at most halved; cov, covsh: points within 2u, pointwise and shape; hlf/idf: "
+         "half: both at most halved; cov, covsh: points within 2u_S, pointwise and shape; covg: "
+         "gamma's points (about its constant and line) within 2u_gamma; hlf/idf: "
          "halved runs of those where the effect is identifiable from the plan, computed without "
          "the truth; idf/dbl: runs where the effect was identified of those where it doubled the "
          "clean S error)";
@@ -634,7 +637,7 @@ std::string sweep_row(const SweepCell& c) {
   std::snprintf(
       buf, sizeof buf,
       "%-12s %-12s %5.2f %4zu | %5.2f %5.2f %5.2f %5.2f %5.2f | %6.3f %6.3f %6.3f %6.3f %6.3f | "
-      "%6.1f %6.1f %6.1f %6.1f | %5.2f %5.2f %5.2f | %5.3f %5.3f | %3d/%-3d %3d/%-3d",
+      "%6.1f %6.1f %6.1f %6.1f | %5.2f %5.2f %5.2f | %5.3f %5.3f %5.3f | %3d/%-3d %3d/%-3d",
       to_string(c.effect), to_string(c.plan), c.sigma_um, c.runs.size(),
       c.fraction([](const SweepRun& r) { return r.added; }),
       c.fraction([](const SweepRun& r) { return r.identified; }),
@@ -653,8 +656,11 @@ std::string sweep_row(const SweepCell& c) {
       c.fraction([](const SweepRun& r) { return r.worse_S() || r.worse_gamma(); }),
       c.fraction([](const SweepRun& r) { return r.worse_beyond_u(); }),
       c.fraction([](const SweepRun& r) { return r.halved(); }), c.coverage(), c.coverage_shape(),
-      c.halved_identifiable_runs(), c.identifiable_runs(), c.identified_doubled_runs(),
-      c.doubled_runs());
+      c.coverage_gamma(),
+      c.count([](const SweepRun& r) { return r.identifiable_from_plan && r.halved(); }),
+      c.count([](const SweepRun& r) { return r.identifiable_from_plan; }),
+      c.count([](const SweepRun& r) { return r.doubled() && r.identified; }),
+      c.count([](const SweepRun& r) { return r.doubled(); }));
   return buf;
 }
 

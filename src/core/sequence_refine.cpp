@@ -196,6 +196,7 @@ struct Factor {
   Eigen::MatrixXd Q, R;      // thin
   Eigen::VectorXd u_S_unit;  // row norms of Π·(R⁻¹)_S·: u_S = σ̂·u_S_unit
   Eigen::MatrixXd Rinv_S;    // (R⁻¹)_S·: Cov(Ŝ) = σ̂²·Rinv_S·Rinv_Sᵀ in the fit's gauge
+  Eigen::MatrixXd Rinv_gamma;  // (R⁻¹)_γ· (µrad per µm): Cov(γ̂) = 1e-12·σ̂²·Rinv_γ·Rinv_γᵀ
   Eigen::VectorXd u_gamma_unit, u_f_unit;  // row norms of 1e-6·(R⁻¹)_γ· and Bf·(R⁻¹)_f·
   std::map<int, Projected> proj;           // candidate → its columns projected off span(Q)
   std::map<int, Eigen::MatrixXd> toS;  // candidate → Π·(R⁻¹Qᵀ·J·D⁻¹)_S (what the fit puts in Ŝ)
@@ -220,7 +221,8 @@ Factor factorise(const Base& b, const Eigen::MatrixXd& extra, bool with_u = true
   F.Rinv_S = Rinv.middleRows(b.nf, b.P);
   const Eigen::MatrixXd Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
   F.u_S_unit = (Pi * F.Rinv_S).rowwise().norm();
-  F.u_gamma_unit = 1e-6 * Rinv.middleRows(b.nf + b.P, b.P).rowwise().norm();
+  F.Rinv_gamma = Rinv.middleRows(b.nf + b.P, b.P);
+  F.u_gamma_unit = 1e-6 * F.Rinv_gamma.rowwise().norm();
   F.u_f_unit = (b.Bf * Rinv.topRows(b.nf)).rowwise().norm();
   return F;
 }
@@ -1158,10 +1160,7 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
     // 67.3 µrad there.
     const Factor Fh = factorise(b, Eigen::MatrixXd(col));
     const Eigen::MatrixXd toS = Pi * Fh.Rinv_S * Fh.Q.transpose();  // P × (P·T)
-    const Eigen::MatrixXd toG = Fh.R.triangularView<Eigen::Upper>()
-                                    .solve(Eigen::MatrixXd::Identity(Fh.R.cols(), Fh.R.cols()))
-                                    .middleRows(b.nf + b.P, b.P) *
-                                Fh.Q.transpose();
+    const Eigen::MatrixXd toG = Fh.Rinv_gamma * Fh.Q.transpose();   // µrad per µm
     Eigen::MatrixXd& G = res.after.S_covariance_factor_um;
     Eigen::VectorXd var_sign = Eigen::VectorXd::Zero(b.P), var_sign_g = var_sign;
     for (Eigen::Index j = 0; j < col.size(); ++j) {

@@ -217,8 +217,9 @@ void drift_redundant(double sigma, bool halving_holds) {
       std::printf(
           "  thermal_one identified in %.2f of runs (not asserted); it doubled the clean S error "
           "in %d of the %zu runs, identified in %d of those\n",
-          c.identified(UndeclaredEffect::thermal_one), cell.doubled_runs(), cell.runs.size(),
-          cell.identified_doubled_runs());
+          c.identified(UndeclaredEffect::thermal_one),
+          cell.count([](const SweepRun& r) { return r.doubled(); }), cell.runs.size(),
+          cell.count([](const SweepRun& r) { return r.doubled() && r.identified; }));
   CHECK(c.m.library_identifiable_doubled > 0);
   if (halving_holds)
     CHECK(c.m.library_halved_doubled >= 0.8 * c.m.library_identifiable_doubled);

@@ -40,6 +40,9 @@ struct SweepRun {
   /// Largest change a step made to the constant, line and bow of S (µm, RMS of the change).
   double gauge_change_um = 0;
   int points = 0, covered = 0, covered_shape = 0;  ///< within 2u (pointwise; shape)
+  /// γ's points within 2 u_γ, γ's error about its constant and line (as gamma_*_urad): u_γ
+  /// enters worse_beyond_u, so its coverage is measured beside u_S's.
+  int covered_gamma = 0;
   bool worse_S() const { return S_after_um > S_before_um * (1 + 1e-9); }
   bool worse_gamma() const { return gamma_after_urad > gamma_before_urad * (1 + 1e-9); }
   /// The error grew by more than its stated uncertainty (RMS of u over the points).
@@ -76,15 +79,11 @@ struct SweepCell {
   double fraction(bool (*pred)(const SweepRun&)) const;
   double median(double (*get)(const SweepRun&)) const;
   double worst(double (*get)(const SweepRun&)) const;
-  /// Runs where the effect is identifiable from the plan, and of those, the halved ones.
-  int identifiable_runs() const;
-  int halved_identifiable_runs() const;
-  /// Runs where the effect doubled the clean S error (SweepRun::doubled), and of those, the ones
-  /// in which it was identified.
-  int doubled_runs() const;
-  int identified_doubled_runs() const;
+  /// Runs that satisfy `pred` (e.g. identifiable from the plan and halved).
+  int count(bool (*pred)(const SweepRun&)) const;
   double coverage() const;        ///< pointwise, pooled over the runs
   double coverage_shape() const;  ///< shape, pooled
+  double coverage_gamma() const;  ///< of u_γ (SweepRun::covered_gamma), pooled
   /// Pointwise coverage pooled over the runs that satisfy `pred` (0 points: -1), and their number.
   double coverage_where(bool (*pred)(const SweepRun&), int* runs_counted = nullptr) const;
 };
@@ -161,7 +160,11 @@ struct MustShow {
   int not_in_library_runs = 0, not_in_library_not_white = 0;  ///< nonlinearity, bump
   long points = 0, covered = 0;              ///< u_S coverage pooled over all cells
   long points_found = 0, covered_found = 0;  ///< ... over the runs where something was added
+  long covered_gamma = 0;                    ///< u_γ coverage pooled over all cells (of `points`)
   double coverage() const { return points ? static_cast<double>(covered) / points : 0.0; }
+  double coverage_gamma() const {
+    return points ? static_cast<double>(covered_gamma) / points : 0.0;
+  }
   std::string brief() const;
 };
 MustShow must_show(const std::vector<SweepCell>& cells);
