@@ -886,15 +886,23 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
         "the refine step table; the refined S, gamma, f are in " +
             (rel.has_parent_path() ? std::string("refine/motion.csv, refine/reference.csv")
                                    : std::string("motion.csv, reference.csv of this folder")));
+    // service/refine_run.cpp's refine_role: a scan sequence's result is its own refined fit
+    // (sequence_refine.csv), and this table the single-scan refine kept for comparison, whose
+    // findings do not concern the result's figures.
+    const bool comparison = t.meta("refine_role") == std::optional<std::string>("comparison");
+    const std::string whose =
+        comparison ? ": the single-scan refine kept for comparison (the result is the scan "
+                     "sequence's fit, which this does not concern): its "
+                   : ": the ";
     if (auto m = t.meta("model_complete"); m && *m != "true")
-      res.warnings.push_back(rf.string() +
-                             ": the refined model is incomplete (residual not white or implausible "
+      res.warnings.push_back(rf.string() + whose +
+                             "refined model is incomplete (residual not white or implausible "
                              "effects rejected): see refine_report.txt beside it.");
     // io::refine_csv's u_S_unbounded<i>: the refined u_S is held at the readings' bound.
     for (int i = 0; t.meta("u_S_unbounded" + std::to_string(i)); ++i)
-      res.warnings.push_back(rf.string() +
-                             ": the refined u_S is not bounded by the data (held at the "
-                             "readings' bound, not a measured uncertainty): " +
+      res.warnings.push_back(rf.string() + whose +
+                             "refined u_S is not bounded by the data (held at the readings' "
+                             "bound, not a measured uncertainty): " +
                              *t.meta("u_S_unbounded" + std::to_string(i)));
   }
   // A scan sequence's findings (service::FourSensorPipeline with refine on): what drift or

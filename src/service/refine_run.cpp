@@ -178,6 +178,11 @@ RefineRunResult run_refine(const io::FourSensorInputs& in, const fs::path& out_d
   out.swept = stage.swept();
   io::CsvTable steps = io::refine_csv(r);
   steps.set_meta("source", opts.source);
+  // Whose figures the step table's findings concern (errsep-report words its warnings by it):
+  // on a scan sequence whose refined fit is the result, the table is the single-scan refine of
+  // m1..m4, kept for comparison.
+  const bool comparison = out.sequence && sequence_is_the_result(in.sequence->first);
+  steps.set_meta("refine_role", comparison ? "comparison" : "result");
   steps.set_meta("run_id", stage.run_id());
   io::write_csv(stage.dir() / "refine_steps.csv", steps);
   io::write_file_atomic(stage.dir() / "refine_report.txt", out.text);
@@ -189,7 +194,7 @@ RefineRunResult run_refine(const io::FourSensorInputs& in, const fs::path& out_d
     io::write_csv(stage.dir() / "sequence_refine.csv", sq);
   }
   io::ResultWriteInfo info{opts.source, "X", "Y", {}};
-  if (out.sequence && sequence_is_the_result(in.sequence->first)) {
+  if (comparison) {
     // The sequence's refined fit is the result of such a scan (service/four_sensor_pipeline.hpp):
     // the refined files say the same, not the weaker single-scan refine of m1..m4.
     info.extra_metadata = {{"run_id", stage.run_id()}};

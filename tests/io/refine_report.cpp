@@ -6,7 +6,10 @@
 #include <cmath>
 
 #include "errsep/core/effect_traverse.hpp"
+#include "errsep/io/scan_report.hpp"
 #include "support/refine_cases.hpp"
+#include "support/result_dir.hpp"
+#include "support/support.hpp"
 
 using namespace errsep;
 
@@ -166,4 +169,31 @@ TEST_CASE("refine report: the declared Type-B bounds are printed beside the step
   const auto plain = core::refine_four_sensor(c.cfg, c.sim.m_um, Eigen::MatrixXd(), {}, &c.truth);
   CHECK_FALSE(io::refine_csv(plain).meta("declared0"));
   CHECK(io::format_refine_text(plain).find("declared bounds") == std::string::npos);
+}
+
+// errsep-report's warning beside an unbounded u_S names whose figures it concerns: the result's,
+// or (a scan sequence whose refined fit is the result) the single-scan refine kept for comparison.
+TEST_CASE("report: an unbounded u_S of the comparison refine is not said of the result") {
+  test::TempDir tmp;
+  io::ScanReportOptions o;
+  o.plots = false;
+  o.tables = false;
+  const std::string line = "u_S unbounded: pe2 not determined by this plan; declare a bound";
+  for (const char* role : {"result", "comparison"}) {
+    INFO(role);
+    test::ResultDirSpec spec;
+    spec.refine_unbounded = line;
+    spec.refine_role = role;
+    test::write_four_sensor_result(tmp / role, spec);
+    const auto res = io::write_scan_report(tmp / role, o);
+    int warned = 0, of_comparison = 0;
+    for (const auto& w : res.warnings)
+      if (w.find("refined u_S is not bounded by the data") != std::string::npos &&
+          w.find(line) != std::string::npos) {
+        ++warned;
+        of_comparison += w.find("single-scan refine kept for comparison") != std::string::npos;
+      }
+    CHECK(warned == 1);
+    CHECK(of_comparison == (std::string(role) == "comparison" ? 1 : 0));
+  }
 }

@@ -165,6 +165,9 @@ TEST_CASE("a scan sequence with refine on: refined once, refine/ holds the scan'
       CHECK(S_after[n] == Approx(S[n]).margin(1e-6));
     CHECK_THAT(test::read_file(out / "refine" / "refine_report.txt"),
                Catch::Contains("single-scan refine of each configuration's first traverse"));
+    // ... and the step table says so (errsep-report words its warnings by it).
+    CHECK(meta(io::read_csv(out / "refine" / "refine_steps.csv", {.allow_non_finite = true}),
+               "refine_role") == "comparison");
   }
   // Without a recorded sequence nothing is refined as a sequence and refine/ is the single refine.
   const auto r = pipeline.write_result_set(test::simulated_raw(23), tmp / "single", "test");

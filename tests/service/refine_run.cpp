@@ -55,6 +55,8 @@ TEST_CASE("refine result: a u_S the data do not bound is said so in the files, n
     const io::CsvTable motion = io::read_csv(out / "motion.csv");
     const io::CsvTable steps = io::read_csv(out / "refine_steps.csv", {.allow_non_finite = true});
     const std::string summary = read_text(out / "summary.txt");
+    // A single scan: the step table's findings concern the result (errsep-report's wording).
+    CHECK(steps.meta("refine_role") == std::optional<std::string>("result"));
     if (bump) {
       CHECK(motion.meta("u_S_bounded_by_data") == std::optional<std::string>("false"));
       CHECK(steps.meta("u_S_unbounded0") == std::optional<std::string>(r.result.unbounded[0]));
