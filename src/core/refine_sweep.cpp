@@ -521,6 +521,7 @@ SweepRun evaluate_sequence_run(UndeclaredEffect effect, const ScanSequence& seq,
   // Not white: the refine says the readings hold something its model lacks (the trace of the
   // final fit depends on a recorded variable, a non-linearity or a knock found).
   run.not_white = r.trace.depends || r.nonlinearity.detected || r.knock.scan.found;
+  run.unbounded = !r.unbounded.empty();
   for (const auto& line : r.report) {
     run.verdicts += (run.verdicts.empty() ? "" : " | ") + line;
     run.not_identifiable_reported =

@@ -48,6 +48,8 @@ bool SequenceRefineOptions::is_valid(std::string* why) const {
   if (!(undetermined_S_max > 0)) return fail("undetermined_S_max must be > 0");
   if (thermal_grid < 1) return fail("thermal_grid must be >= 1");
   if (traverse_degree < 1) return fail("traverse_degree must be >= 1");
+  if (!(reading_bound >= 0 && std::isfinite(reading_bound)))
+    return fail("reading_bound = " + std::to_string(reading_bound) + ": must be finite and >= 0");
   if (!(certain_selection_ratio >= 0 && certain_selection_ratio <= 1))
     return fail("certain_selection_ratio = " + std::to_string(certain_selection_ratio) +
                 ": must be in [0, 1]");
@@ -691,9 +693,10 @@ struct SequenceModel::Impl {
   // Frisch-Waugh, minus what the model without them puts into S, γ, f from their columns
   // (R⁻¹Qᵀ·J), S after the gauge.  Returns whether to apply; cand.decision says why, and for a
   // declined step bias_S = D_S·p̂ (what it would have changed in S) and cand.u_S_added_um its RMS.
+  // `unbounded`: set when the declined bias is held at the readings' bound (its line).
   bool decide(const std::vector<int>& key, int i, const Eigen::MatrixXd& m_um,
               const Eigen::VectorXd& y, double threshold, SequenceCandidate& cand,
-              Eigen::VectorXd& bias_S) {
+              Eigen::VectorXd& bias_S, std::string& unbounded) {
     Factor& F = factor(key);
     std::vector<int> nkey = key;
     nkey.push_back(i);
@@ -748,6 +751,27 @@ struct SequenceModel::Impl {
                               d.reason + ")" + fig;
     if (d.apply || negligible) return true;
     bias_S = q[0].sensitivity * p;
+    // The readings' bound (SequenceRefineOptions::reading_bound, the single-scan rule of
+    // refine.cpp): a declined effect whose fitted change of the readings exceeds reading_bound
+    // times what the sensors read lies along what f, S, γ, e and the model's other effects
+    // absorb (the fit cancels most of it), so its p̂, and the bias D_S·p̂, are not sizes the data
+    // support.  Measured (errsep-refine-sweep --plan identifying --seed0 41, reversed closing,
+    // seed 41): a thermal drift on top of the fitted linear drift, F = 5.4, p = 0.003, declined
+    // with D_S·p̂ of 38 um RMS carried in u_S against an S error of 0.07 um (u_S x160).
+    const double read_um =
+        std::sqrt((directions(F, i) * p).squaredNorm() / static_cast<double>(y.size()));
+    const double read_rms_um = std::sqrt((m_um.rowwise() - m_um.colwise().mean()).squaredNorm() /
+                                         std::max<double>(1, static_cast<double>(m_um.size())));
+    if (o.reading_bound > 0 && read_um > o.reading_bound * read_rms_um) {
+      bias_S *= o.reading_bound * read_rms_um / read_um;
+      char buf[400];
+      std::snprintf(buf, sizeof buf,
+                    "u_S unbounded: %s not determined by this plan; declare a bound (its fitted "
+                    "change of the readings, %.3g um rms, is more than %.3g x their own %.3g um "
+                    "rms: the data do not bound it, u_S carries it at that bound)",
+                    to_string(cand.kind), read_um, o.reading_bound, read_rms_um);
+      unbounded = buf;
+    }
     cand.u_S_added_um = std::sqrt(bias_S.squaredNorm() / static_cast<double>(b.P));
     return false;
   }
@@ -1463,9 +1487,11 @@ SequenceRefineResult SequenceModel::Impl::refine_effects(const Eigen::MatrixXd& 
     if (o.decide_steps) {
       SequenceCandidate& cand = scored[ib];
       Eigen::VectorXd bias_S;
-      if (!decide(key, best_of[ib], m_um, y, threshold, cand, bias_S)) {
+      std::string unbounded;
+      if (!decide(key, best_of[ib], m_um, y, threshold, cand, bias_S, unbounded)) {
         res.declined.push_back(cand);
         declined_bias.push_back(bias_S);
+        if (!unbounded.empty()) res.unbounded.push_back(unbounded);
         // No further step: the declined effect's signal stays in the residual, where another
         // candidate would take it (thermal drift on one configuration, reversed plan, seed
         // 1046: the drift declined, a non-repeating traverse then fitted it, S 0.72 -> 1.25 um
@@ -1687,6 +1713,7 @@ SequenceRefineResult SequenceModel::Impl::refine_effects(const Eigen::MatrixXd& 
     res.report.push_back(buf);
   }
   res.report.insert(res.report.end(), res.ambiguous.begin(), res.ambiguous.end());
+  res.report.insert(res.report.end(), res.unbounded.begin(), res.unbounded.end());
   // Only an effect the data suggest gets a line: "not identifiable" on every clean run of a
   // plan would be noise the user learns to ignore.
   for (const auto& id : res.plan_identifiability)

@@ -347,6 +347,9 @@ CsvTable sequence_refine_csv(const core::SequenceRefineResult& r, const std::vec
   t.set_meta("findings", std::to_string(r.report.size()));
   for (std::size_t k = 0; k < r.report.size(); ++k)
     t.set_meta("finding_" + std::to_string(k + 1), r.report[k]);
+  // As refine_csv's: a term of u_S held at the readings' bound, one key each (errsep-report warns).
+  for (std::size_t i = 0; i < r.unbounded.size(); ++i)
+    t.set_meta("u_S_unbounded" + std::to_string(i), r.unbounded[i]);
   auto col = [P](const Eigen::VectorXd& v) {
     std::vector<double> c(P, 0.0);
     for (std::size_t n = 0; n < P && n < static_cast<std::size_t>(v.size()); ++n)

@@ -874,6 +874,15 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     html.files.emplace_back("verification.csv",
                             "before, predicted and measured residual at machine positions");
   }
+  // io::refine_csv's and io::sequence_refine_csv's u_S_unbounded<i>: a term of the refined u_S
+  // held at the readings' bound.
+  auto warn_unbounded = [&](const CsvTable& t, const std::string& whose) {
+    for (int i = 0; t.meta("u_S_unbounded" + std::to_string(i)); ++i)
+      res.warnings.push_back(whose +
+                             "refined u_S is not bounded by the data (held at the readings' "
+                             "bound, not a measured uncertainty): " +
+                             *t.meta("u_S_unbounded" + std::to_string(i)));
+  };
   // The refine step (find_refine_file).  The base step has no parameters: nan there.
   if (const fs::path rel = find_refine_file(dir, "refine_steps.csv"); !rel.empty()) {
     const fs::path rf = dir / rel;
@@ -898,12 +907,7 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
       res.warnings.push_back(rf.string() + whose +
                              "refined model is incomplete (residual not white or implausible "
                              "effects rejected): see refine_report.txt beside it.");
-    // io::refine_csv's u_S_unbounded<i>: the refined u_S is held at the readings' bound.
-    for (int i = 0; t.meta("u_S_unbounded" + std::to_string(i)); ++i)
-      res.warnings.push_back(rf.string() + whose +
-                             "refined u_S is not bounded by the data (held at the readings' "
-                             "bound, not a measured uncertainty): " +
-                             *t.meta("u_S_unbounded" + std::to_string(i)));
+    warn_unbounded(t, rf.string() + whose);
   }
   // A scan sequence's findings (service::FourSensorPipeline with refine on): what drift or
   // non-repeat the redundant traverses show, and what the plan could not identify.
@@ -911,6 +915,7 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     const fs::path sf = dir / rel;
     const auto t = read_csv(sf, {.allow_non_finite = true, .min_rows = 1});
     html.tables.push_back(sequence_findings_table(t, sf));
+    warn_unbounded(t, sf.string() + ": the scan sequence fit's ");
     html.files.emplace_back(
         linked_from_report(opts, rel),
         "the scan sequence's fit: S and u_S before and after its refine, and its findings");

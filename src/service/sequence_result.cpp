@@ -97,6 +97,9 @@ void describe_sequence_result(const core::FourSensorConfig& cfg, const core::Sca
         "S (see the findings)");
   for (const auto& line : sr.report)
     info.summary_notes.push_back("finding: " + line);
+  // A term of u_S held at the readings' bound (core::SequenceRefineResult::unbounded, in the
+  // findings above): motion.csv says so beside its u_S_um column, as a single scan's refine does.
+  if (!sr.unbounded.empty()) info.extra_metadata.emplace_back("u_S_bounded_by_data", "false");
   // ISO 230-1 straightness with U from the fit's covariance (as the separation writes its
   // own from its posterior covariance).
   for (const auto ref : {core::ReferenceLine::end_points, core::ReferenceLine::least_squares,

@@ -413,3 +413,23 @@ TEST_CASE("identifying plan, single plan: bump (with the non-linearity) at sigma
 TEST_CASE("identifying plan, single plan: bump (with the non-linearity) at sigma 0.2", "[sweep]") {
   bump_cell(0.2);
 }
+
+// A declined effect whose fitted change of the readings the data do not bound
+// (SequenceRefineOptions::reading_bound): the run that showed it (reversed closing, drift on one
+// configuration, sigma 0.1, seed 41: a thermal drift on top of the fitted linear drift, declined
+// with D_S·p̂ of 38 um RMS carried in u_S, 160x max(S error, raw u_S)).  Now: held at the
+// readings' bound and said so; measured u_S 0.39 um (raw 0.16 um, S error 0.07 um).  Asserted:
+// the run says u_S is unbounded, its u_S still covers the error, and is no more than 4x the raw
+// u_S (it was 240x).
+TEST_CASE(
+    "identifying plan, seed 41: a declined drift term the data do not bound is held, said so") {
+  const SweepCell c = run_sweep_cell_on(ScanSequenceKind::reversed_closing,
+                                        UndeclaredEffect::drift_one, 0.1, 1, 41);
+  REQUIRE(c.runs.size() == 1);
+  const SweepRun& r = c.runs[0];
+  INFO(r.verdicts);
+  CHECK(r.unbounded);
+  CHECK(r.verdicts.find("u_S unbounded: thermal drift") != std::string::npos);
+  CHECK(r.S_after_um <= 2.0 * r.u_S_after_um);
+  CHECK(r.u_S_after_um <= 4.0 * r.u_S_before_um);
+}

@@ -88,6 +88,17 @@ TEST_CASE("sequence refine csv: no hysteresis says whether the plan could show o
   const io::CsvTable t = io::sequence_refine_csv(r, positions_mm(P));
   CHECK(t.meta("knock") == std::optional<std::string>("none found"));
   CHECK_FALSE(t.meta("knock_x_mm"));
+  // Every term of u_S bounded by the data: no u_S_unbounded key.
+  CHECK_FALSE(t.meta("u_S_unbounded0"));
+}
+
+TEST_CASE("sequence refine csv: a u_S term held at the readings' bound is one key each") {
+  const int P = 5;
+  auto r = hand_result(P);
+  r.unbounded = {"u_S unbounded: thermal drift not determined by this plan; declare a bound (...)"};
+  const io::CsvTable t = io::sequence_refine_csv(r, positions_mm(P));
+  CHECK(t.meta("u_S_unbounded0") == std::optional<std::string>(r.unbounded[0]));
+  CHECK_FALSE(t.meta("u_S_unbounded1"));
 }
 
 TEST_CASE("sequence refine csv: the wrong number of positions is refused, naming both counts") {

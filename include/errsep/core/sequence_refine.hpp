@@ -218,6 +218,11 @@ struct SequenceRefineOptions {
   /// by the reading itself too: the two signs differ by 2h in that reading, h ≫ σ in the cases
   /// that matter (SequenceRefine's refine_hysteresis).  Off: the slope's sign alone.
   bool hysteresis_signs_from_readings = true;
+  /// A declined effect's bias carried in u_S is held where its fitted change of the readings
+  /// exceeds this many times what the sensors read at all (RMS about each traverse's mean), and
+  /// SequenceRefineResult::unbounded says u_S is unbounded: the single-scan refine's rule
+  /// (RefineOptions::reading_bound).  0: no bound.
+  double reading_bound = 3.0;
   bool is_valid(std::string* why = nullptr) const;
 };
 
@@ -343,6 +348,10 @@ struct SequenceRefineResult {
   std::vector<SequenceCandidate> declined;
   /// P: the part of after.u_S_um that the declined effects' bias adds (quadrature); zero when none.
   Eigen::VectorXd u_S_declined_um;
+  /// One line per term of u_S held at the readings' bound (SequenceRefineOptions::reading_bound),
+  /// "u_S unbounded: <effect> not determined by this plan; declare a bound (...)", as
+  /// RefineResult::unbounded; also in `report`.  Empty: every term is bounded by the data.
+  std::vector<std::string> unbounded;
   /// P: the part of after.u_S_um that the detected-but-unidentifiable effects add (quadrature);
   /// zero when there are none.
   Eigen::VectorXd u_S_widening_um;
