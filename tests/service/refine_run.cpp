@@ -10,9 +10,11 @@
 #include <iterator>
 #include <string>
 
+#include "errsep/core/four_sensor_sequence_simulation.hpp"
 #include "errsep/core/undeclared_effect_simulation.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/four_sensor_inputs.hpp"
+#include "errsep/service/sequence_result.hpp"
 #include "support/support.hpp"
 
 using namespace errsep;
@@ -67,4 +69,39 @@ TEST_CASE("refine result: a u_S the data do not bound is said so in the files, n
       CHECK(summary.find("u_S unbounded") == std::string::npos);
     }
   }
+}
+
+// A scan sequence's fit as the result (service/sequence_result.cpp): a term of its u_S held at
+// the readings' bound (core::SequenceRefineResult::unbounded) puts u_S_bounded_by_data false
+// into motion.csv's metadata and the line into summary.txt's notes; none, nothing.
+TEST_CASE("sequence result: a u_S the data do not bound is said so in motion.csv's metadata") {
+  const core::FourSensorConfig cfg;
+  const auto seq = core::ScanSequence::make(core::ScanSequenceKind::reversed_closing, cfg);
+  core::SequenceSimOptions so;
+  so.seed = 5;
+  so.sigma_um = 0.1;
+  const auto d =
+      core::simulate_four_sensor_sequence(cfg, core::random_smooth_truth(cfg, 5), seq, so);
+  core::SequenceRefineResult sr;
+  sr.plan = seq.name;
+  sr.before = sr.after = core::fit_four_sensor_sequence(cfg, seq, d.m_um);
+  auto bounded_meta = [&](const core::SequenceRefineResult& r) {
+    io::ResultWriteInfo info;
+    service::describe_sequence_result(cfg, seq, r, d.x_mm, info);
+    std::optional<std::string> v;
+    for (const auto& [k, val] : info.extra_metadata)
+      if (k == "u_S_bounded_by_data") v = val;
+    bool noted = false;
+    for (const auto& n : info.summary_notes)
+      noted = noted || n.find("u_S unbounded") != std::string::npos;
+    return std::make_pair(v, noted);
+  };
+  const auto [v0, noted0] = bounded_meta(sr);
+  CHECK_FALSE(v0);
+  CHECK_FALSE(noted0);
+  sr.unbounded = {"u_S unbounded: thermal drift not determined by this plan; declare a bound"};
+  sr.report = sr.unbounded;  // as refine_effects puts it into the findings
+  const auto [v1, noted1] = bounded_meta(sr);
+  CHECK(v1 == std::optional<std::string>("false"));
+  CHECK(noted1);
 }
