@@ -1199,12 +1199,14 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
     if (col_slope.size() == col.size()) {
       const Eigen::VectorXd half_dS = 0.5 * Pi * (with_h_slope.S_um - with_h.S_um);
       const Eigen::VectorXd half_dg_urad = 0.5e6 * (with_h_slope.gamma_rad - with_h.gamma_rad);
+      // A difference at rounding level (the reversed plan, whose column puts nothing into S)
+      // is no finding.
       if (half_dS.cwiseAbs().maxCoeff() > 1e-9) {
         G.conservativeResize(Eigen::NoChange, G.cols() + 1);
         G.col(G.cols() - 1) = half_dS;
+        hy.sign_rules_dS_rms_um = 2.0 * std::sqrt(half_dS.squaredNorm() / static_cast<double>(b.P));
       }
       var_sign += half_dS.cwiseAbs2();
-      hy.sign_rules_dS_rms_um = 2.0 * std::sqrt(half_dS.squaredNorm() / static_cast<double>(b.P));
       var_sign_g += half_dg_urad.cwiseAbs2();
     }
     hy.u_S_added_um = var_sign.cwiseSqrt();

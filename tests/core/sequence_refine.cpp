@@ -967,6 +967,9 @@ void hysteresis_cells(const ScanSequence& seq, bool expect_bias) {
       applied += r.hysteresis.applied ? 1 : 0;
       if (r.hysteresis.detected)
         h_err.push_back(std::abs(r.hysteresis.h_um - h) / r.hysteresis.u_h_um);
+      // The reversed plan's column puts nothing into S: the two sign rules cannot disagree on
+      // it, and the finding says nothing of them.
+      if (!expect_bias) CHECK(r.hysteresis.sign_rules_dS_rms_um == 0.0);
       e_clean.push_back(clean);
       e_before.push_back(before);
       e_after.push_back(after);
