@@ -959,8 +959,18 @@ int Daemon::run() {
     ping_watchdog(monotonic_ns());
 
     if (worker_.joinable() && worker_state_->done.load()) {
+      const std::uint64_t id = ctx_ ? ctx_->scan_id() : 0;
       finish_scan(false);
       next_check = now + interval;
+      // Writing the files is part of the scan: a tick that fell meanwhile (fsync on a loaded
+      // disk can take seconds) is refused like one during the run, not made up right after.
+      const auto written = clock::now();
+      if (sched.count() > 0 && written >= next_schedule) {
+        while (next_schedule <= written)
+          next_schedule += sched;
+        log(kWarning, "trigger from schedule refused: scan " + std::to_string(id) +
+                          " was writing its files (not made up)");
+      }
     }
     if (reload_.load() && !worker_.joinable()) {
       reload_deferred_logged_ = false;
