@@ -199,8 +199,10 @@ struct Factor {
   Eigen::VectorXd u_S_unit;  // row norms of Π·(R⁻¹)_S·: u_S = σ̂·u_S_unit
   Eigen::MatrixXd Rinv_S;    // (R⁻¹)_S·: Cov(Ŝ) = σ̂²·Rinv_S·Rinv_Sᵀ in the fit's gauge
   Eigen::MatrixXd Rinv_gamma;  // (R⁻¹)_γ· (µrad per µm): Cov(γ̂) = 1e-12·σ̂²·Rinv_γ·Rinv_γᵀ
-  Eigen::VectorXd u_gamma_unit, u_f_unit;  // row norms of 1e-6·(R⁻¹)_γ· and Bf·(R⁻¹)_f·
-  std::map<int, Projected> proj;           // candidate → its columns projected off span(Q)
+  // Row norms of 1e-6·Π₁·(R⁻¹)_γ· (γ about its constant and line), 1e-6·(R⁻¹)_γ· (the gauge's)
+  // and Bf·(R⁻¹)_f·.
+  Eigen::VectorXd u_gamma_unit, u_gamma_gauge_unit, u_f_unit;
+  std::map<int, Projected> proj;  // candidate → its columns projected off span(Q)
   std::map<int, Eigen::MatrixXd> toS;  // candidate → Π·(R⁻¹Qᵀ·J·D⁻¹)_S (what the fit puts in Ŝ)
   std::map<int, Projected> rival;  // candidate's reduced directions of the parent model
 };
@@ -224,7 +226,13 @@ Factor factorise(const Base& b, const Eigen::MatrixXd& extra, bool with_u = true
   const Eigen::MatrixXd Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
   F.u_S_unit = (Pi * F.Rinv_S).rowwise().norm();
   F.Rinv_gamma = Rinv.middleRows(b.nf + b.P, b.P);
-  F.u_gamma_unit = 1e-6 * F.Rinv_gamma.rowwise().norm();
+  // γ about its best-fit constant and line (SequenceFit::u_gamma_rad): with a fitted warm-up of
+  // configuration 4 the constant e_4 = 0 sets is all but undetermined (thermal on all
+  // configurations, reversed closing plan, σ 0.1, seed 10: u_γ 6292 µrad at every point in the
+  // gauge, γ's error about its constant and line 8 µrad).
+  const Eigen::MatrixXd Pi1 = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 1);
+  F.u_gamma_unit = 1e-6 * (Pi1 * F.Rinv_gamma).rowwise().norm();
+  F.u_gamma_gauge_unit = 1e-6 * F.Rinv_gamma.rowwise().norm();
   F.u_f_unit = (b.Bf * Rinv.topRows(b.nf)).rowwise().norm();
   return F;
 }
@@ -258,6 +266,7 @@ SequenceFit fit_with(const Base& b, const Factor& F, const Eigen::MatrixXd& m_um
   out.u_S_um = out.sigma_um * F.u_S_unit;
   out.S_covariance_factor_um = out.sigma_um * F.Rinv_S;
   out.u_gamma_rad = out.sigma_um * F.u_gamma_unit;
+  out.u_gamma_in_gauge_rad = out.sigma_um * F.u_gamma_gauge_unit;
   out.u_f_um = out.sigma_um * F.u_f_unit;
   return out;
 }
@@ -442,7 +451,8 @@ struct SequenceModel::Impl {
   ScanSequence seq;
   SequenceRefineOptions o;
   Base b;
-  Eigen::MatrixXd Pi;
+  Eigen::MatrixXd Pi;   // S about its best-fit constant, line and bow
+  Eigen::MatrixXd Pi1;  // γ about its best-fit constant and line
   std::vector<SequenceEffectColumns> cands;
   std::vector<double> cand_tau;  // thermal: τ; else 0
   std::map<std::vector<int>, Factor> factors;
@@ -471,6 +481,7 @@ struct SequenceModel::Impl {
     std::string why;
     if (!o.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
     Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
+    Pi1 = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 1);
     const auto taus = ThermalDriftEffect::tau_grid_s(seq.times_s(cfg), o.thermal_grid);
     auto add = [&](SequenceEffectKind k, double tau) {
       cands.push_back(
@@ -721,7 +732,7 @@ struct SequenceModel::Impl {
     const double scale = cur.sigma_um > 0 ? std::sqrt(s2) / cur.sigma_um : 1.0;
     std::vector<QuantityImpact> q(3);
     q[0] = {"S", "um", Pi * Bcol.middleRows(b.nf, b.P), scale * cur.u_S_um};
-    q[1] = {"gamma", "urad", Bcol.middleRows(b.nf + b.P, b.P), scale * 1e6 * cur.u_gamma_rad};
+    q[1] = {"gamma", "urad", Pi1 * Bcol.middleRows(b.nf + b.P, b.P), scale * 1e6 * cur.u_gamma_rad};
     q[2] = {"f", "um", b.Bf * Bcol.topRows(b.nf), scale * cur.u_f_um};
     // Decided on S (the measure: the straightness the user gets); γ's and f's figures
     // are printed with the decision but do not veto it (the poorly determined γ of a thermal
@@ -1145,7 +1156,7 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
       F0.R.triangularView<Eigen::Upper>().solve(F0.Q.transpose() * col);
   std::vector<QuantityImpact> q(3);
   q[0] = {"S", "um", Pi * beta_col.segment(b.nf, b.P), before.u_S_um};
-  q[1] = {"gamma", "urad", beta_col.segment(b.nf + b.P, b.P), 1e6 * before.u_gamma_rad};
+  q[1] = {"gamma", "urad", Pi1 * beta_col.segment(b.nf + b.P, b.P), 1e6 * before.u_gamma_rad};
   q[2] = {"f", "um", b.Bf * beta_col.head(b.nf), before.u_f_um};
   const StepDecision d = decide_step(Eigen::VectorXd::Constant(1, hy.h_um),
                                      Eigen::MatrixXd::Constant(1, 1, hy.u_h_um * hy.u_h_um), q);
@@ -1183,10 +1194,12 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
     // settle wrongly add no variance here.  The sign rules' half-difference (below) does: u_γ
     // 67.3 µrad there.
     const Factor Fh = factorise(b, Eigen::MatrixXd(col));
-    const Eigen::MatrixXd toS = Pi * Fh.Rinv_S * Fh.Q.transpose();  // P × (P·T)
-    const Eigen::MatrixXd toG = Fh.Rinv_gamma * Fh.Q.transpose();   // µrad per µm
+    const Eigen::MatrixXd toS = Pi * Fh.Rinv_S * Fh.Q.transpose();       // P × (P·T)
+    const Eigen::MatrixXd toG_gauge = Fh.Rinv_gamma * Fh.Q.transpose();  // µrad per µm
+    const Eigen::MatrixXd toG = Pi1 * toG_gauge;
     Eigen::MatrixXd& G = res.after.S_covariance_factor_um;
-    Eigen::VectorXd var_sign = Eigen::VectorXd::Zero(b.P), var_sign_g = var_sign;
+    Eigen::VectorXd var_sign = Eigen::VectorXd::Zero(b.P), var_sign_g = var_sign,
+                    var_sign_g_gauge = var_sign;
     for (Eigen::Index j = 0; j < col.size(); ++j) {
       const double sd = std::abs(hy.h_um) * std::sqrt(std::max(0.0, 1.0 - col(j) * col(j)));
       if (sd < 1e-9) continue;
@@ -1194,11 +1207,14 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
       G.col(G.cols() - 1) = toS.col(j) * sd;
       var_sign += (toS.col(j) * sd).cwiseAbs2();
       var_sign_g += (toG.col(j) * sd).cwiseAbs2();
+      var_sign_g_gauge += (toG_gauge.col(j) * sd).cwiseAbs2();
     }
     // The sign rules' half-difference (above): a column of G, as the drift form's.
     if (col_slope.size() == col.size()) {
       const Eigen::VectorXd half_dS = 0.5 * Pi * (with_h_slope.S_um - with_h.S_um);
-      const Eigen::VectorXd half_dg_urad = 0.5e6 * (with_h_slope.gamma_rad - with_h.gamma_rad);
+      const Eigen::VectorXd half_dg_gauge_urad =
+          0.5e6 * (with_h_slope.gamma_rad - with_h.gamma_rad);
+      const Eigen::VectorXd half_dg_urad = Pi1 * half_dg_gauge_urad;
       // A difference at rounding level (the reversed plan, whose column puts nothing into S)
       // is no finding.
       if (half_dS.cwiseAbs().maxCoeff() > 1e-9) {
@@ -1208,10 +1224,13 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
       }
       var_sign += half_dS.cwiseAbs2();
       var_sign_g += half_dg_urad.cwiseAbs2();
+      var_sign_g_gauge += half_dg_gauge_urad.cwiseAbs2();
     }
     hy.u_S_added_um = var_sign.cwiseSqrt();
     res.after.u_S_um = (res.after.u_S_um.cwiseAbs2() + var_sign).cwiseSqrt();
     res.after.u_gamma_rad = (res.after.u_gamma_rad.cwiseAbs2() + 1e-12 * var_sign_g).cwiseSqrt();
+    res.after.u_gamma_in_gauge_rad =
+        (res.after.u_gamma_in_gauge_rad.cwiseAbs2() + 1e-12 * var_sign_g_gauge).cwiseSqrt();
   } else {
     res = refine_knock(m_um);
     // Left out: u_S carries its bias, the change taking it in would make (step_decision.hpp).
@@ -1224,6 +1243,9 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
     // ... and u_γ the bias it leaves in γ (q[1]: µrad per µm of h).
     const Eigen::VectorXd g_add_rad = 1e-6 * q[1].sensitivity * hy.h_um;
     res.after.u_gamma_rad = (res.after.u_gamma_rad.cwiseAbs2() + g_add_rad.cwiseAbs2()).cwiseSqrt();
+    const Eigen::VectorXd g_add_gauge_rad = 1e-6 * beta_col.segment(b.nf + b.P, b.P) * hy.h_um;
+    res.after.u_gamma_in_gauge_rad =
+        (res.after.u_gamma_in_gauge_rad.cwiseAbs2() + g_add_gauge_rad.cwiseAbs2()).cwiseSqrt();
   }
   char signs[200] = "";
   if (hy.sign_rules_dS_rms_um > 0)
@@ -1307,7 +1329,7 @@ SequenceRefineResult SequenceModel::Impl::refine_with_knock(const Eigen::MatrixX
       F0.R.triangularView<Eigen::Upper>().solve(F0.Q.transpose() * A.col);
   std::vector<QuantityImpact> q(3);
   q[0] = {"S", "um", Pi * beta_col.segment(b.nf, b.P), before.u_S_um};
-  q[1] = {"gamma", "urad", beta_col.segment(b.nf + b.P, b.P), 1e6 * before.u_gamma_rad};
+  q[1] = {"gamma", "urad", Pi1 * beta_col.segment(b.nf + b.P, b.P), 1e6 * before.u_gamma_rad};
   q[2] = {"f", "um", b.Bf * beta_col.head(b.nf), before.u_f_um};
   const StepDecision d = decide_step(Eigen::VectorXd::Constant(1, A.size),
                                      Eigen::MatrixXd::Constant(1, 1, A.u_size * A.u_size), q);

@@ -26,7 +26,7 @@ core::FourSensorResult sequence_as_result(const core::FourSensorResult& single,
   r.gamma_rad = fit.gamma_rad;
   r.f_um = fit.f_um;
   r.u_S_um = fit.u_S_in_gauge_um();
-  r.u_gamma_rad = fit.u_gamma_rad;
+  r.u_gamma_rad = fit.u_gamma_in_gauge_rad;  // γ is stated in the fit's gauge (e_4 = 0)
   r.u_f_um = fit.u_f_um;
   r.sensor_residual_um.resize(fit.residual_um.rows(), 4);
   for (int c = 0; c < 4; ++c)
@@ -100,6 +100,26 @@ void describe_sequence_result(const core::FourSensorConfig& cfg, const core::Sca
   // A term of u_S held at the readings' bound (core::SequenceRefineResult::unbounded, in the
   // findings above): motion.csv says so beside its u_S_um column, as a single scan's refine does.
   if (!sr.unbounded.empty()) info.extra_metadata.emplace_back("u_S_bounded_by_data", "false");
+  // motion.csv's u_gamma_urad is in the fit's gauge (γ's constant set by e_4 = 0, Eq. 19); a
+  // fitted warm-up of configuration 4 leaves that constant all but undetermined (u_γ thousands of
+  // µrad, uniform) while γ's shape is as well determined as without it.  Both are stated, and
+  // the case is said in words: γ's range and its deviation from a line hold, its level does not.
+  const auto rms = [](const Eigen::VectorXd& v) {
+    return v.size() ? std::sqrt(v.squaredNorm() / static_cast<double>(v.size())) : 0.0;
+  };
+  const double ug_shape_urad = 1e6 * rms(sr.after.u_gamma_rad);
+  const double ug_gauge_urad = 1e6 * rms(sr.after.u_gamma_in_gauge_rad);
+  info.motion_metadata.emplace_back("u_gamma_about_constant_and_line_urad_rms",
+                                    io::format_number(ug_shape_urad));
+  if (ug_gauge_urad > kGammaLevelUndeterminedRatio * ug_shape_urad) {
+    info.extra_metadata.emplace_back("gamma_level_determined_by_data", "false");
+    info.summary_notes.push_back(
+        "gamma's level is not determined by this plan with the effects applied: u_gamma " +
+        io::format_number(ug_gauge_urad) + " urad RMS in motion.csv's gauge (e4 = 0), " +
+        io::format_number(ug_shape_urad) +
+        " urad RMS about gamma's best-fit constant and line: its range and its deviation from a "
+        "line hold, its absolute value does not");
+  }
   // ISO 230-1 straightness with U from the fit's covariance (as the separation writes its
   // own from its posterior covariance).
   for (const auto ref : {core::ReferenceLine::end_points, core::ReferenceLine::least_squares,

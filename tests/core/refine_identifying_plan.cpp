@@ -24,7 +24,7 @@
 //   - an effect not in the library reported as not white in >= 80 %: per sigma over the
 //     non-linearity's cell alone and over it with the bump's (the bump alone: 65-70 %, printed);
 //   - coverage of 2 u_S over each case's cells within 90-99 % (redundant plans; clean single
-//     plan), of 2 u_gamma at least 90 % there; printed for the single plan's effect cells, some
+//     plan), of 2 u_gamma within 90-99 % there; printed for the single plan's effect cells, some
 //     of which undercover (see there).
 // What does not hold (measured with these seeds; the app prints it): a thermal drift on all
 // configurations on the reversed closing plan is halved in 11 of the 15 runs at sigma 0.1 (5 of 8
@@ -84,15 +84,16 @@ std::vector<PlanChoice> identifying_cells(const std::vector<UndeclaredEffect>& e
 }
 
 // u_γ (γ about its constant and line, as its errors): it decides "worse beyond u" for γ, so it
-// must cover too.  Only its lower bound is asserted: on the reversed closing plan it covers
-// 0.994 (drift) and 1.000 (thermal drift on all configurations) with seeds 1-20, generous
-// where the drift's columns leave γ poorly determined; elsewhere 0.96-0.98.
+// must cover too, within the same 90-99 % band.  (Before u_γ was stated about γ's constant and
+// line, the reversed closing plan's drift cells covered 0.994-1.000: the gauge's constant, which
+// a fitted warm-up of configuration 4 leaves undetermined, was in it; now 0.93-0.96.)
 void check_coverage(const MustShow& m) {
   INFO("u_S coverage " << m.coverage() << " (" << m.covered << " of " << m.points << ")");
   CHECK(m.coverage() >= 0.90);
   CHECK(m.coverage() <= 0.99);
   INFO("u_gamma coverage " << m.coverage_gamma());
   CHECK(m.coverage_gamma() >= 0.90);
+  CHECK(m.coverage_gamma() <= 0.99);
 }
 
 void print_halved(const MustShow& m) {

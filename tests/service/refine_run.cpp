@@ -105,3 +105,65 @@ TEST_CASE("sequence result: a u_S the data do not bound is said so in motion.csv
   CHECK(v1 == std::optional<std::string>("false"));
   CHECK(noted1);
 }
+
+// γ's level (service/sequence_result.cpp): motion.csv's u_gamma_urad is in the fit's gauge (the
+// constant e_4 = 0 sets); with a warm-up of every configuration fitted that constant is all but
+// undetermined, and the result says so (gamma_level_determined_by_data false, a summary line)
+// beside γ's u about its constant and line, which stays the size of the plain fit's.  Without
+// fitted effects or with a linear drift: determined, nothing said.
+TEST_CASE("sequence result: gamma's level undetermined by a fitted warm-up is said so") {
+  const core::FourSensorConfig cfg;
+  const auto seq = core::ScanSequence::make(core::ScanSequenceKind::reversed_closing, cfg);
+  core::SequenceSimOptions so;
+  so.seed = 10;
+  so.sigma_um = 0.1;
+  const auto d =
+      core::simulate_four_sensor_sequence(cfg, core::random_smooth_truth(cfg, 10), seq, so);
+  const auto rms = [](const Eigen::VectorXd& v) {
+    return std::sqrt(v.squaredNorm() / static_cast<double>(v.size()));
+  };
+  struct Said {
+    double ratio = 0, shape_urad = 0;
+    std::optional<std::string> determined, shape_meta;
+    bool noted = false;
+  };
+  auto said = [&](const Eigen::MatrixXd& extra) {
+    core::SequenceRefineResult sr;
+    sr.plan = seq.name;
+    sr.before = sr.after = core::fit_four_sensor_sequence(cfg, seq, d.m_um, extra);
+    io::ResultWriteInfo info;
+    service::describe_sequence_result(cfg, seq, sr, d.x_mm, info);
+    Said s;
+    s.shape_urad = 1e6 * rms(sr.after.u_gamma_rad);
+    s.ratio = rms(sr.after.u_gamma_in_gauge_rad) / rms(sr.after.u_gamma_rad);
+    for (const auto& [k, v] : info.extra_metadata)
+      if (k == "gamma_level_determined_by_data") s.determined = v;
+    for (const auto& [k, v] : info.motion_metadata)
+      if (k == "u_gamma_about_constant_and_line_urad_rms") s.shape_meta = v;
+    for (const auto& n : info.summary_notes)
+      s.noted = s.noted || n.find("gamma's level is not determined") != std::string::npos;
+    return s;
+  };
+  const auto cols = [&](core::SequenceEffectKind k) {
+    return core::sequence_effect_columns(k, cfg, seq, 40.0, 1).J;
+  };
+  const Said plain = said({});
+  const Said drift = said(cols(core::SequenceEffectKind::drift));
+  const Said warm = said(cols(core::SequenceEffectKind::thermal));
+  WARN("u_gamma in the gauge / about its constant and line: plain "
+       << plain.ratio << ", drift " << drift.ratio << ", warm-up " << warm.ratio
+       << "; about its constant and line (urad RMS): " << plain.shape_urad << ", "
+       << drift.shape_urad << ", " << warm.shape_urad);
+  for (const Said* s : {&plain, &drift}) {
+    CHECK(s->ratio < service::kGammaLevelUndeterminedRatio);
+    CHECK_FALSE(s->determined);
+    CHECK_FALSE(s->noted);
+    CHECK(s->shape_meta);
+  }
+  CHECK(warm.ratio > service::kGammaLevelUndeterminedRatio);
+  CHECK(warm.determined == std::optional<std::string>("false"));
+  CHECK(warm.noted);
+  CHECK(warm.shape_meta);
+  // The shape's u with the warm-up fitted is of the plain fit's size, not the gauge's.
+  CHECK(warm.shape_urad < 3.0 * plain.shape_urad);
+}

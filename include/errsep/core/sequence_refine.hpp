@@ -95,9 +95,15 @@ struct SequenceFit {
   /// straightness of Ŝ needs (sequence_straightness).  After a refine it also holds the
   /// widening's columns (SequenceRefineResult::u_S_widening_um).
   Eigen::MatrixXd S_covariance_factor_um;
-  /// Standard uncertainties (k = 1) in the fit's gauge: γ up to the constant that e_4 = 0 sets
-  /// (as Eq. 19), f with its ends at 0.
-  Eigen::VectorXd u_gamma_rad, u_f_um;
+  /// Of γ about its best-fit constant and line (k = 1), as u_S_um is about S's constant, line
+  /// and bow: what one scan's readings see of γ (the constant is set only by e_4 = 0, Eq. 19, and
+  /// a fitted warm-up of configuration 4 moves it; the and the sweep's measure).
+  Eigen::VectorXd u_gamma_rad;
+  /// Of γ in the fit's gauge (the constant that e_4 = 0 sets included): what a result that
+  /// states γ in that gauge carries (motion.csv), as u_S_in_gauge_um.
+  Eigen::VectorXd u_gamma_in_gauge_rad;
+  /// Of f in the fit's gauge (its ends at 0), k = 1.
+  Eigen::VectorXd u_f_um;
   /// The row norms of S_covariance_factor_um: u(Ŝ) in the fit's gauge, the bow included.
   Eigen::VectorXd u_S_in_gauge_um() const { return S_covariance_factor_um.rowwise().norm(); }
   Eigen::VectorXd extra_coefficients;  ///< along the extra columns

@@ -26,9 +26,18 @@ core::FourSensorResult sequence_as_result(const core::FourSensorResult& single,
                                           const core::ScanSequence& seq,
                                           const core::SequenceRefineResult& sr);
 
+/// Above this ratio of γ's u in the fit's gauge (motion.csv's u_gamma_urad) to its u about γ's
+/// best-fit constant and line (RMS of each), γ's level is said not to be determined by the plan
+/// (gamma_level_determined_by_data: false and a summary line).  Measured (reversed closing, σ
+/// 0.1 µm, seed 10; tests/service/refine_run.cpp): 1.1 without fitted effects, 1.3 with a
+/// linear drift, 35 with a warm-up of every configuration at τ = 40 s (about 770 at the τ the
+/// refine fitted in errsep-refine-sweep's thermal_all cell, same seed).
+inline constexpr double kGammaLevelUndeterminedRatio = 10.0;
+
 /// Adds to `info` what the files of that result say about it: summary.txt's first line, every
 /// traverse's residual, estimator and uncertainty model, scan_plan and separation metadata,
-/// summary notes with the findings, and the straightness figures with U over `x_mm`.
+/// summary notes with the findings, γ's u about its constant and line (and whether the plan
+/// determines its level), and the straightness figures with U over `x_mm`.
 void describe_sequence_result(const core::FourSensorConfig& cfg, const core::ScanSequence& seq,
                               const core::SequenceRefineResult& sr, const Eigen::VectorXd& x_mm,
                               io::ResultWriteInfo& info);
