@@ -20,8 +20,8 @@ double rms(const Eigen::VectorXd& v) {
 
 // γ's points within 2u_γ, the error about its constant and line (what one scan cannot see, as
 // the errors gamma_*_urad).
-int covered_within_2u(const Eigen::VectorXd& gamma_rad, const Eigen::VectorXd& truth_rad,
-                      const Eigen::VectorXd& u_rad) {
+int covered_gamma_within_2u(const Eigen::VectorXd& gamma_rad, const Eigen::VectorXd& truth_rad,
+                            const Eigen::VectorXd& u_rad) {
   const Eigen::VectorXd dev = remove_polynomial(gamma_rad - truth_rad, 1);
   return static_cast<int>((dev.array().abs() <= 2.0 * u_rad.array()).count());
 }
@@ -84,7 +84,7 @@ SweepRun evaluate_refine_run(UndeclaredEffect effect, const UndeclaredCaseOption
   run.points = static_cast<int>(dS.size());
   for (Eigen::Index n = 0; n < dS.size(); ++n)
     if (std::abs(dS(n)) <= 2.0 * r.after.u_S_um(n)) ++run.covered;
-  run.covered_gamma = covered_within_2u(r.after.gamma_rad, c.gamma_rad, r.after.u_gamma_rad);
+  run.covered_gamma = covered_gamma_within_2u(r.after.gamma_rad, c.gamma_rad, r.after.u_gamma_rad);
   if (r.after.covariance) {
     std::vector<int> all(static_cast<std::size_t>(dS.size()));
     for (std::size_t n = 0; n < all.size(); ++n)
@@ -538,7 +538,7 @@ SweepRun evaluate_sequence_run(UndeclaredEffect effect, const ScanSequence& seq,
   for (Eigen::Index n = 0; n < dev.size(); ++n)
     if (std::abs(dev(n)) <= 2.0 * r.after.u_S_um(n)) ++run.covered;
   run.covered_shape = run.covered;
-  run.covered_gamma = covered_within_2u(r.after.gamma_rad, d.gamma_rad, r.after.u_gamma_rad);
+  run.covered_gamma = covered_gamma_within_2u(r.after.gamma_rad, d.gamma_rad, r.after.u_gamma_rad);
   return run;
 }
 

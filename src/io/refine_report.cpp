@@ -16,6 +16,26 @@ std::string lambda_summary(const core::FourSensorResult& sep) {
   return out + ")";
 }
 
+const char* to_string(RefineRole r) {
+  switch (r) {
+    case RefineRole::result:
+      return "result";
+    case RefineRole::comparison:
+      return "comparison";
+  }
+  return "?";
+}
+
+RefineRole refine_role_of(const CsvTable& steps, const std::filesystem::path& file) {
+  const auto v = steps.meta(kRefineRoleKey);
+  if (!v) return RefineRole::result;
+  for (const RefineRole r : {RefineRole::result, RefineRole::comparison})
+    if (*v == to_string(r)) return r;
+  throw CsvError(file, steps.meta_line(kRefineRoleKey),
+                 std::string("metadata '") + kRefineRoleKey + ": " + *v +
+                     "': neither 'result' nor 'comparison'");
+}
+
 const std::vector<std::string>& refine_csv_columns() {
   static const std::vector<std::string> columns = {"step",
                                                    "parameter_index",

@@ -898,7 +898,7 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
     // service/refine_run.cpp's refine_role: a scan sequence's result is its own refined fit
     // (sequence_refine.csv), and this table the single-scan refine kept for comparison, whose
     // findings do not concern the result's figures.
-    const bool comparison = t.meta("refine_role") == std::optional<std::string>("comparison");
+    const bool comparison = refine_role_of(t, rf) == RefineRole::comparison;
     const std::string whose =
         comparison ? ": the single-scan refine kept for comparison (the result is the scan "
                      "sequence's fit, which this does not concern): its "

@@ -182,7 +182,8 @@ RefineRunResult run_refine(const io::FourSensorInputs& in, const fs::path& out_d
   // on a scan sequence whose refined fit is the result, the table is the single-scan refine of
   // m1..m4, kept for comparison.
   const bool comparison = out.sequence && sequence_is_the_result(in.sequence->first);
-  steps.set_meta("refine_role", comparison ? "comparison" : "result");
+  steps.set_meta(io::kRefineRoleKey,
+                 io::to_string(comparison ? io::RefineRole::comparison : io::RefineRole::result));
   steps.set_meta("run_id", stage.run_id());
   io::write_csv(stage.dir() / "refine_steps.csv", steps);
   io::write_file_atomic(stage.dir() / "refine_report.txt", out.text);

@@ -179,13 +179,14 @@ TEST_CASE("report: an unbounded u_S of the comparison refine is not said of the 
   o.plots = false;
   o.tables = false;
   const std::string line = "u_S unbounded: pe2 not determined by this plan; declare a bound";
-  for (const char* role : {"result", "comparison"}) {
-    INFO(role);
+  for (const io::RefineRole role : {io::RefineRole::result, io::RefineRole::comparison}) {
+    const std::string name = io::to_string(role);
+    INFO(name);
     test::ResultDirSpec spec;
     spec.refine_unbounded = line;
     spec.refine_role = role;
-    test::write_four_sensor_result(tmp / role, spec);
-    const auto res = io::write_scan_report(tmp / role, o);
+    test::write_four_sensor_result(tmp / name, spec);
+    const auto res = io::write_scan_report(tmp / name, o);
     int warned = 0, of_comparison = 0;
     for (const auto& w : res.warnings)
       if (w.find("refined u_S is not bounded by the data") != std::string::npos &&
@@ -194,6 +195,22 @@ TEST_CASE("report: an unbounded u_S of the comparison refine is not said of the 
         of_comparison += w.find("single-scan refine kept for comparison") != std::string::npos;
       }
     CHECK(warned == 1);
-    CHECK(of_comparison == (std::string(role) == "comparison" ? 1 : 0));
+    CHECK(of_comparison == (role == io::RefineRole::comparison ? 1 : 0));
   }
+}
+
+// refine_steps.csv's refine_role read back: absent is the result's (tables written before the
+// key), a value that is neither is an error naming the file and the metadata line.
+TEST_CASE("refine_steps.csv: refine_role read back, a bad value named with its line") {
+  io::CsvTable t;
+  CHECK(io::refine_role_of(t, "refine_steps.csv") == io::RefineRole::result);
+  for (const io::RefineRole role : {io::RefineRole::result, io::RefineRole::comparison}) {
+    t.set_meta(io::kRefineRoleKey, io::to_string(role));
+    CHECK(io::refine_role_of(t, "refine_steps.csv") == role);
+  }
+  t.set_meta(io::kRefineRoleKey, "sequence");
+  CHECK_THROWS_WITH(io::refine_role_of(t, "refine_steps.csv"),
+                    Catch::Contains("refine_steps.csv") &&
+                        Catch::Contains("refine_role: sequence") &&
+                        Catch::Contains("neither 'result' nor 'comparison'"));
 }

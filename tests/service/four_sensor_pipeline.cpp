@@ -17,6 +17,7 @@
 #include "errsep/core/four_sensor_sequence_simulation.hpp"
 #include "errsep/core/four_sensor_simulation.hpp"
 #include "errsep/io/csv.hpp"
+#include "errsep/io/refine_report.hpp"
 #include "errsep/io/staged_directory.hpp"
 #include "support/raw_scan_cases.hpp"
 #include "support/support.hpp"
@@ -166,8 +167,9 @@ TEST_CASE("a scan sequence with refine on: refined once, refine/ holds the scan'
     CHECK_THAT(test::read_file(out / "refine" / "refine_report.txt"),
                Catch::Contains("single-scan refine of each configuration's first traverse"));
     // ... and the step table says so (errsep-report words its warnings by it).
-    CHECK(meta(io::read_csv(out / "refine" / "refine_steps.csv", {.allow_non_finite = true}),
-               "refine_role") == "comparison");
+    const fs::path steps = out / "refine" / "refine_steps.csv";
+    CHECK(io::refine_role_of(io::read_csv(steps, {.allow_non_finite = true}), steps) ==
+          io::RefineRole::comparison);
   }
   // Without a recorded sequence nothing is refined as a sequence and refine/ is the single refine.
   const auto r = pipeline.write_result_set(test::simulated_raw(23), tmp / "single", "test");

@@ -14,6 +14,7 @@
 #include "errsep/core/undeclared_effect_simulation.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/four_sensor_inputs.hpp"
+#include "errsep/io/refine_report.hpp"
 #include "errsep/service/sequence_result.hpp"
 #include "support/support.hpp"
 
@@ -58,7 +59,8 @@ TEST_CASE("refine result: a u_S the data do not bound is said so in the files, n
     const io::CsvTable steps = io::read_csv(out / "refine_steps.csv", {.allow_non_finite = true});
     const std::string summary = read_text(out / "summary.txt");
     // A single scan: the step table's findings concern the result (errsep-report's wording).
-    CHECK(steps.meta("refine_role") == std::optional<std::string>("result"));
+    CHECK(io::refine_role_of(steps, "refine_steps.csv") == io::RefineRole::result);
+    CHECK(steps.meta(io::kRefineRoleKey));
     if (bump) {
       CHECK(motion.meta("u_S_bounded_by_data") == std::optional<std::string>("false"));
       CHECK(steps.meta("u_S_unbounded0") == std::optional<std::string>(r.result.unbounded[0]));

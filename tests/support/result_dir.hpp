@@ -26,8 +26,8 @@ struct ResultDirSpec {
   bool lcurve = true, residuals = true, refine = true;
   /// With refine: the refine table's u_S_unbounded0 line (io::refine_csv); empty: none.
   std::string refine_unbounded;
-  /// With refine: the table's refine_role (service/refine_run.cpp): "result" or "comparison".
-  std::string refine_role = "result";
+  /// With refine: the table's refine_role (service/refine_run.cpp).
+  io::RefineRole refine_role = io::RefineRole::result;
 };
 
 inline void write_four_sensor_result(const std::filesystem::path& dir, ResultDirSpec spec = {}) {
@@ -131,7 +131,7 @@ inline void write_four_sensor_result(const std::filesystem::path& dir, ResultDir
     t.set_meta("step1_effect", "gain");
     t.set_meta("step1_verdict", "applied: the gain changes S by 0.4 um");
     if (!spec.refine_unbounded.empty()) t.set_meta("u_S_unbounded0", spec.refine_unbounded);
-    t.set_meta("refine_role", spec.refine_role);
+    t.set_meta(io::kRefineRoleKey, io::to_string(spec.refine_role));
     for (int j = 0; j < 3; ++j)
       t.set_meta("step1_parameter" + std::to_string(j), "g" + std::to_string(j + 2));
     t.columns = io::refine_csv_columns();

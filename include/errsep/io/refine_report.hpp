@@ -20,6 +20,16 @@ CsvTable refine_csv(const core::RefineResult& r);
 /// The columns of refine_csv, in order.
 const std::vector<std::string>& refine_csv_columns();
 
+/// Whose figures a refine_steps.csv concerns (its metadata kRefineRoleKey): the result written
+/// beside it, or, on a scan sequence whose refined fit is the result, the single-scan refine of
+/// m1..m4 kept for comparison (errsep-report words its warnings by it).
+enum class RefineRole { result, comparison };
+const char* to_string(RefineRole r);
+inline constexpr const char* kRefineRoleKey = "refine_role";
+/// The role `steps` states; a table without it (written before the key existed) is the result's.
+/// Throws CsvError naming `file` for a value that is neither.
+RefineRole refine_role_of(const CsvTable& steps, const std::filesystem::path& file);
+
 /// "λ (rule)" or "λ (rule, fallback)" of a separation, e.g. "0.3481 (lcurve)" or
 /// "9.033e-07 (lcurve, no_regularisation)".
 std::string lambda_summary(const core::FourSensorResult& sep);
