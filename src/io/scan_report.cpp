@@ -15,6 +15,7 @@
 #include "errsep/io/atomic_file.hpp"
 #include "errsep/io/csv.hpp"
 #include "errsep/io/displacement_refine_csv.hpp"
+#include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/html_report.hpp"
 #include "errsep/io/machine_axes_metadata.hpp"
 #include "errsep/io/raw_scan_csv.hpp"
@@ -454,6 +455,15 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
                 a.uncertainty.expanded});
       add_eval({ea, "angular deviation gamma(x)", "max - min", ea, "arcsec", a.deviation_arcsec,
                 a.expanded_uncertainty_arcsec});
+      // service/sequence_result.cpp: a fitted warm-up of configuration 4 leaves γ's level
+      // undetermined; u_gamma_urad (the e4 = 0 gauge's) carries it at every point, and the
+      // pointwise propagation of max - min cannot cancel it: U is overstated, not measured.
+      if (md.table.meta(kMetaGammaLevelDetermined) == std::optional<std::string>("false"))
+        res.warnings.push_back(
+            "gamma's level is not determined by this scan plan with the effects applied: the "
+            "angular deviation's U (from u_gamma_urad in the e4 = 0 gauge) is overstated; "
+            "gamma's u about its best-fit constant and line is " +
+            md.table.meta(kMetaUGammaShapeUrad).value_or("?") + " urad RMS (motion.csv).");
     } else {
       res.warnings.push_back("motion.csv has no gamma_urad/gamma_deg column: no angular figure.");
     }

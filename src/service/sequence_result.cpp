@@ -109,10 +109,9 @@ void describe_sequence_result(const core::FourSensorConfig& cfg, const core::Sca
   };
   const double ug_shape_urad = 1e6 * rms(sr.after.u_gamma_rad);
   const double ug_gauge_urad = 1e6 * rms(sr.after.u_gamma_in_gauge_rad);
-  info.motion_metadata.emplace_back("u_gamma_about_constant_and_line_urad_rms",
-                                    io::format_number(ug_shape_urad));
+  info.motion_metadata.emplace_back(io::kMetaUGammaShapeUrad, io::format_number(ug_shape_urad));
   if (ug_gauge_urad > kGammaLevelUndeterminedRatio * ug_shape_urad) {
-    info.extra_metadata.emplace_back("gamma_level_determined_by_data", "false");
+    info.extra_metadata.emplace_back(io::kMetaGammaLevelDetermined, "false");
     info.summary_notes.push_back(
         "gamma's level is not determined by this plan with the effects applied: u_gamma " +
         io::format_number(ug_gauge_urad) + " urad RMS in motion.csv's gauge (e4 = 0), " +

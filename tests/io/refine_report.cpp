@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "errsep/core/effect_traverse.hpp"
+#include "errsep/io/four_sensor_result_csv.hpp"
 #include "errsep/io/scan_report.hpp"
 #include "support/refine_cases.hpp"
 #include "support/result_dir.hpp"
@@ -213,4 +214,30 @@ TEST_CASE("refine_steps.csv: refine_role read back, a bad value named with its l
                     Catch::Contains("refine_steps.csv") &&
                         Catch::Contains("refine_role: sequence") &&
                         Catch::Contains("neither 'result' nor 'comparison'"));
+}
+
+// A scan sequence result whose γ level the plan does not determine (service/sequence_result.cpp
+// says so in motion.csv): the angular deviation's U, propagated pointwise from u_gamma_urad in the
+// e4 = 0 gauge, is overstated, and the report says so with γ's u about its constant and line.
+TEST_CASE("report: gamma's level undetermined: the angular deviation's U is said overstated") {
+  test::TempDir tmp;
+  io::ScanReportOptions o;
+  o.plots = false;
+  o.tables = false;
+  for (const bool undetermined : {false, true}) {
+    INFO("undetermined " << undetermined);
+    test::ResultDirSpec spec;
+    spec.motion_metadata = {{io::kMetaUGammaShapeUrad, "8.7"}};
+    if (undetermined) spec.motion_metadata.emplace_back(io::kMetaGammaLevelDetermined, "false");
+    const auto dir = tmp / (undetermined ? "undetermined" : "determined");
+    test::write_four_sensor_result(dir, spec);
+    const auto res = io::write_scan_report(dir, o);
+    int said = 0;
+    for (const auto& w : res.warnings)
+      if (w.find("gamma's level is not determined") != std::string::npos &&
+          w.find("angular deviation's U") != std::string::npos &&
+          w.find("8.7 urad") != std::string::npos)
+        ++said;
+    CHECK(said == (undetermined ? 1 : 0));
+  }
 }

@@ -139,9 +139,9 @@ TEST_CASE("sequence result: gamma's level undetermined by a fitted warm-up is sa
     s.shape_urad = 1e6 * rms(sr.after.u_gamma_rad);
     s.ratio = rms(sr.after.u_gamma_in_gauge_rad) / rms(sr.after.u_gamma_rad);
     for (const auto& [k, v] : info.extra_metadata)
-      if (k == "gamma_level_determined_by_data") s.determined = v;
+      if (k == io::kMetaGammaLevelDetermined) s.determined = v;
     for (const auto& [k, v] : info.motion_metadata)
-      if (k == "u_gamma_about_constant_and_line_urad_rms") s.shape_meta = v;
+      if (k == io::kMetaUGammaShapeUrad) s.shape_meta = v;
     for (const auto& n : info.summary_notes)
       s.noted = s.noted || n.find("gamma's level is not determined") != std::string::npos;
     return s;

@@ -28,6 +28,8 @@ struct ResultDirSpec {
   std::string refine_unbounded;
   /// With refine: the table's refine_role (service/refine_run.cpp).
   io::RefineRole refine_role = io::RefineRole::result;
+  /// motion.csv's extra metadata (key, value), e.g. a scan sequence result's.
+  std::vector<std::pair<std::string, std::string>> motion_metadata;
 };
 
 inline void write_four_sensor_result(const std::filesystem::path& dir, ResultDirSpec spec = {}) {
@@ -62,6 +64,8 @@ inline void write_four_sensor_result(const std::filesystem::path& dir, ResultDir
   m.set_meta("source", spec.source);
   m.set_meta("axis", "X");
   m.set_meta("straightness_direction", "Y");
+  for (const auto& [k, v] : spec.motion_metadata)
+    m.set_meta(k, v);
   m.add_column("x_mm", x);
   m.add_column("S_um", s);
   m.add_column("gamma_deg", gd);

@@ -23,6 +23,13 @@
 
 namespace errsep::io {
 
+/// motion.csv metadata of a scan sequence result (service/sequence_result.cpp) that errsep-report
+/// reads: γ's u about its best-fit constant and line (RMS, µrad), and "false" where the plan with
+/// the effects applied does not determine γ's level (u_gamma_urad, in the e4 = 0 gauge, then
+/// carries that level at every point).
+inline constexpr const char* kMetaUGammaShapeUrad = "u_gamma_about_constant_and_line_urad_rms";
+inline constexpr const char* kMetaGammaLevelDetermined = "gamma_level_determined_by_data";
+
 struct ResultWriteInfo {
   std::string source;  ///< raw-data file the result came from ("simulation" for errsep-simulate)
   std::string axis = "X";                    ///< moving axis (ISO 230-1 naming)
