@@ -23,6 +23,22 @@ namespace fs = std::filesystem;
 
 namespace {
 
+// A reversed closing plan's readings (random smooth truth of `seed`, σ 0.1 µm).
+struct SequenceScan {
+  core::FourSensorConfig cfg;
+  core::ScanSequence seq = core::ScanSequence::make(core::ScanSequenceKind::reversed_closing, cfg);
+  core::SequenceSimData d;
+};
+SequenceScan reversed_closing_scan(std::uint64_t seed) {
+  SequenceScan s;
+  core::SequenceSimOptions so;
+  so.seed = seed;
+  so.sigma_um = 0.1;
+  s.d =
+      core::simulate_four_sensor_sequence(s.cfg, core::random_smooth_truth(s.cfg, seed), s.seq, so);
+  return s;
+}
+
 io::FourSensorInputs inputs_of(const core::UndeclaredCase& k) {
   io::FourSensorInputs in;
   in.cfg = k.cfg;
@@ -77,13 +93,10 @@ TEST_CASE("refine result: a u_S the data do not bound is said so in the files, n
 // the readings' bound (core::SequenceRefineResult::unbounded) puts u_S_bounded_by_data false
 // into motion.csv's metadata and the line into summary.txt's notes; none, nothing.
 TEST_CASE("sequence result: a u_S the data do not bound is said so in motion.csv's metadata") {
-  const core::FourSensorConfig cfg;
-  const auto seq = core::ScanSequence::make(core::ScanSequenceKind::reversed_closing, cfg);
-  core::SequenceSimOptions so;
-  so.seed = 5;
-  so.sigma_um = 0.1;
-  const auto d =
-      core::simulate_four_sensor_sequence(cfg, core::random_smooth_truth(cfg, 5), seq, so);
+  const SequenceScan scan = reversed_closing_scan(5);
+  const auto& cfg = scan.cfg;
+  const auto& seq = scan.seq;
+  const auto& d = scan.d;
   core::SequenceRefineResult sr;
   sr.plan = seq.name;
   sr.before = sr.after = core::fit_four_sensor_sequence(cfg, seq, d.m_um);
@@ -114,13 +127,10 @@ TEST_CASE("sequence result: a u_S the data do not bound is said so in motion.csv
 // beside γ's u about its constant and line, which stays the size of the plain fit's.  Without
 // fitted effects or with a linear drift: determined, nothing said.
 TEST_CASE("sequence result: gamma's level undetermined by a fitted warm-up is said so") {
-  const core::FourSensorConfig cfg;
-  const auto seq = core::ScanSequence::make(core::ScanSequenceKind::reversed_closing, cfg);
-  core::SequenceSimOptions so;
-  so.seed = 10;
-  so.sigma_um = 0.1;
-  const auto d =
-      core::simulate_four_sensor_sequence(cfg, core::random_smooth_truth(cfg, 10), seq, so);
+  const SequenceScan scan = reversed_closing_scan(10);
+  const auto& cfg = scan.cfg;
+  const auto& seq = scan.seq;
+  const auto& d = scan.d;
   const auto rms = [](const Eigen::VectorXd& v) {
     return std::sqrt(v.squaredNorm() / static_cast<double>(v.size()));
   };
