@@ -1407,16 +1407,6 @@ SequenceRefineResult SequenceModel::Impl::refine_effects(const Eigen::MatrixXd& 
     std::vector<int> best_of;  // candidate index of each scored entry, or -1 (no directions)
     for (auto kind : kinds) {
       if (res.identified(kind)) continue;
-      // Nor is the other member offered once one is in the model: the family is one effect, its
-      // form (and τ) decided and carried below (drift_form_decision, thermal_with_tau).  Offered,
-      // the line on top of a fitted warm-up took the warm-up's τ misfit (tested at the grid's τ)
-      // for a drift, was declined as too poorly determined (nearly collinear), and its bias went
-      // into u_S: errsep-refine-sweep --plan identifying --seed0 41 --effects thermal_one, σ 0.1:
-      // linear drift F = 5.2, p = 4e-4, declined, u_S 3.8 um RMS against an S error of 0.07 um.
-      if (o.one_drift_member && is_drift_kind(kind) &&
-          std::any_of(res.added.begin(), res.added.end(),
-                      [](const auto& c) { return is_drift_kind(c.kind); }))
-        continue;
       // A declined effect is not offered again; the drift family's members are one effect (a·t
       // is the long-τ limit of the thermal form), so declining one declines both.  (Not reached
       // today: a decline ends the loop, below.)

@@ -229,10 +229,6 @@ struct SequenceRefineOptions {
   /// SequenceRefineResult::unbounded says u_S is unbounded: the single-scan refine's rule
   /// (RefineOptions::reading_bound).  0: no bound.
   double reading_bound = 3.0;
-  /// Once a member of the drift family (linear, thermal) is in the model, the other is not offered
-  /// on top: the family is one effect, its form and τ decided and carried by the drift-form
-  /// decision.  Off (the behaviour before): the other member is scored as a further effect.
-  bool one_drift_member = true;
   bool is_valid(std::string* why = nullptr) const;
 };
 
