@@ -259,7 +259,12 @@ TEST_CASE("GPIO start input after SIGHUP: the new config's input is watched, the
   REQUIRE(wait_until(d, [](auto x) { return x.last_scan_id == 1 && idle(x); }));
 
   d.request_reload();
-  REQUIRE(wait_until(d, [&](auto x) { return builds == 2 && idle(x); }));
+  // Until the reload has ended (the new devices open, their input watched) the old input is the
+  // configuration in force: an edge on it then is a trigger.  The state stays idle while the new
+  // backend is built, so idle alone does not say the reload ended (a loaded CI machine took more
+  // than the 100 ms this test waited once the new backend existed).
+  REQUIRE(wait_until(
+      d, [&](auto x) { return builds == 2 && idle(x) && x.message == "configuration reloaded"; }));
   std::this_thread::sleep_for(100ms);
   io1.inject({ms_ns(2000), 3, acq::Edge::rising});  // the old input: no longer watched
   std::this_thread::sleep_for(300ms);
