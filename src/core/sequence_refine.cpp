@@ -199,9 +199,8 @@ struct Factor {
   Eigen::VectorXd u_S_unit;  // row norms of Π·(R⁻¹)_S·: u_S = σ̂·u_S_unit
   Eigen::MatrixXd Rinv_S;    // (R⁻¹)_S·: Cov(Ŝ) = σ̂²·Rinv_S·Rinv_Sᵀ in the fit's gauge
   Eigen::MatrixXd Rinv_gamma;  // (R⁻¹)_γ· (µrad per µm): Cov(γ̂) = 1e-12·σ̂²·Rinv_γ·Rinv_γᵀ
-  // Row norms of 1e-6·Π₁·(R⁻¹)_γ· (γ about its constant and line), 1e-6·(R⁻¹)_γ· (the gauge's)
-  // and Bf·(R⁻¹)_f·.
-  Eigen::VectorXd u_gamma_unit, u_gamma_gauge_unit, u_f_unit;
+  // Row norms of 1e-6·Π₁·(R⁻¹)_γ· (γ about its constant and line) and Bf·(R⁻¹)_f·.
+  Eigen::VectorXd u_gamma_unit, u_f_unit;
   std::map<int, Projected> proj;  // candidate → its columns projected off span(Q)
   std::map<int, Eigen::MatrixXd> toS;  // candidate → Π·(R⁻¹Qᵀ·J·D⁻¹)_S (what the fit puts in Ŝ)
   std::map<int, Projected> rival;  // candidate's reduced directions of the parent model
@@ -232,7 +231,6 @@ Factor factorise(const Base& b, const Eigen::MatrixXd& extra, bool with_u = true
   // gauge, γ's error about its constant and line 8 µrad).
   const Eigen::MatrixXd Pi1 = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 1);
   F.u_gamma_unit = 1e-6 * (Pi1 * F.Rinv_gamma).rowwise().norm();
-  F.u_gamma_gauge_unit = 1e-6 * F.Rinv_gamma.rowwise().norm();
   F.u_f_unit = (b.Bf * Rinv.topRows(b.nf)).rowwise().norm();
   return F;
 }
@@ -266,7 +264,7 @@ SequenceFit fit_with(const Base& b, const Factor& F, const Eigen::MatrixXd& m_um
   out.u_S_um = out.sigma_um * F.u_S_unit;
   out.S_covariance_factor_um = out.sigma_um * F.Rinv_S;
   out.u_gamma_rad = out.sigma_um * F.u_gamma_unit;
-  out.u_gamma_in_gauge_rad = out.sigma_um * F.u_gamma_gauge_unit;
+  out.gamma_covariance_factor_rad = 1e-6 * out.sigma_um * F.Rinv_gamma;
   out.u_f_um = out.sigma_um * F.u_f_unit;
   return out;
 }
@@ -391,6 +389,28 @@ StraightnessEstimate sequence_straightness(const SequenceFit& fit, const Eigen::
         dev.assign(d.data(), d.data() + d.size());
       },
       reference, draws);
+}
+
+AngularResult sequence_angular_deviation(const SequenceFit& fit, const EvaluationOptions& opts) {
+  const Eigen::MatrixXd& G = fit.gamma_covariance_factor_rad;
+  if (G.rows() != fit.gamma_rad.size())
+    throw std::invalid_argument(
+        "sequence_angular_deviation: gamma and its covariance factor "
+        "differ in length");
+  const Eigen::VectorXd g_urad = 1e6 * fit.gamma_rad;
+  AngularResult r = evaluate_angular_deviation(
+      std::vector<double>(g_urad.data(), g_urad.data() + g_urad.size()), {}, opts);
+  // u(max − min) = |Gᵀ·c|, c = e_max − e_min: the constant of γ (a column of G equal at every
+  // point) cancels exactly.
+  const double u_urad = r.index_max == r.index_min
+                            ? 0.0
+                            : 1e6 * (G.row(static_cast<Eigen::Index>(r.index_max)) -
+                                     G.row(static_cast<Eigen::Index>(r.index_min)))
+                                        .norm();
+  r.uncertainty.u_uncorrelated = r.uncertainty.u_bound = u_urad;
+  r.uncertainty.expanded = opts.coverage_factor * u_urad;
+  r.expanded_uncertainty_arcsec = r.uncertainty.expanded * kArcsecPerUrad;
+  return r;
 }
 
 SequenceEffectColumns sequence_effect_columns(SequenceEffectKind kind, const FourSensorConfig& cfg,
@@ -1198,8 +1218,8 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
     const Eigen::MatrixXd toG_gauge = Fh.Rinv_gamma * Fh.Q.transpose();  // µrad per µm
     const Eigen::MatrixXd toG = Pi1 * toG_gauge;
     Eigen::MatrixXd& G = res.after.S_covariance_factor_um;
-    Eigen::VectorXd var_sign = Eigen::VectorXd::Zero(b.P), var_sign_g = var_sign,
-                    var_sign_g_gauge = var_sign;
+    Eigen::MatrixXd& Gg = res.after.gamma_covariance_factor_rad;
+    Eigen::VectorXd var_sign = Eigen::VectorXd::Zero(b.P), var_sign_g = var_sign;
     for (Eigen::Index j = 0; j < col.size(); ++j) {
       const double sd = std::abs(hy.h_um) * std::sqrt(std::max(0.0, 1.0 - col(j) * col(j)));
       if (sd < 1e-9) continue;
@@ -1207,7 +1227,8 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
       G.col(G.cols() - 1) = toS.col(j) * sd;
       var_sign += (toS.col(j) * sd).cwiseAbs2();
       var_sign_g += (toG.col(j) * sd).cwiseAbs2();
-      var_sign_g_gauge += (toG_gauge.col(j) * sd).cwiseAbs2();
+      Gg.conservativeResize(Eigen::NoChange, Gg.cols() + 1);
+      Gg.col(Gg.cols() - 1) = 1e-6 * toG_gauge.col(j) * sd;
     }
     // The sign rules' half-difference (above): a column of G, as the drift form's.
     if (col_slope.size() == col.size()) {
@@ -1224,13 +1245,12 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
       }
       var_sign += half_dS.cwiseAbs2();
       var_sign_g += half_dg_urad.cwiseAbs2();
-      var_sign_g_gauge += half_dg_gauge_urad.cwiseAbs2();
+      Gg.conservativeResize(Eigen::NoChange, Gg.cols() + 1);
+      Gg.col(Gg.cols() - 1) = 1e-6 * half_dg_gauge_urad;
     }
     hy.u_S_added_um = var_sign.cwiseSqrt();
     res.after.u_S_um = (res.after.u_S_um.cwiseAbs2() + var_sign).cwiseSqrt();
     res.after.u_gamma_rad = (res.after.u_gamma_rad.cwiseAbs2() + 1e-12 * var_sign_g).cwiseSqrt();
-    res.after.u_gamma_in_gauge_rad =
-        (res.after.u_gamma_in_gauge_rad.cwiseAbs2() + 1e-12 * var_sign_g_gauge).cwiseSqrt();
   } else {
     res = refine_knock(m_um);
     // Left out: u_S carries its bias, the change taking it in would make (step_decision.hpp).
@@ -1243,9 +1263,9 @@ SequenceRefineResult SequenceModel::Impl::refine_hysteresis(const Eigen::MatrixX
     // ... and u_γ the bias it leaves in γ (q[1]: µrad per µm of h).
     const Eigen::VectorXd g_add_rad = 1e-6 * q[1].sensitivity * hy.h_um;
     res.after.u_gamma_rad = (res.after.u_gamma_rad.cwiseAbs2() + g_add_rad.cwiseAbs2()).cwiseSqrt();
-    const Eigen::VectorXd g_add_gauge_rad = 1e-6 * beta_col.segment(b.nf + b.P, b.P) * hy.h_um;
-    res.after.u_gamma_in_gauge_rad =
-        (res.after.u_gamma_in_gauge_rad.cwiseAbs2() + g_add_gauge_rad.cwiseAbs2()).cwiseSqrt();
+    Eigen::MatrixXd& Gg = res.after.gamma_covariance_factor_rad;
+    Gg.conservativeResize(Eigen::NoChange, Gg.cols() + 1);
+    Gg.col(Gg.cols() - 1) = 1e-6 * beta_col.segment(b.nf + b.P, b.P) * hy.h_um;
   }
   char signs[200] = "";
   if (hy.sign_rules_dS_rms_um > 0)

@@ -450,15 +450,27 @@ ScanReportResult write_scan_report(const fs::path& dir, const ScanReportOptions&
                              sig(travel) + " mm: local straightness not evaluated.");
     }
     if (!md.gamma_urad.empty()) {
+      // A scan sequence's result writes the figure with U from its covariance of γ
+      // (service/sequence_result.cpp): max - min cancels γ's constant there, which a fitted
+      // warm-up of configuration 4 leaves all but undetermined.  Otherwise U is propagated
+      // pointwise from u_gamma_urad.
+      const auto v = md.table.meta_number(kMetaAngularDeviationUrad, motion_file);
+      const auto U = md.table.meta_number(kMetaAngularDeviationUUrad, motion_file);
+      const bool from_cov = v && U && opts.evaluation.coverage_factor == 2.0;
       const auto a = core::evaluate_angular_deviation(md.gamma_urad, md.u_gamma, opts.evaluation);
-      add_eval({ea, "angular deviation gamma(x)", "max - min", ea, "urad", a.deviation_urad,
-                a.uncertainty.expanded});
-      add_eval({ea, "angular deviation gamma(x)", "max - min", ea, "arcsec", a.deviation_arcsec,
-                a.expanded_uncertainty_arcsec});
-      // service/sequence_result.cpp: a fitted warm-up of configuration 4 leaves γ's level
-      // undetermined; u_gamma_urad (the e4 = 0 gauge's) carries it at every point, and the
+      const double dev_urad = from_cov ? *v : a.deviation_urad;
+      const double U_urad = from_cov ? *U : a.uncertainty.expanded;
+      add_eval({ea, "angular deviation gamma(x)", "max - min", ea, "urad", dev_urad, U_urad});
+      add_eval({ea, "angular deviation gamma(x)", "max - min", ea, "arcsec",
+                dev_urad * core::kArcsecPerUrad, U_urad * core::kArcsecPerUrad});
+      if (from_cov)
+        html.configuration.emplace_back(
+            "angular deviation U", "from the fit's covariance of gamma (correlations included)");
+      // An older result whose γ level is undetermined and that has no figure from the
+      // covariance: u_gamma_urad (the e4 = 0 gauge's) carries the level at every point, and the
       // pointwise propagation of max - min cannot cancel it: U is overstated, not measured.
-      if (md.table.meta(kMetaGammaLevelDetermined) == std::optional<std::string>("false"))
+      if (!from_cov &&
+          md.table.meta(kMetaGammaLevelDetermined) == std::optional<std::string>("false"))
         res.warnings.push_back(
             "gamma's level is not determined by this scan plan with the effects applied: the "
             "angular deviation's U (from u_gamma_urad in the e4 = 0 gauge) is overstated; "

@@ -26,7 +26,7 @@ core::FourSensorResult sequence_as_result(const core::FourSensorResult& single,
   r.gamma_rad = fit.gamma_rad;
   r.f_um = fit.f_um;
   r.u_S_um = fit.u_S_in_gauge_um();
-  r.u_gamma_rad = fit.u_gamma_in_gauge_rad;  // γ is stated in the fit's gauge (e_4 = 0)
+  r.u_gamma_rad = fit.u_gamma_in_gauge_rad();  // γ is stated in the fit's gauge (e_4 = 0)
   r.u_f_um = fit.u_f_um;
   r.sensor_residual_um.resize(fit.residual_um.rows(), 4);
   for (int c = 0; c < 4; ++c)
@@ -108,7 +108,7 @@ void describe_sequence_result(const core::FourSensorConfig& cfg, const core::Sca
     return v.size() ? std::sqrt(v.squaredNorm() / static_cast<double>(v.size())) : 0.0;
   };
   const double ug_shape_urad = 1e6 * rms(sr.after.u_gamma_rad);
-  const double ug_gauge_urad = 1e6 * rms(sr.after.u_gamma_in_gauge_rad);
+  const double ug_gauge_urad = 1e6 * rms(sr.after.u_gamma_in_gauge_rad());
   info.motion_metadata.emplace_back(io::kMetaUGammaShapeUrad, io::format_number(ug_shape_urad));
   if (ug_gauge_urad > kGammaLevelUndeterminedRatio * ug_shape_urad) {
     info.extra_metadata.emplace_back(io::kMetaGammaLevelDetermined, "false");
@@ -118,6 +118,15 @@ void describe_sequence_result(const core::FourSensorConfig& cfg, const core::Sca
         io::format_number(ug_shape_urad) +
         " urad RMS about gamma's best-fit constant and line: its range and its deviation from a "
         "line hold, its absolute value does not");
+  }
+  // The angular deviation with U from the fit's covariance of γ: max − min cancels γ's constant,
+  // which the report's pointwise propagation of u_gamma_urad (the gauge's) cannot.
+  {
+    const auto a = core::sequence_angular_deviation(sr.after);
+    info.motion_metadata.emplace_back(io::kMetaAngularDeviationUrad,
+                                      io::format_number(a.deviation_urad));
+    info.motion_metadata.emplace_back(io::kMetaAngularDeviationUUrad,
+                                      io::format_number(a.uncertainty.expanded));
   }
   // ISO 230-1 straightness with U from the fit's covariance (as the separation writes its
   // own from its posterior covariance).

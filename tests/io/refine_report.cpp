@@ -2,8 +2,11 @@
 // metadata, the whiteness verdict in the text.
 #include "errsep/io/refine_report.hpp"
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <fstream>
+#include <iterator>
 
 #include "errsep/core/effect_traverse.hpp"
 #include "errsep/io/four_sensor_result_csv.hpp"
@@ -240,4 +243,46 @@ TEST_CASE("report: gamma's level undetermined: the angular deviation's U is said
         ++said;
     CHECK(said == (undetermined ? 1 : 0));
   }
+}
+
+// A scan sequence result now writes the angular deviation with U from its covariance of γ
+// (core::sequence_angular_deviation; tests/core/sequence_angular_deviation.cpp checks its
+// coverage): the report takes that figure, names where its U comes from, and says nothing of an
+// overstated U, γ's level undetermined or not.
+TEST_CASE("report: the angular deviation's U from gamma's covariance is taken from motion.csv") {
+  test::TempDir tmp;
+  io::ScanReportOptions o;
+  o.plots = false;
+  o.tables = false;
+  test::ResultDirSpec spec;
+  spec.motion_metadata = {{io::kMetaUGammaShapeUrad, "8.7"},
+                          {io::kMetaGammaLevelDetermined, "false"},
+                          {io::kMetaAngularDeviationUrad, "123.5"},
+                          {io::kMetaAngularDeviationUUrad, "17.25"}};
+  const auto dir = tmp / "from_covariance";
+  test::write_four_sensor_result(dir, spec);
+  const auto res = io::write_scan_report(dir, o);
+  for (const auto& w : res.warnings)
+    CHECK(w.find("angular deviation's U") == std::string::npos);
+  // evaluation.csv: the figure and its U as motion.csv states them (the text rounds U).
+  const auto ev = std::find_if(res.written.begin(), res.written.end(),
+                               [](const auto& p) { return p.filename() == "evaluation.csv"; });
+  REQUIRE(ev != res.written.end());
+  const io::CsvTable t = io::read_csv(*ev);
+  int found = 0;
+  for (const auto& name : t.columns) {
+    if (name.size() > 7 && name.substr(name.size() - 7) == "_U_urad") {
+      CHECK(t.column(name).at(0) == Approx(17.25));
+      ++found;
+    } else if (name.size() > 5 && name.substr(name.size() - 5) == "_urad") {
+      CHECK(t.column(name).at(0) == Approx(123.5));
+      ++found;
+    }
+  }
+  CHECK(found == 2);
+  // Beside the numbers, where U came from.
+  REQUIRE(!res.html.empty());
+  std::ifstream f(res.html);
+  const std::string page{std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>()};
+  CHECK(page.find("from the fit&#39;s covariance of gamma") != std::string::npos);  // ' escaped
 }

@@ -136,7 +136,7 @@ TEST_CASE("sequence result: gamma's level undetermined by a fitted warm-up is sa
   };
   struct Said {
     double ratio = 0, shape_urad = 0;
-    std::optional<std::string> determined, shape_meta;
+    std::optional<std::string> determined, shape_meta, angular, angular_U;
     bool noted = false;
   };
   auto said = [&](const Eigen::MatrixXd& extra) {
@@ -147,11 +147,16 @@ TEST_CASE("sequence result: gamma's level undetermined by a fitted warm-up is sa
     service::describe_sequence_result(cfg, seq, sr, d.x_mm, info);
     Said s;
     s.shape_urad = 1e6 * rms(sr.after.u_gamma_rad);
-    s.ratio = rms(sr.after.u_gamma_in_gauge_rad) / rms(sr.after.u_gamma_rad);
+    s.ratio = rms(sr.after.u_gamma_in_gauge_rad()) / rms(sr.after.u_gamma_rad);
     for (const auto& [k, v] : info.extra_metadata)
       if (k == io::kMetaGammaLevelDetermined) s.determined = v;
     for (const auto& [k, v] : info.motion_metadata)
-      if (k == io::kMetaUGammaShapeUrad) s.shape_meta = v;
+      if (k == io::kMetaUGammaShapeUrad)
+        s.shape_meta = v;
+      else if (k == io::kMetaAngularDeviationUrad)
+        s.angular = v;
+      else if (k == io::kMetaAngularDeviationUUrad)
+        s.angular_U = v;
     for (const auto& n : info.summary_notes)
       s.noted = s.noted || n.find("gamma's level is not determined") != std::string::npos;
     return s;
@@ -178,4 +183,11 @@ TEST_CASE("sequence result: gamma's level undetermined by a fitted warm-up is sa
   CHECK(warm.shape_meta);
   // The shape's u with the warm-up fitted is of the plain fit's size, not the gauge's.
   CHECK(warm.shape_urad < 3.0 * plain.shape_urad);
+  // The angular deviation (max - min) with U from γ's covariance is stated in every case; with
+  // the warm-up its U stays of the plain fit's order (γ's constant cancels), not the gauge's.
+  for (const Said* s : {&plain, &drift, &warm}) {
+    REQUIRE(s->angular);
+    REQUIRE(s->angular_U);
+  }
+  CHECK(std::stod(*warm.angular_U) < 3.0 * std::stod(*plain.angular_U));
 }

@@ -99,13 +99,20 @@ struct SequenceFit {
   /// and bow: what one scan's readings see of γ (the constant is set only by e_4 = 0, Eq. 19, and
   /// a fitted warm-up of configuration 4 moves it; the and the sweep's measure).
   Eigen::VectorXd u_gamma_rad;
-  /// Of γ in the fit's gauge (the constant that e_4 = 0 sets included): what a result that
-  /// states γ in that gauge carries (motion.csv), as u_S_in_gauge_um.
-  Eigen::VectorXd u_gamma_in_gauge_rad;
+  /// G (P × k): Cov(γ̂) = G·Gᵀ in the fit's gauge (the constant that e_4 = 0 sets included), as
+  /// S_covariance_factor_um for S; after a refine it holds the hysteresis's terms too.  What a
+  /// figure of γ that cancels its constant (the angular deviation, max − min) needs when a fitted
+  /// warm-up of configuration 4 leaves that constant all but undetermined.
+  Eigen::MatrixXd gamma_covariance_factor_rad;
   /// Of f in the fit's gauge (its ends at 0), k = 1.
   Eigen::VectorXd u_f_um;
   /// The row norms of S_covariance_factor_um: u(Ŝ) in the fit's gauge, the bow included.
   Eigen::VectorXd u_S_in_gauge_um() const { return S_covariance_factor_um.rowwise().norm(); }
+  /// The row norms of gamma_covariance_factor_rad: u(γ̂) in the fit's gauge, what a result that
+  /// states γ in that gauge carries (motion.csv).
+  Eigen::VectorXd u_gamma_in_gauge_rad() const {
+    return gamma_covariance_factor_rad.rowwise().norm();
+  }
   Eigen::VectorXd extra_coefficients;  ///< along the extra columns
   Eigen::MatrixXd residual_um;         ///< P × T
   double rss_um2 = 0, sigma_um = 0;
@@ -124,6 +131,15 @@ SequenceFit fit_four_sensor_sequence(const FourSensorConfig& cfg, const ScanSequ
 /// estimate_straightness.
 StraightnessEstimate sequence_straightness(const SequenceFit& fit, const Eigen::VectorXd& x_mm,
                                            ReferenceLine reference, int draws = 100);
+
+/// The ISO 230-1 angular deviation of fit.gamma_rad (max − min) with its u from the fit's
+/// covariance (gamma_covariance_factor_rad, correlations included: u_uncorrelated = u_bound =
+/// the exact u, so either Correlation gives it): max − min cancels γ's constant, which the
+/// pointwise propagation of the gauge's u(γ̂) cannot (a fitted warm-up of configuration 4: U
+/// thousands of µrad against a γ error of ~10 µrad).  Throws std::invalid_argument as
+/// evaluate_angular_deviation, or when the factor's rows differ from γ's length.
+AngularResult sequence_angular_deviation(const SequenceFit& fit,
+                                         const EvaluationOptions& opts = {});
 
 /// An effect's columns for a sequence (rows k·P + n), at time constant tau_s for thermal.
 struct SequenceEffectColumns {

@@ -29,6 +29,12 @@ namespace errsep::io {
 /// carries that level at every point).
 inline constexpr const char* kMetaUGammaShapeUrad = "u_gamma_about_constant_and_line_urad_rms";
 inline constexpr const char* kMetaGammaLevelDetermined = "gamma_level_determined_by_data";
+/// motion.csv metadata of a scan sequence result: the angular deviation (max − min of γ, µrad)
+/// and its U (k = 2) from the fit's covariance of γ, correlations included, so that γ's constant
+/// cancels (core::sequence_angular_deviation); errsep-report takes them in place of propagating
+/// u_gamma_urad pointwise.
+inline constexpr const char* kMetaAngularDeviationUrad = "angular_deviation_urad";
+inline constexpr const char* kMetaAngularDeviationUUrad = "angular_deviation_U_urad";
 
 struct ResultWriteInfo {
   std::string source;  ///< raw-data file the result came from ("simulation" for errsep-simulate)
