@@ -74,6 +74,8 @@ struct Base {
   int knock_column = -1;         // a knocked sensor's column (SequenceKnock), the last one; or -1
   int nonlinearity_column = -1;  // a sensor non-linearity's column (SequenceNonlinearity), or -1
   int hysteresis_column = -1;    // the sensor's hysteresis column (SequenceHysteresis), or -1
+  Eigen::MatrixXd Pi;            // P × P: S about its best-fit constant, line and bow
+  Eigen::MatrixXd Pi1;           // P × P: γ about its best-fit constant and line
 };
 
 // The base design with one more column appended (after f, S, γ, e: their indices stay), its
@@ -150,6 +152,8 @@ Base base_design(const FourSensorConfig& cfg, const ScanSequence& seq) {
       if (ec >= 0) b.X(r, ec) = 1.0;
     }
   }
+  b.Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
+  b.Pi1 = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 1);
   return b;
 }
 
@@ -222,15 +226,13 @@ Factor factorise(const Base& b, const Eigen::MatrixXd& extra, bool with_u = true
   const Eigen::MatrixXd Rinv =
       F.R.triangularView<Eigen::Upper>().solve(Eigen::MatrixXd::Identity(X.cols(), X.cols()));
   F.Rinv_S = Rinv.middleRows(b.nf, b.P);
-  const Eigen::MatrixXd Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
-  F.u_S_unit = (Pi * F.Rinv_S).rowwise().norm();
+  F.u_S_unit = (b.Pi * F.Rinv_S).rowwise().norm();
   F.Rinv_gamma = Rinv.middleRows(b.nf + b.P, b.P);
   // γ about its best-fit constant and line (SequenceFit::u_gamma_rad): with a fitted warm-up of
   // configuration 4 the constant e_4 = 0 sets is all but undetermined (thermal on all
   // configurations, reversed closing plan, σ 0.1, seed 10: u_γ 6292 µrad at every point in the
   // gauge, γ's error about its constant and line 8 µrad).
-  const Eigen::MatrixXd Pi1 = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 1);
-  F.u_gamma_unit = 1e-6 * (Pi1 * F.Rinv_gamma).rowwise().norm();
+  F.u_gamma_unit = 1e-6 * (b.Pi1 * F.Rinv_gamma).rowwise().norm();
   F.u_f_unit = (b.Bf * Rinv.topRows(b.nf)).rowwise().norm();
   return F;
 }
@@ -471,8 +473,8 @@ struct SequenceModel::Impl {
   ScanSequence seq;
   SequenceRefineOptions o;
   Base b;
-  Eigen::MatrixXd Pi;   // S about its best-fit constant, line and bow
-  Eigen::MatrixXd Pi1;  // γ about its best-fit constant and line
+  const Eigen::MatrixXd& Pi = b.Pi;    // S about its best-fit constant, line and bow
+  const Eigen::MatrixXd& Pi1 = b.Pi1;  // γ about its best-fit constant and line
   std::vector<SequenceEffectColumns> cands;
   std::vector<double> cand_tau;  // thermal: τ; else 0
   std::map<std::vector<int>, Factor> factors;
@@ -500,8 +502,6 @@ struct SequenceModel::Impl {
         hy_col(hysteresis) {
     std::string why;
     if (!o.is_valid(&why)) throw std::invalid_argument("invalid refine options: " + why);
-    Pi = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 2);
-    Pi1 = remove_polynomial(Eigen::MatrixXd::Identity(b.P, b.P), 1);
     const auto taus = ThermalDriftEffect::tau_grid_s(seq.times_s(cfg), o.thermal_grid);
     auto add = [&](SequenceEffectKind k, double tau) {
       cands.push_back(
