@@ -619,10 +619,11 @@ std::string sweep_header() {
   char buf[512];
   std::snprintf(buf, sizeof buf,
                 "%-12s %-12s %5s %4s | %5s %5s %5s %5s %5s | %6s %6s %6s %6s %6s | %6s %6s %6s "
-                "%6s | %5s %5s %5s | %5s %5s %5s | %7s %7s",
+                "%6s | %5s %5s %5s | %5s %5s %5s | %7s %7s %7s %7s",
                 "effect", "plan", "sigma", "runs", "added", "ident", "appl", "!wht", "!idp",
                 "S_cln", "S_bef", "S_aft", "Sbef^", "Saft^", "g_bef", "g_aft", "gbef^", "gaft^",
-                "worse", ">u", "half", "cov", "covsh", "covg", "hlf/idf", "idf/dbl");
+                "worse", ">u", "half", "cov", "covsh", "covg", "hlf/idf", "idf/dbl", "hlf/i+d",
+                "hwd/i+d");
   return std::string(buf) +
          "\n  (fractions of runs; errors RMS in um / urad, median and ^ worst; S_cln: the same "
          "scan without the effect; worse: S or gamma error grew; >u: by more than its stated u; "
@@ -630,7 +631,11 @@ std::string sweep_header() {
          "gamma's points (about its constant and line) within 2u_gamma; hlf/idf: "
          "halved runs of those where the effect is identifiable from the plan, computed without "
          "the truth; idf/dbl: runs where the effect was identified of those where it doubled the "
-         "clean S error)";
+         "clean S error; hlf/i+d: halved runs of those where the effect is identifiable from the "
+         "plan and doubled the clean S error (S and gamma halved: the must-show's halving per "
+         "cell); "
+         "hwd/i+d: the same with gamma required to halve only where the effect doubled gamma's "
+         "error)";
 }
 
 std::string sweep_row(const SweepCell& c) {
@@ -638,7 +643,8 @@ std::string sweep_row(const SweepCell& c) {
   std::snprintf(
       buf, sizeof buf,
       "%-12s %-12s %5.2f %4zu | %5.2f %5.2f %5.2f %5.2f %5.2f | %6.3f %6.3f %6.3f %6.3f %6.3f | "
-      "%6.1f %6.1f %6.1f %6.1f | %5.2f %5.2f %5.2f | %5.3f %5.3f %5.3f | %3d/%-3d %3d/%-3d",
+      "%6.1f %6.1f %6.1f %6.1f | %5.2f %5.2f %5.2f | %5.3f %5.3f %5.3f | %3d/%-3d %3d/%-3d "
+      "%3d/%-3d %3d/%-3d",
       to_string(c.effect), to_string(c.plan), c.sigma_um, c.runs.size(),
       c.fraction([](const SweepRun& r) { return r.added; }),
       c.fraction([](const SweepRun& r) { return r.identified; }),
@@ -661,7 +667,14 @@ std::string sweep_row(const SweepCell& c) {
       c.count([](const SweepRun& r) { return r.identifiable_from_plan && r.halved(); }),
       c.count([](const SweepRun& r) { return r.identifiable_from_plan; }),
       c.count([](const SweepRun& r) { return r.doubled() && r.identified; }),
-      c.count([](const SweepRun& r) { return r.doubled(); }));
+      c.count([](const SweepRun& r) { return r.doubled(); }), c.count([](const SweepRun& r) {
+        return r.identifiable_from_plan && r.doubled() && r.halved();
+      }),
+      c.count([](const SweepRun& r) { return r.identifiable_from_plan && r.doubled(); }),
+      c.count([](const SweepRun& r) {
+        return r.identifiable_from_plan && r.doubled() && r.halved_where_doubled();
+      }),
+      c.count([](const SweepRun& r) { return r.identifiable_from_plan && r.doubled(); }));
   return buf;
 }
 
